@@ -1,0 +1,65 @@
+// Densifying a knot trajectory on SE(3) onto output times (thesis §3.5, §3.6):
+//  - geodesic two-point interpolation (Prop. 3.19, Eq. 3.44),
+//  - minimum-acceleration two-point interpolation along the geodesic with a
+//    cubic time warp p(tau), p(0)=0, p(1)=1, p'(0)=sigma, p'(1)=mu (Lemma 3.22),
+//  - Park-Ravani multi-point C2 attitude scheme of §3.6.1 (cubic r(tau) per
+//    segment, angular velocity and acceleration continuous at the knots), with a
+//    natural cubic spline for position (the thesis' suggestion, §3.6.1).
+// All three stay in the product for comparison.
+#pragma once
+
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "core/trajectory.hpp"
+
+namespace imuemu::interp {
+
+enum class Method { geodesic, min_acceleration, park_ravani };
+
+struct Options {
+  Method method = Method::geodesic;
+  // Lemma 3.22 boundary speeds, in units of the geodesic's own speed.
+  double sigma = 1.0;
+  double mu = 1.0;
+  // Park-Ravani initial conditions, body frame, rad/s and rad/s^2. If
+  // initial_rate_from_first_segment is true the initial rate is the first
+  // geodesic segment's constant rate (and initial_rate_rad_s is ignored).
+  bool initial_rate_from_first_segment = true;
+  Vec3 initial_rate_rad_s = Vec3::Zero();
+  Vec3 initial_angular_accel_rad_s2 = Vec3::Zero();
+};
+
+// Thrown for knots the method cannot interpolate: non-increasing times, fewer
+// than two knots, or consecutive attitudes whose relative rotation angle is
+// (numerically) pi, where the geodesic is not unique (thesis: Tr(R_{i-1}^T R_i)
+// != -1). The message names the two knots (0-based indices and times).
+struct InterpolationError : std::runtime_error {
+  using std::runtime_error::runtime_error;
+};
+
+// Relative-rotation angle above which two consecutive knots are refused as
+// antipodal (rad). pi - 1e-6: below this the log's axis is still well defined.
+inline constexpr double kAntipodalMarginRad = 1e-6;
+
+// Pose on the geodesic from a to b (Eq. 3.44) at tau in [0, 1].
+Pose geodesic(const Pose& a, const Pose& b, double tau);
+
+// Lemma 3.22 time warp p(tau).
+double min_acceleration_warp(double tau, double sigma, double mu);
+
+// Evaluates the chosen method at every time in `times` (each within
+// [knots.front().t_ns, knots.back().t_ns]; sorted ascending). Knot times may be
+// non-uniform for geodesic/min_acceleration; Park-Ravani uses each segment's
+// own duration for tau.
+std::vector<Pose> interpolate(const std::vector<Pose>& knots, const std::vector<TimeNs>& times,
+                              const Options& options);
+
+// Validates knots (throws InterpolationError naming the offending knots).
+void check_knots(const std::vector<Pose>& knots);
+
+Method method_from_string(const std::string& name);  // "geodesic", "min-accel", "park-ravani"
+std::string to_string(Method m);
+
+}  // namespace imuemu::interp
