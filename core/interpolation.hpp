@@ -59,6 +59,20 @@ std::vector<Pose> interpolate(const std::vector<Pose>& knots, const std::vector<
 // Validates knots (throws InterpolationError naming the offending knots).
 void check_knots(const std::vector<Pose>& knots);
 
+// Park-Ravani coefficients of one segment (§3.6.1, Eq. 3.64): on segment i,
+// between knots i-1 and i, R(t) = R_{i-1} exp([a tau^3 + b tau^2 + c tau]) with
+// tau = (t - t_{i-1}) / (t_i - t_{i-1}). The coefficients are in tau units, so
+// the body rate is W(r) r'(tau) / duration_s.
+struct ParkRavaniSegment {
+  Vec3 a = Vec3::Zero();
+  Vec3 b = Vec3::Zero();
+  Vec3 c = Vec3::Zero();
+  double duration_s = 0.0;
+};
+// One entry per segment (knots.size() - 1), after check_knots(knots).
+std::vector<ParkRavaniSegment> park_ravani_coefficients(const std::vector<Pose>& knots,
+                                                        const Options& options);
+
 Method method_from_string(const std::string& name);  // "geodesic", "min-accel", "park-ravani"
 std::string to_string(Method m);
 

@@ -1,6 +1,11 @@
 #include "core/so3.hpp"
 
+#include <Eigen/Geometry>  // Vec3::cross is only declared by Eigen/Core
+
 #include <algorithm>
+#include <array>
+#include <cstddef>
+#include <limits>
 #include <cmath>
 #include <numbers>
 
@@ -18,35 +23,119 @@ Vec3 vee(const Mat3& M) {
   return 0.5 * Vec3(M(2, 1) - M(1, 2), M(0, 2) - M(2, 0), M(1, 0) - M(0, 1));
 }
 
+namespace {
+
+// n! in double; exact up to 22! (its odd part is below 2^53), which covers
+// every coefficient below that is not already negligible.
+constexpr double factorial(int n) {
+  double f = 1.0;
+  for (int i = 2; i <= n; ++i) f *= i;
+  return f;
+}
+
+// Horner evaluation of sum_k c[k] x^k.
+template <std::size_t N>
+constexpr double horner(const std::array<double, N>& c, double x) {
+  double p = c[N - 1];
+  for (std::size_t k = N - 1; k-- > 0;) p = p * x + c[k];
+  return p;
+}
+
+// C(t) = (t - sin t)/t^3 = sum_k (-1)^k t^2k / (2k+3)!. Ten terms reach
+// t = 1 with truncation 1/23! < 1e-22, i.e. < 1e-21 relative.
+constexpr std::array<double, 10> kCSeries = [] {
+  std::array<double, 10> c{};
+  for (int k = 0; k < 10; ++k) c[k] = (k % 2 ? -1.0 : 1.0) / factorial(2 * k + 3);
+  return c;
+}();
+// B'(t)/t = sum_{k>=1} (-1)^k 2k t^(2k-2) / (2k+2)!, in powers of t^2.
+constexpr std::array<double, 10> kDBSeries = [] {
+  std::array<double, 10> c{};
+  for (int k = 1; k <= 10; ++k) c[k - 1] = (k % 2 ? -1.0 : 1.0) * (2.0 * k) / factorial(2 * k + 2);
+  return c;
+}();
+// C'(t)/t = sum_{k>=1} (-1)^k 2k t^(2k-2) / (2k+3)!, in powers of t^2.
+constexpr std::array<double, 10> kDCSeries = [] {
+  std::array<double, 10> c{};
+  for (int k = 1; k <= 10; ++k) c[k - 1] = (k % 2 ? -1.0 : 1.0) * (2.0 * k) / factorial(2 * k + 3);
+  return c;
+}();
+
+// Below this angle C, B'/t and C'/t come from their series: the closed forms
+// cancel ~t^3..t^5 out of O(1) terms, losing ~eps/t^2 relative (83 ulp of C
+// at t = 0.1). At t >= 1 the loss is a few ulp.
+constexpr double kSeriesBelow_rad = 1.0;
+
+// |v| without underflow: squaredNorm() flushes components below ~1e-154 to
+// zero, which would make log() of a 1e-200 rad rotation return 0.
+double norm_no_underflow(const Vec3& v) {
+  const double n2 = v.squaredNorm();
+  if (n2 >= std::numeric_limits<double>::min() / std::numeric_limits<double>::epsilon()) {
+    return std::sqrt(n2);
+  }
+  const double m = v.cwiseAbs().maxCoeff();
+  if (m == 0.0) return 0.0;
+  return m * (v / m).norm();
+}
+
+// [r]^2 = r r^T - |r|^2 I, with the diagonal -(r_j^2 + r_k^2) summed directly
+// instead of subtracting |r|^2 (which was rounded through |r|): saves ~2 ulp
+// of |r|^2 on the diagonal near |r| = pi.
+Mat3 hat_squared(const Vec3& r) {
+  const double xx = r.x() * r.x(), yy = r.y() * r.y(), zz = r.z() * r.z();
+  const double xy = r.x() * r.y(), xz = r.x() * r.z(), yz = r.y() * r.z();
+  Mat3 m;
+  m << -(yy + zz), xy, xz,  //
+      xy, -(xx + zz), yz,   //
+      xz, yz, -(xx + yy);
+  return m;
+}
+
+}  // namespace
+
 Coefficients coefficients(double theta) {
   const double t2 = theta * theta;
   Coefficients c{};
   // Below 0.1 rad the Taylor series (truncation < 1e-20 relative) replaces the
-  // closed forms whose numerators cancel: (t - sin t) loses ~1e-16/t^2.
+  // closed forms of A and B, which are 0/0 at t = 0 (they do not cancel above).
   if (theta < 0.1) {
     c.sin_over_theta = 1.0 - t2 / 6.0 * (1.0 - t2 / 20.0 * (1.0 - t2 / 42.0 * (1.0 - t2 / 72.0)));
     c.one_minus_cos_over_t2 =
         0.5 - t2 / 24.0 * (1.0 - t2 / 30.0 * (1.0 - t2 / 56.0 * (1.0 - t2 / 90.0)));
-    c.t_minus_sin_over_t3 =
-        1.0 / 6.0 - t2 / 120.0 * (1.0 - t2 / 42.0 * (1.0 - t2 / 72.0 * (1.0 - t2 / 110.0)));
   } else {
-    const double half = 0.5 * theta;
-    const double s_half = std::sin(half);
+    const double s_half = std::sin(0.5 * theta);
     c.sin_over_theta = std::sin(theta) / theta;
     // 1 - cos t = 2 sin^2(t/2): no cancellation.
     c.one_minus_cos_over_t2 = 2.0 * s_half * s_half / t2;
-    c.t_minus_sin_over_t3 = (theta - std::sin(theta)) / (t2 * theta);
   }
+  c.t_minus_sin_over_t3 = theta < kSeriesBelow_rad ? horner(kCSeries, t2)
+                                                   : (theta - std::sin(theta)) / (t2 * theta);
   return c;
 }
 
 Mat3 exp(const Vec3& r) {
   const double theta = r.norm();
   const Coefficients c = coefficients(theta);
-  const Mat3 K = hat(r);
-  // Eq. 3.9, with [r]^2 = r r^T - |r|^2 I written out to avoid a matrix product.
-  Mat3 R = Mat3::Identity() + c.sin_over_theta * K;
-  R.noalias() += c.one_minus_cos_over_t2 * (r * r.transpose() - (theta * theta) * Mat3::Identity());
+  const double A = c.sin_over_theta, B = c.one_minus_cos_over_t2;
+  const double cos_theta = std::cos(theta);
+  const double sq[3] = {r.x() * r.x(), r.y() * r.y(), r.z() * r.z()};
+  Mat3 R;
+  // Eq. 3.9 entry by entry (Eq. 3.11). A diagonal entry is both
+  // 1 - B (r_j^2 + r_k^2) and cos t + B r_i^2; using the form whose B-term is
+  // the smaller one keeps that term <= (1 - cos t)/2 <= 1, halving the
+  // rounding near |r| = pi, where the other form subtracts ~2 from 1.
+  for (int i = 0; i < 3; ++i) {
+    const double rest = sq[(i + 1) % 3] + sq[(i + 2) % 3];
+    R(i, i) = sq[i] <= rest ? cos_theta + B * sq[i] : 1.0 - B * rest;
+  }
+  const double bxy = B * r.x() * r.y(), bxz = B * r.x() * r.z(), byz = B * r.y() * r.z();
+  const double ax = A * r.x(), ay = A * r.y(), az = A * r.z();
+  R(0, 1) = bxy - az;
+  R(1, 0) = bxy + az;
+  R(0, 2) = bxz + ay;
+  R(2, 0) = bxz - ay;
+  R(1, 2) = byz - ax;
+  R(2, 1) = byz + ax;
   return R;
 }
 
@@ -88,7 +177,7 @@ Vec3 log(const Mat3& R) {
   const Eigen::Vector4d q = quaternion_from_matrix(R);
   const double w = q[0];
   const Vec3 v = q.tail<3>();
-  const double s = v.norm();  // sin(theta/2)
+  const double s = norm_no_underflow(v);  // sin(theta/2)
   if (s == 0.0) return Vec3::Zero();
   // theta = 2 atan2(s, w) is accurate for every angle; r = theta * v / s.
   double scale;
@@ -113,7 +202,7 @@ Vec3 log(const Mat3& R) {
 
 double angle(const Mat3& R) {
   const Eigen::Vector4d q = quaternion_from_matrix(R);
-  return 2.0 * std::atan2(q.tail<3>().norm(), q[0]);
+  return 2.0 * std::atan2(norm_no_underflow(q.tail<3>()), q[0]);
 }
 
 Mat3 W(const Vec3& r) {
@@ -121,7 +210,7 @@ Mat3 W(const Vec3& r) {
   const double theta = r.norm();
   const Coefficients c = coefficients(theta);
   Mat3 M = Mat3::Identity() - c.one_minus_cos_over_t2 * hat(r);
-  M.noalias() += c.t_minus_sin_over_t3 * (r * r.transpose() - (theta * theta) * Mat3::Identity());
+  M.noalias() += c.t_minus_sin_over_t3 * hat_squared(r);
   return M;
 }
 
@@ -138,7 +227,7 @@ Mat3 W_inverse(const Vec3& r) {
     D = (1.0 - half * std::cos(half) / std::sin(half)) / t2;
   }
   Mat3 M = Mat3::Identity() + 0.5 * hat(r);
-  M.noalias() += D * (r * r.transpose() - t2 * Mat3::Identity());
+  M.noalias() += D * hat_squared(r);
   return M;
 }
 
@@ -150,9 +239,10 @@ Vec3 angular_acceleration(const Vec3& r, const Vec3& r_dot, const Vec3& r_ddot) 
   const double t2 = theta * theta;
   const Coefficients c = coefficients(theta);
   double dB_over_t, dC_over_t;
-  if (theta < 0.2) {
-    dB_over_t = -1.0 / 12.0 + t2 * (1.0 / 180.0 + t2 * (-1.0 / 6720.0 + t2 * (1.0 / 453600.0 - t2 / 47900160.0)));
-    dC_over_t = -1.0 / 60.0 + t2 * (1.0 / 1260.0 + t2 * (-1.0 / 60480.0 + t2 * (1.0 / 4989600.0 - t2 / 622702080.0)));
+  if (theta < kSeriesBelow_rad) {
+    // -1/12 + t^2/180 - ... and -1/60 + t^2/1260 - ...
+    dB_over_t = horner(kDBSeries, t2);
+    dC_over_t = horner(kDCSeries, t2);
   } else {
     const double s = std::sin(theta), co = std::cos(theta);
     dB_over_t = (theta * s + 2.0 * co - 2.0) / (t2 * t2);

@@ -1,7 +1,7 @@
 // Basic vocabulary shared by every room: vectors, rotations and integer time.
 #pragma once
 
-#include <Eigen/Core>
+#include <Eigen/Dense>
 #include <cstdint>
 
 namespace imuemu {

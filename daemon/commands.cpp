@@ -1,1 +1,287 @@
+#include "daemon/commands.hpp"
 
+#include <unistd.h>
+
+#include <algorithm>
+#include <charconv>
+#include <chrono>
+#include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <iostream>
+#include <numbers>
+#include <unordered_map>
+
+#include "core/attitude.hpp"
+#include "core/earth.hpp"
+#include "core/pipeline.hpp"
+#include "core/reference_motion.hpp"
+#include "core/so3.hpp"
+#include "core/strapdown.hpp"
+#include "io/atomic_file.hpp"
+#include "io/decimal_time.hpp"
+#include "io/sample_writers.hpp"
+#include "io/scene_poses.hpp"
+#include "io/trajectory_csv.hpp"
+
+namespace imuemu::cli {
+namespace {
+
+constexpr double kRadToDeg = 180.0 / std::numbers::pi;
+
+// A one-line progress bar on stderr, shown only on a terminal and only once a
+// run has taken longer than a second (short runs stay silent).
+class ProgressBar {
+ public:
+  explicit ProgressBar(bool enabled) : enabled_(enabled && ::isatty(STDERR_FILENO) == 1) {}
+  ~ProgressBar() {
+    if (shown_) std::fputs("\n", stderr);
+  }
+  void update(double fraction) {
+    if (!enabled_) return;
+    const auto elapsed = std::chrono::steady_clock::now() - start_;
+    if (elapsed < std::chrono::seconds(1)) return;
+    shown_ = true;
+    constexpr int kWidth = 40;
+    const int filled = static_cast<int>(std::clamp(fraction, 0.0, 1.0) * kWidth);
+    std::fprintf(stderr, "\r[%.*s%*s] %3d%%", filled, "########################################",
+                 kWidth - filled, "", static_cast<int>(fraction * 100.0));
+    std::fflush(stderr);
+  }
+
+ private:
+  bool enabled_;
+  bool shown_ = false;
+  std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
+};
+
+Physics physics_from(const std::string& scene) { return scene == "flat" ? Physics::flat : Physics::ecef; }
+
+SceneModel scene_model(const std::string& scene, double gravity_m_s2) {
+  SceneModel m;
+  m.physics = physics_from(scene);
+  m.flat_gravity_m_s2 = Vec3(0.0, 0.0, gravity_m_s2);
+  return m;
+}
+
+std::string number(double v) {
+  char buf[64];
+  const auto res = std::to_chars(buf, buf + sizeof buf, v);
+  return std::string(buf, res.ptr);
+}
+
+// Errors from files become messages with the file:line:column the reader put
+// in them, and a meaningful exit code.
+template <typename Fn>
+int run_guarded(Fn&& fn) {
+  try {
+    return fn();
+  } catch (const io::CsvFormatError& e) {
+    std::cerr << "imuemu: " << e.what() << "\n";
+    return kBadInput;
+  } catch (const interp::InterpolationError& e) {
+    std::cerr << "imuemu: cannot interpolate: " << e.what() << "\n";
+    return kCannotProcess;
+  } catch (const std::invalid_argument& e) {
+    std::cerr << "imuemu: " << e.what() << "\n";
+    return kCannotProcess;
+  } catch (const std::system_error& e) {
+    std::cerr << "imuemu: " << e.what() << "\n";
+    return kOutputError;
+  } catch (const std::exception& e) {
+    std::cerr << "imuemu: internal error: " << e.what() << "\n";
+    return kInternalError;
+  }
+}
+
+}  // namespace
+
+int generate(const GenerateArgs& args) {
+  return run_guarded([&] {
+    const auto wall_start = std::chrono::steady_clock::now();
+    const io::Trajectory trajectory = io::read_trajectory_csv(args.in_path);
+    PipelineOptions opt;
+    opt.scene = scene_model(args.scene, args.gravity_m_s2);
+    opt.rate_hz = args.rate_hz;
+    opt.chart = chart_from_string(args.chart);
+    opt.interpolation.method = interp::method_from_string(args.method);
+    opt.interpolation.sigma = args.sigma;
+    opt.interpolation.mu = args.mu;
+    opt.kernel.delta = args.delta;
+    opt.kernel.width = smoothing::kernel_width_from_string(args.kernel);
+    opt.kernel.half_width_s = args.kernel_half_width_s;
+    const std::vector<Pose> knots = io::poses_in_scene(trajectory, opt.scene.physics);
+    BatchResult result;
+    {
+      ProgressBar bar(!args.quiet);
+      result = run_batch(knots, opt, [&](double f) { bar.update(f); });
+    }
+    io::write_imu_csv(args.out_path, result.imu);
+    if (!args.trajectory_out_path.empty())
+      io::write_trajectory_csv(args.trajectory_out_path, result.trajectory, opt.scene.physics);
+    if (!args.quiet) {
+      const double wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start).count();
+      std::cerr << "imuemu: " << knots.size() << " knots -> " << result.imu.size() << " samples at " << args.rate_hz
+                << " Hz (" << args.scene << ", " << args.method << ", Delta " << args.delta << ", " << args.kernel
+                << " kernel, " << args.chart << " chart) in " << number(std::round(wall_s * 1000) / 1000)
+                << " s -> " << args.out_path << "\n";
+    }
+    return static_cast<int>(kOk);
+  });
+}
+
+int verify(const VerifyArgs& args) {
+  return run_guarded([&] {
+    std::vector<ImuSample> imu = io::read_imu_csv(args.imu_path);
+    if (args.start_s > 0.0 && !imu.empty()) {
+      const TimeNs start_ns = imu.front().t_ns + static_cast<TimeNs>(std::llround(args.start_s * 1e9));
+      imu.erase(imu.begin(), std::lower_bound(imu.begin(), imu.end(), start_ns,
+                                              [](const ImuSample& s, TimeNs t) { return s.t_ns < t; }));
+    }
+    const io::KinematicsTrajectory ref = io::read_kinematics_csv(args.trajectory_path);
+    const SceneModel scene = scene_model(args.scene, args.gravity_m_s2);
+    if (ref.physics != scene.physics)
+      throw std::invalid_argument("trajectory file " + args.trajectory_path + " is in the " +
+                                  (ref.physics == Physics::flat ? "flat" : "ecef") + " scene, not " + args.scene);
+    if (imu.size() < 3 || ref.states.empty()) throw std::invalid_argument("verify needs at least three IMU samples");
+    std::unordered_map<TimeNs, std::size_t> index_of;
+    index_of.reserve(ref.states.size());
+    for (std::size_t i = 0; i < ref.states.size(); ++i) index_of.emplace(ref.states[i].t_ns, i);
+    const auto first = index_of.find(imu.front().t_ns);
+    if (first == index_of.end())
+      throw std::invalid_argument("the trajectory file has no state at the first IMU time " +
+                                  io::format_decimal_seconds(imu.front().t_ns) + " s");
+    const Kinematics& k0 = ref.states[first->second];
+    const strapdown::NavState initial{k0.t_ns, k0.position_m, k0.velocity_m_s, k0.attitude};
+    std::vector<strapdown::NavState> aiding;
+    if (args.aid_vertical) {
+      aiding.reserve(imu.size());
+      for (const ImuSample& s : imu) {
+        const auto it = index_of.find(s.t_ns);
+        if (it == index_of.end())
+          throw std::invalid_argument("--aid-vertical: no trajectory state at IMU time " + io::format_decimal_seconds(s.t_ns));
+        const Kinematics& k = ref.states[it->second];
+        aiding.push_back({k.t_ns, k.position_m, k.velocity_m_s, k.attitude});
+      }
+    }
+    strapdown::Options sopt;
+    sopt.aid_vertical = args.aid_vertical;
+    const auto states = strapdown::integrate(scene, initial, imu, sopt, aiding);
+
+    std::printf("# closed loop: %zu IMU samples integrated (Eq. 3.69, %s scene%s) against %s\n", imu.size(),
+                args.scene.c_str(), args.aid_vertical ? ", vertical aided" : "", args.trajectory_path.c_str());
+    std::printf("%12s %14s %14s %14s %14s\n", "time_s", "pos_err_m", "horiz_err_m", "vert_err_m", "att_err_rad");
+    double max_pos = 0.0, max_h = 0.0, max_v = 0.0, max_att = 0.0;
+    TimeNs next_report = imu.front().t_ns;
+    const auto report_step = static_cast<TimeNs>(std::max(args.report_every_s, 1e-3) * 1e9);
+    for (std::size_t i = 0; i < states.size(); ++i) {
+      const auto it = index_of.find(states[i].t_ns);
+      if (it == index_of.end()) continue;
+      const Kinematics& k = ref.states[it->second];
+      const Vec3 dp = states[i].position_m - k.position_m;
+      Vec3 down = Vec3::UnitZ();
+      if (scene.physics == Physics::ecef) {
+        const earth::Geodetic g = earth::geodetic_from_ecef(k.position_m);
+        down = attitude::ned_to_ecef(g.latitude_rad, g.longitude_rad).col(2);
+      }
+      const double vert = std::abs(dp.dot(down));
+      const double horiz = (dp - dp.dot(down) * down).norm();
+      const double att = so3::angle(k.attitude.transpose() * states[i].attitude);
+      max_pos = std::max(max_pos, dp.norm());
+      max_h = std::max(max_h, horiz);
+      max_v = std::max(max_v, vert);
+      max_att = std::max(max_att, att);
+      if (states[i].t_ns >= next_report || i + 1 == states.size()) {
+        std::printf("%12s %14.6e %14.6e %14.6e %14.6e\n",
+                    io::format_decimal_seconds(states[i].t_ns - imu.front().t_ns).c_str(), dp.norm(), horiz, vert, att);
+        while (next_report <= states[i].t_ns) next_report += report_step;
+      }
+    }
+    std::printf("# max: position %.6e m (horizontal %.6e, vertical %.6e), attitude %.6e rad\n", max_pos, max_h,
+                max_v, max_att);
+    const bool pos_bad = args.max_position_error_m >= 0.0 && !(max_pos <= args.max_position_error_m);
+    const bool att_bad = args.max_attitude_error_rad >= 0.0 && !(max_att <= args.max_attitude_error_rad);
+    if (pos_bad || att_bad) {
+      std::fprintf(stderr, "imuemu verify: drift above the requested bound\n");
+      return static_cast<int>(kVerifyFailed);
+    }
+    return static_cast<int>(kOk);
+  });
+}
+
+int sample_trajectory(const SampleArgs& args) {
+  return run_guarded([&] {
+    const auto duration_ns = static_cast<TimeNs>(std::llround(args.duration_s * 1e9));
+    const auto period_ns = static_cast<TimeNs>(std::llround(args.period_s * 1e9));
+    std::string text;
+    auto line = [&](TimeNs t, const Vec3& p, const attitude::HeadingPitchRoll& hpr) {
+      text += io::format_decimal_seconds(t);
+      for (double v : {p.x(), p.y(), p.z(), hpr.heading_rad * kRadToDeg, hpr.pitch_rad * kRadToDeg,
+                       hpr.roll_rad * kRadToDeg}) {
+        text += ',';
+        text += number(v);
+      }
+      text += '\n';
+    };
+    if (args.kind == "circle") {
+      const reference::Circle motion(500.0, 50.0, 0, duration_ns);
+      text = "# imuemu sample: horizontal circle, radius 500 m at 50 m/s, local NED frame\n"
+             "time_s,north_m,east_m,down_m,heading_deg,pitch_deg,roll_deg\n";
+      for (const Pose& p : reference::sample_knots(motion, period_ns))
+        line(p.t_ns, p.position_m, attitude::hpr_from_rotation(p.attitude));
+    } else {
+      std::unique_ptr<reference::Motion> motion;
+      if (args.kind == "static")
+        motion = std::make_unique<reference::Static>(reference::AircraftFlight::default_origin(),
+                                                     attitude::HeadingPitchRoll{0.5, 0.02, -0.01}, Physics::ecef, 0,
+                                                     duration_ns);
+      else
+        motion = std::make_unique<reference::AircraftFlight>(Physics::ecef, reference::AircraftFlight::default_origin(),
+                                                             0, duration_ns);
+      text = "# imuemu sample: " + args.kind +
+             " near Barcelona, WGS84 geodetic position, attitude body FRD to local NED\n"
+             "time_s,lat_deg,lon_deg,h_m,heading_deg,pitch_deg,roll_deg\n";
+      for (const Pose& p : reference::sample_knots(*motion, period_ns)) {
+        const earth::Geodetic g = earth::geodetic_from_ecef(p.position_m);
+        const Mat3 R_b_l = attitude::ned_to_ecef(g.latitude_rad, g.longitude_rad).transpose() * p.attitude;
+        line(p.t_ns, Vec3(g.latitude_rad * kRadToDeg, g.longitude_rad * kRadToDeg, g.height_m),
+             attitude::hpr_from_rotation(R_b_l));
+      }
+    }
+    io::write_file_atomically(args.out_path, text);
+    return static_cast<int>(kOk);
+  });
+}
+
+int demo(const std::string& out_dir, std::int64_t rate_hz) {
+  std::error_code ec;
+  std::filesystem::create_directories(out_dir, ec);
+  if (ec) {
+    std::cerr << "imuemu demo: cannot create " << out_dir << ": " << ec.message() << "\n";
+    return kOutputError;
+  }
+  const std::string traj = out_dir + "/trajectory.csv", imu = out_dir + "/imu.csv", smooth = out_dir + "/smoothed.csv";
+  std::cout << "imuemu demo: built-in 10-minute aircraft-like flight near Barcelona, knots at 1 Hz\n";
+  if (int rc = sample_trajectory({traj, "flight", 600.0, 1.0}); rc != kOk) return rc;
+  GenerateArgs gen;
+  gen.in_path = traj;
+  gen.out_path = imu;
+  gen.trajectory_out_path = smooth;
+  gen.rate_hz = rate_hz;
+  gen.delta = static_cast<int>(rate_hz);  // +-1 s window, as the thesis' Appendix C
+  gen.scene = "ecef";
+  if (int rc = generate(gen); rc != kOk) return rc;
+  std::cout << "  " << traj << "  (input knots)\n  " << imu << "  (ideal IMU, ecef scene: Earth rate, Coriolis, normal gravity)\n  "
+            << smooth << "  (smoothed trajectory)\n\nClosed loop (vertical channel aided):\n";
+  std::cout.flush();
+  VerifyArgs ver;
+  ver.imu_path = imu;
+  ver.trajectory_path = smooth;
+  ver.scene = "ecef";
+  ver.aid_vertical = true;
+  ver.report_every_s = 60.0;
+  ver.start_s = 1.0;  // past the one-sided window at the start
+  return verify(ver);
+}
+
+}  // namespace imuemu::cli

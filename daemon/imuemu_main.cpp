@@ -1,1 +1,70 @@
-int main() { return 0; }
+// imuemu: offline trajectory-to-IMU generation and verification.
+#include <CLI/CLI.hpp>
+
+#include "daemon/commands.hpp"
+
+int main(int argc, char** argv) {
+  using namespace imuemu::cli;
+  CLI::App app{"imuemu: turns a sparse pose trajectory into ideal IMU samples (see README.md)"};
+  app.require_subcommand(1);
+
+  GenerateArgs gen;
+  auto* g = app.add_subcommand("generate", "Interpolate, smooth and differentiate a trajectory into IMU samples");
+  g->add_option("--in", gen.in_path, "Trajectory CSV (docs/trajectory-format.md)")->required();
+  g->add_option("--out", gen.out_path, "IMU CSV to write (time_ns, gyro rad/s, accel m/s^2)")->required();
+  g->add_option("--trajectory-out", gen.trajectory_out_path, "Also write the smoothed trajectory CSV");
+  g->add_option("--rate", gen.rate_hz, "Output rate in Hz (integer)")->capture_default_str()->check(CLI::Range(1, 1000000));
+  g->add_option("--delta", gen.delta, "Window half-length Delta of Eq. 3.68, in output samples")->capture_default_str()->check(CLI::Range(0, 1000000));
+  g->add_option("--method", gen.method, "Two-point/multi-point interpolation")->capture_default_str()
+      ->check(CLI::IsMember({"geodesic", "min-accel", "park-ravani"}));
+  g->add_option("--sigma", gen.sigma, "min-accel: start speed factor (Lemma 3.22)")->capture_default_str();
+  g->add_option("--mu", gen.mu, "min-accel: end speed factor (Lemma 3.22)")->capture_default_str();
+  g->add_option("--kernel", gen.kernel, "Bump time axis: window (support = window), thesis (t in seconds, literal Eq. 3.68), seconds")
+      ->capture_default_str()->check(CLI::IsMember({"window", "thesis", "seconds"}));
+  g->add_option("--kernel-half-width-s", gen.kernel_half_width_s, "Bump half width for --kernel seconds")->capture_default_str();
+  g->add_option("--chart", gen.chart, "Where to smooth: local (default) or global (the thesis' log R)")->capture_default_str()
+      ->check(CLI::IsMember({"local", "global"}));
+  g->add_option("--scene", gen.scene, "Physics: ecef (Earth rate, Coriolis, normal gravity) or flat")->capture_default_str()
+      ->check(CLI::IsMember({"ecef", "flat"}));
+  g->add_option("--gravity", gen.gravity_m_s2, "flat scene: gravity magnitude (m/s^2), along NED down")->capture_default_str();
+  g->add_flag("--quiet", gen.quiet, "No progress bar or summary");
+
+  VerifyArgs ver;
+  auto* v = app.add_subcommand("verify", "Integrate IMU samples (Eq. 3.69) and print drift against a trajectory");
+  v->add_option("--imu", ver.imu_path, "IMU CSV written by generate")->required();
+  v->add_option("--trajectory", ver.trajectory_path, "Smoothed trajectory CSV written by generate --trajectory-out")->required();
+  v->add_option("--scene", ver.scene, "Physics the IMU was generated for")->capture_default_str()
+      ->check(CLI::IsMember({"ecef", "flat"}));
+  v->add_option("--gravity", ver.gravity_m_s2, "flat scene gravity (m/s^2)")->capture_default_str();
+  v->add_flag("--aid-vertical", ver.aid_vertical, "Reset height and vertical speed from the trajectory every step (ecef's free-inertial vertical channel is unstable)");
+  v->add_option("--report-every-s", ver.report_every_s, "Seconds between drift lines")->capture_default_str();
+  v->add_option("--start-s", ver.start_s, "Start integrating this many seconds after the first sample (skip the one-sided window)")->capture_default_str();
+  v->add_option("--max-position-error-m", ver.max_position_error_m, "Exit 6 if the position drift exceeds this");
+  v->add_option("--max-attitude-error-rad", ver.max_attitude_error_rad, "Exit 6 if the attitude drift exceeds this");
+
+  SampleArgs smp;
+  auto* s = app.add_subcommand("sample-trajectory", "Write a built-in sample trajectory CSV (geodetic + heading/pitch/roll)");
+  s->add_option("--out", smp.out_path, "CSV to write")->required();
+  s->add_option("--kind", smp.kind, "flight (aircraft-like, Barcelona), circle, static")->capture_default_str()
+      ->check(CLI::IsMember({"flight", "circle", "static"}));
+  s->add_option("--duration-s", smp.duration_s, "Duration")->capture_default_str()->check(CLI::PositiveNumber);
+  s->add_option("--period-s", smp.period_s, "Knot period")->capture_default_str()->check(CLI::PositiveNumber);
+
+  std::string demo_dir = "out/demo";
+  std::int64_t demo_rate = 400;
+  auto* d = app.add_subcommand("demo", "Main job on the built-in sample: 10-min flight at 1 Hz -> 400 Hz IMU -> verify");
+  d->add_option("--out-dir", demo_dir, "Directory for the demo's files")->capture_default_str();
+  d->add_option("--rate", demo_rate, "Output rate in Hz")->capture_default_str()->check(CLI::Range(1, 100000));
+
+  try {
+    app.parse(argc, argv);
+  } catch (const CLI::ParseError& e) {
+    const int code = app.exit(e);
+    return code == 0 ? kOk : kUsageError;
+  }
+  if (*g) return generate(gen);
+  if (*v) return verify(ver);
+  if (*s) return sample_trajectory(smp);
+  if (*d) return demo(demo_dir, demo_rate);
+  return kUsageError;
+}

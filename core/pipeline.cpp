@@ -1,0 +1,186 @@
+#include "core/pipeline.hpp"
+
+#include <algorithm>
+#include <stdexcept>
+#include <string>
+
+#include "core/so3.hpp"
+
+namespace imuemu {
+
+Chart chart_from_string(const std::string& name) {
+  if (name == "global") return Chart::global;
+  if (name == "local") return Chart::local;
+  throw std::invalid_argument("chart '" + name + "': expected global or local");
+}
+
+std::string to_string(Chart c) { return c == Chart::global ? "global" : "local"; }
+
+std::vector<TimeNs> output_grid(TimeNs t_first_ns, TimeNs t_last_ns, std::int64_t rate_hz) {
+  if (rate_hz <= 0 || rate_hz > 1'000'000)
+    throw std::invalid_argument("output rate " + std::to_string(rate_hz) + " Hz: expected 1..1000000");
+  if (t_last_ns < t_first_ns) throw std::invalid_argument("output grid: end before start");
+  // Exact floor arithmetic without 128-bit types: split into whole seconds and
+  // a remainder so no product exceeds ~1e15.
+  const TimeNs span_ns = t_last_ns - t_first_ns;
+  const std::int64_t whole_s = span_ns / kNsPerSecond, rem_ns = span_ns % kNsPerSecond;
+  const auto count = static_cast<std::size_t>(whole_s * rate_hz + rem_ns * rate_hz / kNsPerSecond) + 1;
+  std::vector<TimeNs> times(count);
+  for (std::size_t k = 0; k < count; ++k) {
+    const auto ks = static_cast<std::int64_t>(k);
+    times[k] = t_first_ns + (ks / rate_hz) * kNsPerSecond + (ks % rate_hz) * kNsPerSecond / rate_hz;
+  }
+  return times;
+}
+
+namespace {
+
+void report(const ProgressFn& progress, double fraction) {
+  if (progress) progress(fraction);
+}
+
+// Eq. 3.71-3.74 at global index i of a sequence of n samples, reading samples
+// through `at(j)` (global indices), with the thesis' rules at both ends.
+template <typename At>
+Vec3 thesis_derivative(const At& at, std::size_t i, std::size_t n, double h_s) {
+  if (i == 0) return (at(1) - at(0)) / h_s;                                   // Eq. 3.71
+  if (i == n - 1) return (at(n - 1) - at(n - 2)) / h_s;                       // Eq. 3.72
+  if (i == 1 || i == n - 2) return (at(i + 1) - at(i - 1)) / (2.0 * h_s);     // Eq. 3.73
+  return (-at(i + 2) + 8.0 * (at(i + 1) - at(i - 1)) + at(i - 2)) / (12.0 * h_s);  // Eq. 3.74
+}
+
+// Everything one block of output samples needs, in the block's chart.
+class BlockSolver {
+ public:
+  BlockSolver(const std::vector<Pose>& dense, const smoothing::UniformKernel& kernel, double period_s)
+      : dense_(dense), kernel_(kernel), h_s_(period_s), n_(dense.size()) {}
+
+  // Tries to solve samples [begin, end) in a chart at `ref` (or the identity
+  // and the origin when `global`). Returns false if some sample of the window
+  // is too far from the reference for the local chart.
+  bool solve(std::size_t begin, std::size_t end, bool global, const SceneModel& scene,
+             const std::vector<TimeNs>& times, BatchResult& out) {
+    const std::size_t ref = begin + (end - begin) / 2;
+    const Mat3 R_ref = global ? Mat3::Identity() : dense_[ref].attitude;
+    const Vec3 d_ref = global ? Vec3::Zero() : dense_[ref].position_m;
+    const std::size_t margin = static_cast<std::size_t>(kernel_.delta()) + 4;
+    lo_ = begin > margin ? begin - margin : 0;
+    const std::size_t hi = std::min(n_, end + margin);
+    const std::size_t m = hi - lo_;
+    rho_.resize(m);
+    delta_.resize(m);
+    for (std::size_t j = lo_; j < hi; ++j) {
+      const Mat3 rel = R_ref.transpose() * dense_[j].attitude;
+      rho_[j - lo_] = so3::log(rel);
+      if (!global && rho_[j - lo_].norm() > kMaxChartAngleRad) return false;
+      delta_[j - lo_] = dense_[j].position_m - d_ref;
+    }
+    // Smoothed values are needed 4 samples beyond the block (velocity stencil
+    // of the velocity stencil); Eq. 3.68's clipping at the true ends happens
+    // because [lo_, hi) only stops short of the full window at index 0 or n.
+    const std::size_t s_lo = begin >= 4 ? begin - 4 : 0;
+    const std::size_t s_hi = std::min(n_, end + 4);
+    rho_s_.resize(m);
+    delta_s_.resize(m);
+    for (std::size_t j = s_lo; j < s_hi; ++j) {
+      rho_s_[j - lo_] = smooth_local(rho_, j, hi);
+      delta_s_[j - lo_] = smooth_local(delta_, j, hi);
+    }
+    auto at_delta = [&](std::size_t j) -> const Vec3& { return delta_s_[j - lo_]; };
+    auto at_rho = [&](std::size_t j) -> const Vec3& { return rho_s_[j - lo_]; };
+    velocity_.resize(m);
+    const std::size_t v_lo = begin >= 2 ? begin - 2 : 0;
+    const std::size_t v_hi = std::min(n_, end + 2);
+    for (std::size_t j = v_lo; j < v_hi; ++j) velocity_[j - lo_] = thesis_derivative(at_delta, j, n_, h_s_);
+    auto at_velocity = [&](std::size_t j) -> const Vec3& { return velocity_[j - lo_]; };
+
+    for (std::size_t i = begin; i < end; ++i) {
+      const Vec3& r = rho_s_[i - lo_];
+      Kinematics& kin = out.trajectory[i];
+      kin.t_ns = times[i];
+      kin.position_m = d_ref + delta_s_[i - lo_];
+      kin.velocity_m_s = velocity_[i - lo_];
+      kin.acceleration_m_s2 = thesis_derivative(at_velocity, i, n_, h_s_);
+      kin.attitude = R_ref * so3::exp(r);
+      // Eq. 3.59-3.60: omega = W(r) r_dot, in the chart (R = R_ref exp([r])
+      // has the same body rate as exp([r]) since R_ref is constant).
+      kin.angular_rate_rad_s = so3::W(r) * thesis_derivative(at_rho, i, n_, h_s_);
+      out.imu[i] = imu_from_kinematics(scene, kin);
+    }
+    return true;
+  }
+
+ private:
+  Vec3 smooth_local(const std::vector<Vec3>& f, std::size_t j, std::size_t hi) const {
+    const int delta = kernel_.delta();
+    const std::size_t a = j >= static_cast<std::size_t>(delta) ? j - static_cast<std::size_t>(delta) : 0;
+    const std::size_t b = std::min(hi - 1, j + static_cast<std::size_t>(delta));
+    const Vec3& fj = f[j - lo_];
+    Vec3 weighted = Vec3::Zero();
+    double weight_sum = 0.0;
+    for (std::size_t k = std::max(a, lo_); k <= b; ++k) {
+      const double w = kernel_.weight(static_cast<int>(static_cast<std::ptrdiff_t>(k) - static_cast<std::ptrdiff_t>(j)));
+      weighted += w * (f[k - lo_] - fj);
+      weight_sum += w;
+    }
+    return fj + weighted / weight_sum;
+  }
+
+  const std::vector<Pose>& dense_;
+  const smoothing::UniformKernel& kernel_;
+  double h_s_;
+  std::size_t n_;
+  std::size_t lo_ = 0;
+  std::vector<Vec3> rho_, delta_, rho_s_, delta_s_, velocity_;
+};
+
+}  // namespace
+
+BatchResult run_batch(const std::vector<Pose>& knots, const PipelineOptions& options,
+                      const ProgressFn& progress) {
+  interp::check_knots(knots);
+  const std::vector<TimeNs> times = output_grid(knots.front().t_ns, knots.back().t_ns, options.rate_hz);
+  const std::size_t n = times.size();
+  if (n < 2) throw std::invalid_argument("trajectory shorter than two output samples");
+  const double period_s = 1.0 / static_cast<double>(options.rate_hz);
+
+  const std::vector<Pose> dense = interp::interpolate(knots, times, options.interpolation);
+  report(progress, 0.2);
+
+  const smoothing::UniformKernel kernel(options.kernel, period_s);
+  BatchResult result;
+  result.trajectory.resize(n);
+  result.imu.resize(n);
+  BlockSolver solver(dense, kernel, period_s);
+  if (options.chart == Chart::global) {
+    solver.solve(0, n, true, options.scene, times, result);
+    report(progress, 1.0);
+    return result;
+  }
+  // Local chart: blocks of 2*Delta samples (so each log serves ~2 outputs),
+  // halved while the window strays more than kMaxChartAngleRad from the block's
+  // reference.
+  const std::size_t nominal = std::max<std::size_t>(16, 2 * static_cast<std::size_t>(kernel.delta()));
+  std::size_t begin = 0, last_report = 0;
+  while (begin < n) {
+    std::size_t length = std::min(nominal, n - begin);
+    while (!solver.solve(begin, begin + length, false, options.scene, times, result)) {
+      if (length == 1) {
+        throw std::invalid_argument(
+            "the smoothing window around output sample " + std::to_string(begin) +
+            " spans more rotation than a chart can hold (> " + std::to_string(kMaxChartAngleRad) +
+            " rad from its centre): reduce Delta or the kernel width, or add knots");
+      }
+      length = (length + 1) / 2;
+    }
+    begin += length;
+    if (begin - last_report > n / 50) {
+      report(progress, 0.2 + 0.8 * static_cast<double>(begin) / static_cast<double>(n));
+      last_report = begin;
+    }
+  }
+  report(progress, 1.0);
+  return result;
+}
+
+}  // namespace imuemu

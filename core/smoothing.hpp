@@ -1,0 +1,66 @@
+// Kernel smoothing of thesis §3.6.2: the bump function of Eq. 3.66 and the
+// windowed discrete convolution of Eq. 3.68 with window parameter Delta.
+#pragma once
+
+#include <span>
+#include <string>
+#include <vector>
+
+#include "core/types.hpp"
+
+namespace imuemu::smoothing {
+
+// Phi(t) = exp(-1 / (1 - t^2)) for |t| < 1, else 0   (Eq. 3.66 numerator).
+double bump(double t);
+// N_G = integral of Phi over [-1, 1] (Eq. 3.66), = 0.443993816168079...
+double bump_normalization();
+
+// How the kernel's time axis relates to the window.
+enum class KernelWidth {
+  // Literal Eq. 3.68: Phi(t_j - t_i) with t in seconds, so the bump's support
+  // is fixed at +-1 s whatever Delta and the rate are (Appendix B: 100 Hz,
+  // Delta = 10 averages +-0.1 s of a nearly flat kernel; Appendix C: 50 Hz,
+  // Delta = 50 spans exactly +-1 s).
+  thesis,
+  // Phi((t_j - t_i) / (Delta * period)): the support equals the window, so the
+  // kernel reaches zero exactly at the window edge (the default).
+  window,
+  // Phi((t_j - t_i) / half_width_s) with an explicit half width; samples
+  // beyond Delta are still cut off.
+  seconds,
+};
+
+struct KernelOptions {
+  int delta = 10;  // Delta of Eq. 3.68: window is +-delta samples
+  KernelWidth width = KernelWidth::window;
+  double half_width_s = 1.0;  // used by KernelWidth::seconds only
+};
+
+KernelWidth kernel_width_from_string(const std::string& name);  // thesis|window|seconds
+std::string to_string(KernelWidth w);
+
+// The weights Phi(k * period / scale) for k = -delta..delta on a uniform grid.
+class UniformKernel {
+ public:
+  UniformKernel(const KernelOptions& options, double period_s);
+  int delta() const { return delta_; }
+  // Weight for offset k in [-delta, delta].
+  double weight(int k) const { return weights_[static_cast<std::size_t>(k + delta_)]; }
+  // Half width of the bump in seconds (support is +-this).
+  double half_width_s() const { return half_width_s_; }
+
+ private:
+  int delta_;
+  double half_width_s_;
+  std::vector<double> weights_;
+};
+
+// Eq. 3.68 on a uniformly sampled sequence, including its one-sided windows at
+// both ends (the sums are clipped to the available samples and renormalised).
+// Evaluated as f_i + sum w (f_j - f_i) / sum w, algebraically identical to the
+// thesis' sum w f_j / sum w but exact for constant input and free of the
+// rounding of large offsets (ECEF coordinates ~6.4e6 m).
+Vec3 smooth_at(const UniformKernel& kernel, std::span<const Vec3> f, std::size_t i);
+void smooth(const UniformKernel& kernel, std::span<const Vec3> f, std::span<Vec3> out);
+
+}  // namespace imuemu::smoothing

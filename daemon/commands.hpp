@@ -1,0 +1,61 @@
+// The imuemu command-line tool's subcommands. Each returns a process exit code.
+#pragma once
+
+#include <cstdint>
+#include <string>
+
+namespace imuemu::cli {
+
+// Exit codes (documented in README.md).
+enum ExitCode : int {
+  kOk = 0,
+  kInternalError = 1,
+  kUsageError = 2,       // bad command line (CLI11 also uses 2..)
+  kBadInput = 3,         // an input file is malformed (file:line:column in the message)
+  kCannotProcess = 4,    // valid file the method cannot handle (antipodal knots, too short, ...)
+  kOutputError = 5,      // an output file could not be written
+  kVerifyFailed = 6,     // verify: drift above the requested bound
+};
+
+struct GenerateArgs {
+  std::string in_path, out_path, trajectory_out_path;
+  std::int64_t rate_hz = 400;
+  int delta = 400;
+  std::string method = "geodesic";
+  double sigma = 1.0, mu = 1.0;
+  std::string kernel = "window";
+  double kernel_half_width_s = 1.0;
+  std::string chart = "local";
+  std::string scene = "ecef";
+  double gravity_m_s2 = 9.80665;
+  bool quiet = false;
+};
+int generate(const GenerateArgs& args);
+
+struct VerifyArgs {
+  std::string imu_path, trajectory_path;
+  std::string scene = "ecef";
+  double gravity_m_s2 = 9.80665;
+  bool aid_vertical = false;
+  double report_every_s = 300.0;
+  // Seconds after the first IMU sample at which integration starts: the
+  // one-sided windows of Eq. 3.68 at a file's ends bias the first Delta
+  // samples (thesis §3.6.2), so a closed loop usually starts past them.
+  double start_s = 0.0;
+  double max_position_error_m = -1.0;  // < 0: no bound
+  double max_attitude_error_rad = -1.0;
+};
+int verify(const VerifyArgs& args);
+
+struct SampleArgs {
+  std::string out_path;
+  std::string kind = "flight";  // flight | circle | static
+  double duration_s = 600.0;
+  double period_s = 1.0;
+};
+int sample_trajectory(const SampleArgs& args);
+
+// The README's main job: sample flight -> generate -> verify, in out_dir.
+int demo(const std::string& out_dir, std::int64_t rate_hz);
+
+}  // namespace imuemu::cli

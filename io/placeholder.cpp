@@ -1,1 +1,0 @@
-namespace imuemu::io { int placeholder() { return 0; } }

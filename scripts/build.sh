@@ -1,0 +1,13 @@
+#!/usr/bin/env bash
+# Configures and builds one flavour: scripts/build.sh release|asan
+# Build trees live in build/<flavour>.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+flavour=${1:-release}
+case "$flavour" in
+  release) extra=(-DCMAKE_BUILD_TYPE=Release) ;;
+  asan) extra=(-DCMAKE_BUILD_TYPE=RelWithDebInfo -DIMUEMU_SANITIZE=ON -DIMUEMU_BUILD_BENCH=OFF) ;;
+  *) echo "usage: $0 release|asan" >&2; exit 2 ;;
+esac
+cmake -S . -B "build/$flavour" -G Ninja "${extra[@]}" >/dev/null
+cmake --build "build/$flavour" -j "$(nproc)"

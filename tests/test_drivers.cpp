@@ -1,0 +1,17 @@
+#include <gtest/gtest.h>
+
+#include <array>
+
+#include "drivers/transport.hpp"
+
+TEST(NullTransport, CountsFramesAndBytes) {
+  imuemu::drivers::NullTransport t;
+  std::array<std::byte, 7> a{};
+  std::array<std::byte, 5> b{};
+  EXPECT_TRUE(t.write_frame(a));
+  EXPECT_TRUE(t.write_frame(b));
+  EXPECT_EQ(t.counters().frames, 2u);
+  EXPECT_EQ(t.counters().bytes, 12u);
+  EXPECT_EQ(t.counters().write_errors, 0u);
+  EXPECT_EQ(t.describe(), "null");
+}
