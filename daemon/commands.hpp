@@ -20,7 +20,7 @@ enum ExitCode : int {
 struct GenerateArgs {
   std::string in_path, out_path, trajectory_out_path;
   std::int64_t rate_hz = 400;
-  int delta = 400;
+  int delta = -1;  // < 0: two knot intervals' worth of output samples
   std::string method = "geodesic";
   double sigma = 1.0, mu = 1.0;
   std::string kernel = "window";

@@ -14,7 +14,7 @@ int main(int argc, char** argv) {
   g->add_option("--out", gen.out_path, "IMU CSV to write (time_ns, gyro rad/s, accel m/s^2)")->required();
   g->add_option("--trajectory-out", gen.trajectory_out_path, "Also write the smoothed trajectory CSV");
   g->add_option("--rate", gen.rate_hz, "Output rate in Hz (integer)")->capture_default_str()->check(CLI::Range(1, 1000000));
-  g->add_option("--delta", gen.delta, "Window half-length Delta of Eq. 3.68, in output samples")->capture_default_str()->check(CLI::Range(0, 1000000));
+  g->add_option("--delta", gen.delta, "Window half-length Delta of Eq. 3.68, in output samples (default: two median knot intervals)")->check(CLI::Range(0, 1000000));
   g->add_option("--method", gen.method, "Two-point/multi-point interpolation")->capture_default_str()
       ->check(CLI::IsMember({"geodesic", "min-accel", "park-ravani"}));
   g->add_option("--sigma", gen.sigma, "min-accel: start speed factor (Lemma 3.22)")->capture_default_str();

@@ -1,0 +1,144 @@
+// The imuemu command line end to end: exit codes, error messages naming the
+// file/line/column, no output left behind on failure, and the closed loop of
+// acceptance item 5 (generate -> verify) with asserted drift bounds.
+#include <gtest/gtest.h>
+
+#include <cstdio>
+#include <cstdlib>
+#include <filesystem>
+#include <fstream>
+#include <sstream>
+#include <string>
+
+namespace fs = std::filesystem;
+
+namespace {
+
+struct CliRun {
+  int exit_code;
+  std::string output;  // stdout + stderr
+};
+
+CliRun run(const std::string& args) {
+  const std::string cmd = std::string(IMUEMU_CLI_PATH) + " " + args + " 2>&1";
+  CliRun r{-1, {}};
+  FILE* p = ::popen(cmd.c_str(), "r");
+  if (!p) return r;
+  char buf[4096];
+  std::size_t n;
+  while ((n = std::fread(buf, 1, sizeof buf, p)) > 0) r.output.append(buf, n);
+  const int status = ::pclose(p);
+  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  return r;
+}
+
+class Cli : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("imuemu_cli_" + std::to_string(::getpid()) + "_" +
+                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  std::string path(const std::string& name) const { return (dir_ / name).string(); }
+  void write(const std::string& name, const std::string& text) const { std::ofstream(path(name)) << text; }
+  fs::path dir_;
+};
+
+// Seconds of flight for the closed loop: one hour normally; ten minutes under
+// the sanitizers, which are ~20x slower.
+#if defined(__SANITIZE_ADDRESS__)
+constexpr int kFlightSeconds = 600;
+#else
+constexpr int kFlightSeconds = 3600;
+#endif
+
+}  // namespace
+
+TEST_F(Cli, HelpAndUsageErrors) {
+  EXPECT_EQ(run("--help").exit_code, 0);
+  EXPECT_EQ(run("generate --help").exit_code, 0);
+  EXPECT_EQ(run("").exit_code, 2);
+  EXPECT_EQ(run("generate --in x.csv").exit_code, 2);  // --out missing
+  EXPECT_EQ(run("generate --in x.csv --out y.csv --rate 0").exit_code, 2);
+}
+
+TEST_F(Cli, MalformedInputNamesFileLineAndColumnAndLeavesNoOutput) {
+  write("bad.csv",
+        "time_s,lat_deg,lon_deg,h_m,heading_deg,pitch_deg,roll_deg\n"
+        "0,41,2,100,0,0,0\n"
+        "1,41,2,100,0,0,0\n"
+        "2,91.5,2,100,0,0,0\n");
+  const CliRun r = run("generate --quiet --in " + path("bad.csv") + " --out " + path("imu.csv"));
+  EXPECT_EQ(r.exit_code, 3) << r.output;
+  EXPECT_NE(r.output.find("bad.csv:4"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("lat_deg"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(path("imu.csv")));
+  for (const auto& e : fs::directory_iterator(dir_)) EXPECT_EQ(e.path().filename(), "bad.csv");
+}
+
+TEST_F(Cli, DuplicateTimeIsRejected) {
+  write("dup.csv",
+        "time_s,north_m,east_m,down_m,heading_deg,pitch_deg,roll_deg\n"
+        "0,0,0,0,0,0,0\n1,1,0,0,0,0,0\n1,2,0,0,0,0,0\n");
+  const CliRun r = run("generate --quiet --scene flat --in " + path("dup.csv") + " --out " + path("imu.csv"));
+  EXPECT_EQ(r.exit_code, 3) << r.output;
+  EXPECT_NE(r.output.find("dup.csv:4"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(path("imu.csv")));
+}
+
+TEST_F(Cli, AntipodalKnotsAreReportedNamingBothKnots) {
+  // Heading 0 then 180 deg: R_{0}^T R_{1} has trace -1, the geodesic is not unique.
+  write("anti.csv",
+        "time_s,north_m,east_m,down_m,heading_deg,pitch_deg,roll_deg\n"
+        "0,0,0,0,0,0,0\n1,1,0,0,10,0,0\n2,2,0,0,190,0,0\n3,3,0,0,190,0,0\n");
+  const CliRun r = run("generate --quiet --scene flat --in " + path("anti.csv") + " --out " + path("imu.csv"));
+  EXPECT_EQ(r.exit_code, 4) << r.output;
+  EXPECT_NE(r.output.find("antipodal"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("knots 1"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(path("imu.csv")));
+}
+
+TEST_F(Cli, LocalPositionsInTheEcefSceneAreRefused) {
+  write("ned.csv", "time_s,north_m,east_m,down_m,heading_deg,pitch_deg,roll_deg\n0,0,0,0,0,0,0\n1,1,0,0,0,0,0\n");
+  const CliRun r = run("generate --quiet --scene ecef --in " + path("ned.csv") + " --out " + path("imu.csv"));
+  EXPECT_EQ(r.exit_code, 3) << r.output;
+  EXPECT_NE(r.output.find("ned.csv:2"), std::string::npos) << r.output;
+}
+
+TEST_F(Cli, ClosedLoopOneHourFlightDriftStaysWithinBounds) {
+  // Acceptance item 5: the ideal IMU of the flight, integrated back by
+  // `imuemu verify`, against the smoothed trajectory it was derived from.
+  const std::string traj = path("flight.csv");
+  ASSERT_EQ(run("sample-trajectory --kind flight --duration-s " + std::to_string(kFlightSeconds) + " --out " + traj)
+                .exit_code, 0);
+  for (const std::string scene : {"ecef", "flat"}) {
+    const std::string imu = path(scene + "_imu.csv"), smooth = path(scene + "_smooth.csv");
+    const CliRun g = run("generate --quiet --scene " + scene + " --rate 200 --delta 200 --in " + traj + " --out " + imu +
+                      " --trajectory-out " + smooth);
+    ASSERT_EQ(g.exit_code, 0) << g.output;
+    // Bounds (see the issue note): attitude drift is the integral of the gyro's
+    // finite-difference error, <1e-6 rad over an hour; horizontal position
+    // drift in ecef is Schuler-bounded (~0.2 m measured), in flat it grows with
+    // t^2 from the tilt (~0.7 m measured). Asserted with ~2x margin.
+    const std::string bound = scene == "ecef" ? "0.5" : "1.5";
+    const CliRun v = run("verify --scene " + scene + " --imu " + imu + " --trajectory " + smooth +
+                      (scene == "ecef" ? " --aid-vertical" : "") + " --start-s 1 --report-every-s 600" +
+                      " --max-position-error-m " + bound + " --max-attitude-error-rad 2e-6");
+    std::cout << v.output;
+    EXPECT_EQ(v.exit_code, 0) << v.output;
+    EXPECT_NE(v.output.find("# max: position"), std::string::npos);
+  }
+  // The bound is live: an impossible one fails with exit code 6.
+  const CliRun tight = run("verify --scene ecef --aid-vertical --start-s 1 --imu " + path("ecef_imu.csv") +
+                        " --trajectory " + path("ecef_smooth.csv") + " --max-position-error-m 1e-12");
+  EXPECT_EQ(tight.exit_code, 6) << tight.output;
+}
+
+TEST_F(Cli, DemoRunsAndWritesItsFiles) {
+  const CliRun r = run("demo --rate 100 --out-dir " + path("demo"));
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_TRUE(fs::exists(path("demo/imu.csv")));
+  EXPECT_TRUE(fs::exists(path("demo/smoothed.csv")));
+  EXPECT_NE(r.output.find("# max: position"), std::string::npos) << r.output;
+}
