@@ -49,76 +49,79 @@ Vec3 thesis_derivative(const At& at, std::size_t i, std::size_t n, double h_s) {
   return (-at(i + 2) + 8.0 * (at(i + 1) - at(i - 1)) + at(i - 2)) / (12.0 * h_s);  // Eq. 3.74
 }
 
-// Everything one block of output samples needs, in the block's chart.
+// Smooths one block of output samples [begin, end) in a chart at its middle
+// sample (or, for the global chart, at the identity and the origin).
+// Positions, velocities and accelerations are final and written straight into
+// the result (position smoothing is linear, so every chart gives the same
+// answer). Attitudes are chart dependent at second order, so the block also
+// returns its smoothed attitudes `overlap` samples beyond each end, for the
+// caller to blend with the neighbouring block.
 class BlockSolver {
  public:
   BlockSolver(const std::vector<Pose>& dense, const smoothing::UniformKernel& kernel, double period_s)
       : dense_(dense), kernel_(kernel), h_s_(period_s), n_(dense.size()) {}
 
-  // Tries to solve samples [begin, end) in a chart at `ref` (or the identity
-  // and the origin when `global`). Returns false if some sample of the window
-  // is too far from the reference for the local chart.
-  bool solve(std::size_t begin, std::size_t end, bool global, const SceneModel& scene,
+  // Returns false (writing nothing) if some sample of the window is too far
+  // from the reference for the local chart.
+  bool solve(std::size_t begin, std::size_t end, std::size_t overlap, bool global,
              const std::vector<TimeNs>& times, BatchResult& out) {
     const std::size_t ref = begin + (end - begin) / 2;
     const Mat3 R_ref = global ? Mat3::Identity() : dense_[ref].attitude;
     const Vec3 d_ref = global ? Vec3::Zero() : dense_[ref].position_m;
-    const std::size_t margin = static_cast<std::size_t>(kernel_.delta()) + 4;
-    lo_ = begin > margin ? begin - margin : 0;
-    const std::size_t hi = std::min(n_, end + margin);
+    // Attitudes are needed on [a_lo, a_hi) (block plus overlap), positions on
+    // the block +-4 (velocity stencil of the velocity stencil), and Eq. 3.68
+    // reads +-Delta around those.
+    a_lo_ = begin > overlap ? begin - overlap : 0;
+    a_hi_ = std::min(n_, end + overlap);
+    const std::size_t reach = static_cast<std::size_t>(kernel_.delta()) + std::max<std::size_t>(overlap, 4);
+    lo_ = begin > reach ? begin - reach : 0;
+    const std::size_t hi = std::min(n_, end + reach);
     const std::size_t m = hi - lo_;
     rho_.resize(m);
     delta_.resize(m);
     for (std::size_t j = lo_; j < hi; ++j) {
-      const Mat3 rel = R_ref.transpose() * dense_[j].attitude;
-      rho_[j - lo_] = so3::log(rel);
+      rho_[j - lo_] = so3::log(R_ref.transpose() * dense_[j].attitude);
       if (!global && rho_[j - lo_].norm() > kMaxChartAngleRad) return false;
       delta_[j - lo_] = dense_[j].position_m - d_ref;
     }
-    // Smoothed values are needed 4 samples beyond the block (velocity stencil
-    // of the velocity stencil); Eq. 3.68's clipping at the true ends happens
-    // because [lo_, hi) only stops short of the full window at index 0 or n.
+    // Eq. 3.68's clipping at the true ends happens because [lo_, hi) stops
+    // short of the full window only at index 0 or n.
+    attitudes_.resize(a_hi_ - a_lo_);
+    for (std::size_t j = a_lo_; j < a_hi_; ++j) attitudes_[j - a_lo_] = R_ref * so3::exp(smooth_local(rho_, j, hi));
     const std::size_t s_lo = begin >= 4 ? begin - 4 : 0;
     const std::size_t s_hi = std::min(n_, end + 4);
-    rho_s_.resize(m);
     delta_s_.resize(m);
-    for (std::size_t j = s_lo; j < s_hi; ++j) {
-      rho_s_[j - lo_] = smooth_local(rho_, j, hi);
-      delta_s_[j - lo_] = smooth_local(delta_, j, hi);
-    }
+    for (std::size_t j = s_lo; j < s_hi; ++j) delta_s_[j - lo_] = smooth_local(delta_, j, hi);
     auto at_delta = [&](std::size_t j) -> const Vec3& { return delta_s_[j - lo_]; };
-    auto at_rho = [&](std::size_t j) -> const Vec3& { return rho_s_[j - lo_]; };
     velocity_.resize(m);
     const std::size_t v_lo = begin >= 2 ? begin - 2 : 0;
     const std::size_t v_hi = std::min(n_, end + 2);
     for (std::size_t j = v_lo; j < v_hi; ++j) velocity_[j - lo_] = thesis_derivative(at_delta, j, n_, h_s_);
     auto at_velocity = [&](std::size_t j) -> const Vec3& { return velocity_[j - lo_]; };
-
     for (std::size_t i = begin; i < end; ++i) {
-      const Vec3& r = rho_s_[i - lo_];
       Kinematics& kin = out.trajectory[i];
       kin.t_ns = times[i];
       kin.position_m = d_ref + delta_s_[i - lo_];
       kin.velocity_m_s = velocity_[i - lo_];
       kin.acceleration_m_s2 = thesis_derivative(at_velocity, i, n_, h_s_);
-      kin.attitude = R_ref * so3::exp(r);
-      // Eq. 3.59-3.60: omega = W(r) r_dot, in the chart (R = R_ref exp([r])
-      // has the same body rate as exp([r]) since R_ref is constant).
-      kin.angular_rate_rad_s = so3::W(r) * thesis_derivative(at_rho, i, n_, h_s_);
-      out.imu[i] = imu_from_kinematics(scene, kin);
     }
     return true;
   }
 
+  // Smoothed attitudes of the last successful solve, on [a_lo(), a_hi()).
+  std::size_t a_lo() const { return a_lo_; }
+  std::size_t a_hi() const { return a_hi_; }
+  const Mat3& attitude(std::size_t j) const { return attitudes_[j - a_lo_]; }
+
  private:
   Vec3 smooth_local(const std::vector<Vec3>& f, std::size_t j, std::size_t hi) const {
-    const int delta = kernel_.delta();
-    const std::size_t a = j >= static_cast<std::size_t>(delta) ? j - static_cast<std::size_t>(delta) : 0;
-    const std::size_t b = std::min(hi - 1, j + static_cast<std::size_t>(delta));
+    const auto delta = static_cast<std::size_t>(kernel_.delta());
+    const std::size_t a = std::max(lo_, j >= delta ? j - delta : 0);
+    const std::size_t b = std::min(hi - 1, j + delta);
     const Vec3& fj = f[j - lo_];
     Vec3 weighted = Vec3::Zero();
     double weight_sum = 0.0;
-    for (std::size_t k = std::max(a, lo_); k <= b; ++k) {
+    for (std::size_t k = a; k <= b; ++k) {
       const double w = kernel_.weight(static_cast<int>(static_cast<std::ptrdiff_t>(k) - static_cast<std::ptrdiff_t>(j)));
       weighted += w * (f[k - lo_] - fj);
       weight_sum += w;
@@ -130,9 +133,17 @@ class BlockSolver {
   const smoothing::UniformKernel& kernel_;
   double h_s_;
   std::size_t n_;
-  std::size_t lo_ = 0;
-  std::vector<Vec3> rho_, delta_, rho_s_, delta_s_, velocity_;
+  std::size_t lo_ = 0, a_lo_ = 0, a_hi_ = 0;
+  std::vector<Vec3> rho_, delta_, delta_s_, velocity_;
+  std::vector<Mat3> attitudes_;
 };
+
+// C2 step from 0 to 1 on [0, 1] (quintic smoothstep): blends two charts'
+// attitudes so the angular rate and its derivative stay continuous.
+double smoothstep(double x) {
+  x = std::clamp(x, 0.0, 1.0);
+  return x * x * x * (10.0 + x * (-15.0 + 6.0 * x));
+}
 
 }  // namespace
 
@@ -153,31 +164,59 @@ BatchResult run_batch(const std::vector<Pose>& knots, const PipelineOptions& opt
   result.imu.resize(n);
   BlockSolver solver(dense, kernel, period_s);
   if (options.chart == Chart::global) {
-    solver.solve(0, n, true, options.scene, times, result);
-    report(progress, 1.0);
-    return result;
-  }
-  // Local chart: blocks of 2*Delta samples (so each log serves ~2 outputs),
-  // halved while the window strays more than kMaxChartAngleRad from the block's
-  // reference.
-  const std::size_t nominal = std::max<std::size_t>(16, 2 * static_cast<std::size_t>(kernel.delta()));
-  std::size_t begin = 0, last_report = 0;
-  while (begin < n) {
-    std::size_t length = std::min(nominal, n - begin);
-    while (!solver.solve(begin, begin + length, false, options.scene, times, result)) {
-      if (length == 1) {
-        throw std::invalid_argument(
-            "the smoothing window around output sample " + std::to_string(begin) +
-            " spans more rotation than a chart can hold (> " + std::to_string(kMaxChartAngleRad) +
-            " rad from its centre): reduce Delta or the kernel width, or add knots");
+    solver.solve(0, n, 0, true, times, result);
+    for (std::size_t i = 0; i < n; ++i) result.trajectory[i].attitude = solver.attitude(i);
+  } else {
+    // Local chart: blocks of 2*Delta samples (so each log serves ~2 outputs),
+    // halved while the window strays more than kMaxChartAngleRad from the
+    // block's reference. Neighbouring blocks' attitudes differ at second order
+    // (smoothing in exponential coordinates depends on the chart); they are
+    // blended over 2*overlap samples centred on each block boundary.
+    const std::size_t nominal = std::max<std::size_t>(16, 2 * static_cast<std::size_t>(kernel.delta()));
+    const std::size_t overlap = std::max<std::size_t>(4, static_cast<std::size_t>(kernel.delta()) / 4);
+    std::size_t begin = 0, last_report = 0;
+    while (begin < n) {
+      std::size_t length = std::min(nominal, n - begin);
+      while (!solver.solve(begin, begin + length, overlap, false, times, result)) {
+        if (length == 1) {
+          throw std::invalid_argument(
+              "the smoothing window around output sample " + std::to_string(begin) +
+              " spans more rotation than a chart can hold (> " + std::to_string(kMaxChartAngleRad) +
+              " rad from its centre): reduce Delta or the kernel width, or add knots");
+        }
+        length = (length + 1) / 2;
       }
-      length = (length + 1) / 2;
+      const std::size_t blend_lo = solver.a_lo();  // == begin - overlap (or 0)
+      const double blend_len = static_cast<double>(begin + overlap - blend_lo);
+      for (std::size_t j = solver.a_lo(); j < solver.a_hi(); ++j) {
+        Mat3& R = result.trajectory[j].attitude;
+        if (begin == 0 || j >= begin + overlap) {
+          R = solver.attitude(j);
+        } else {
+          // Samples before begin+overlap already hold the previous blocks'
+          // value: move it towards this block's along the geodesic.
+          const double s = smoothstep((static_cast<double>(j - blend_lo) + 0.5) / blend_len);
+          R = R * so3::exp(s * so3::log(R.transpose() * solver.attitude(j)));
+        }
+      }
+      begin += length;
+      if (begin - last_report > n / 50) {
+        report(progress, 0.2 + 0.7 * static_cast<double>(begin) / static_cast<double>(n));
+        last_report = begin;
+      }
     }
-    begin += length;
-    if (begin - last_report > n / 50) {
-      report(progress, 0.2 + 0.8 * static_cast<double>(begin) / static_cast<double>(n));
-      last_report = begin;
-    }
+  }
+  // Body rate from the final smoothed attitudes, in each sample's own chart:
+  // rho_j = log(R~_i^T R~_j) is 0 at i, where W(0) = I, so omega_i is the
+  // thesis derivative (Eq. 3.71-3.74) of rho at i (Eq. 3.59-3.60).
+  for (std::size_t i = 0; i < n; ++i) {
+    const Mat3 Rt = result.trajectory[i].attitude.transpose();
+    auto at_rho = [&](std::size_t j) -> Vec3 {
+      return j == i ? Vec3::Zero() : so3::log(Rt * result.trajectory[j].attitude);
+    };
+    Kinematics& kin = result.trajectory[i];
+    kin.angular_rate_rad_s = thesis_derivative(at_rho, i, n, period_s);
+    result.imu[i] = imu_from_kinematics(options.scene, kin);
   }
   report(progress, 1.0);
   return result;

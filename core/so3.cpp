@@ -4,9 +4,9 @@
 
 #include <algorithm>
 #include <array>
+#include <cmath>
 #include <cstddef>
 #include <limits>
-#include <cmath>
 #include <numbers>
 
 namespace imuemu::so3 {
