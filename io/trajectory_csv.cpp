@@ -1,0 +1,472 @@
+#include "io/trajectory_csv.hpp"
+
+#include <algorithm>
+#include <array>
+#include <charconv>
+#include <cmath>
+#include <cstring>
+#include <limits>
+#include <system_error>
+#include <utility>
+
+#include "io/atomic_file.hpp"
+#include "io/decimal_time.hpp"
+
+namespace imuemu::io {
+
+// ---------------------------------------------------------------- errors
+
+namespace {
+
+std::string compose_message(const CsvLocation& where, const std::string& detail) {
+  std::string message = where.file.empty() ? std::string("<input>") : where.file;
+  // Appends one piece at a time: GCC 12 gives a false -Wrestrict for
+  // `":" + std::to_string(n)`.
+  if (where.line != 0) {
+    message += ':';
+    message += std::to_string(where.line);
+  }
+  if (where.column_index != 0) {
+    message += ": column '";
+    message += detail::printable(where.column);
+    message += "' (";
+    message += std::to_string(where.column_index);
+    message += ')';
+  }
+  message += ": ";
+  message += detail;
+  return message;
+}
+
+}  // namespace
+
+CsvFormatError::CsvFormatError(CsvLocation where, std::string expected, std::string detail)
+    : std::runtime_error(compose_message(where, detail)),
+      where_(std::move(where)),
+      expected_(std::move(expected)),
+      detail_(std::move(detail)) {}
+
+std::string_view to_string(PositionKind kind) noexcept {
+  switch (kind) {
+    case PositionKind::geodetic: return "geodetic (lat_deg, lon_deg, h_m)";
+    case PositionKind::ecef: return "ECEF (x_m, y_m, z_m)";
+    case PositionKind::local_ned: return "local NED (north_m, east_m, down_m)";
+  }
+  return "unknown";
+}
+
+std::string_view to_string(AttitudeKind kind) noexcept {
+  switch (kind) {
+    case AttitudeKind::heading_pitch_roll: return "heading-pitch-roll (heading_deg, pitch_deg, roll_deg)";
+    case AttitudeKind::quaternion: return "quaternion q_b^l (qw, qx, qy, qz)";
+    case AttitudeKind::quaternion_ecef: return "quaternion q_b^e (qw_ecef, qx_ecef, qy_ecef, qz_ecef)";
+  }
+  return "unknown";
+}
+
+// ---------------------------------------------------------------- tokenizer
+
+namespace detail {
+
+namespace {
+constexpr bool is_blank(char c) noexcept { return c == ' ' || c == '\t' || c == '\r'; }
+
+std::string_view trim(std::string_view s) noexcept {
+  std::size_t b = 0;
+  std::size_t e = s.size();
+  while (b < e && is_blank(s[b])) ++b;
+  while (e > b && is_blank(s[e - 1])) --e;
+  return s.substr(b, e - b);
+}
+}  // namespace
+
+CsvLineReader::CsvLineReader(std::string_view text) noexcept : text_(text) {
+  // Spreadsheet exports often start with a UTF-8 byte order mark.
+  if (text_.size() >= 3 && std::memcmp(text_.data(), "\xEF\xBB\xBF", 3) == 0) pos_ = 3;
+}
+
+bool CsvLineReader::next() {
+  while (pos_ < text_.size()) {
+    const std::size_t begin = pos_;
+    const void* newline = std::memchr(text_.data() + begin, '\n', text_.size() - begin);
+    const std::size_t end =
+        newline != nullptr ? static_cast<std::size_t>(static_cast<const char*>(newline) - text_.data())
+                           : text_.size();
+    pos_ = end + 1;
+    ++line_number_;
+    const std::string_view line = trim(text_.substr(begin, end - begin));
+    if (line.empty() || line.front() == '#') continue;
+    fields_.clear();
+    std::size_t field_begin = 0;
+    for (;;) {
+      const std::size_t comma = line.find(',', field_begin);
+      if (comma == std::string_view::npos) {
+        fields_.push_back(trim(line.substr(field_begin)));
+        break;
+      }
+      fields_.push_back(trim(line.substr(field_begin, comma - field_begin)));
+      field_begin = comma + 1;
+    }
+    return true;
+  }
+  return false;
+}
+
+std::string printable(std::string_view field) {
+  static constexpr std::size_t kMaxShown = 40;
+  static constexpr char kHex[] = "0123456789abcdef";
+  std::string out;
+  out.reserve(std::min(field.size(), kMaxShown) + 8);
+  std::size_t shown = 0;
+  for (const char c : field) {
+    if (shown == kMaxShown) {
+      out += "...";
+      break;
+    }
+    const auto byte = static_cast<unsigned char>(c);
+    if (byte >= 0x20 && byte < 0x7f && byte != '\\') {
+      out += c;
+    } else {
+      out += "\\x";
+      out += kHex[byte >> 4];
+      out += kHex[byte & 0xf];
+    }
+    ++shown;
+  }
+  return out;
+}
+
+std::string format_double(double value) {
+  char buffer[32];
+  const auto result = std::to_chars(buffer, buffer + sizeof buffer, value);
+  return std::string(buffer, result.ptr);
+}
+
+std::size_t count_lines(std::string_view text) noexcept {
+  return static_cast<std::size_t>(std::count(text.begin(), text.end(), '\n'));
+}
+
+}  // namespace detail
+
+// ---------------------------------------------------------------- columns
+
+namespace {
+
+enum class Group { time, geodetic, ecef, local_ned, hpr, quaternion, quaternion_ecef, extra };
+
+struct ColumnSpec {
+  std::string_view name;
+  Group group;
+  int slot;                   // index within the group's vector
+  std::string_view expected;  // for messages
+  double min;                 // inclusive range of valid values
+  double max;
+};
+
+constexpr double kInf = std::numeric_limits<double>::infinity();
+
+constexpr std::array<ColumnSpec, 21> kColumns{{
+    {"time_s", Group::time, 0, "a time in decimal seconds (digits, optional sign and '.', no exponent)", 0, 0},
+    {"lat_deg", Group::geodetic, 0, "a latitude in [-90, 90] degrees", -90.0, 90.0},
+    {"lon_deg", Group::geodetic, 1, "a finite longitude in degrees", -kInf, kInf},
+    {"h_m", Group::geodetic, 2, "a finite ellipsoidal height in metres", -kInf, kInf},
+    {"x_m", Group::ecef, 0, "a finite ECEF coordinate in metres", -kInf, kInf},
+    {"y_m", Group::ecef, 1, "a finite ECEF coordinate in metres", -kInf, kInf},
+    {"z_m", Group::ecef, 2, "a finite ECEF coordinate in metres", -kInf, kInf},
+    {"north_m", Group::local_ned, 0, "a finite coordinate in metres", -kInf, kInf},
+    {"east_m", Group::local_ned, 1, "a finite coordinate in metres", -kInf, kInf},
+    {"down_m", Group::local_ned, 2, "a finite coordinate in metres", -kInf, kInf},
+    {"heading_deg", Group::hpr, 0, "a finite heading in degrees", -kInf, kInf},
+    {"pitch_deg", Group::hpr, 1, "a pitch in [-90, 90] degrees", -90.0, 90.0},
+    {"roll_deg", Group::hpr, 2, "a finite roll in degrees", -kInf, kInf},
+    {"qw", Group::quaternion, 0, "a finite quaternion component", -kInf, kInf},
+    {"qx", Group::quaternion, 1, "a finite quaternion component", -kInf, kInf},
+    {"qy", Group::quaternion, 2, "a finite quaternion component", -kInf, kInf},
+    {"qz", Group::quaternion, 3, "a finite quaternion component", -kInf, kInf},
+    {"qw_ecef", Group::quaternion_ecef, 0, "a finite quaternion component", -kInf, kInf},
+    {"qx_ecef", Group::quaternion_ecef, 1, "a finite quaternion component", -kInf, kInf},
+    {"qy_ecef", Group::quaternion_ecef, 2, "a finite quaternion component", -kInf, kInf},
+    {"qz_ecef", Group::quaternion_ecef, 3, "a finite quaternion component", -kInf, kInf},
+}};
+
+const ColumnSpec* find_column(std::string_view name) noexcept {
+  for (const ColumnSpec& spec : kColumns) {
+    if (spec.name == name) return &spec;
+  }
+  return nullptr;
+}
+
+struct GroupInfo {
+  Group group;
+  std::string_view label;
+  std::array<std::string_view, 4> names;
+  int size;
+};
+
+constexpr std::array<GroupInfo, 3> kPositionGroups{{
+    {Group::geodetic, "geodetic position", {"lat_deg", "lon_deg", "h_m", ""}, 3},
+    {Group::ecef, "ECEF position", {"x_m", "y_m", "z_m", ""}, 3},
+    {Group::local_ned, "local NED position", {"north_m", "east_m", "down_m", ""}, 3},
+}};
+constexpr std::array<GroupInfo, 3> kAttitudeGroups{{
+    {Group::hpr, "heading-pitch-roll attitude", {"heading_deg", "pitch_deg", "roll_deg", ""}, 3},
+    {Group::quaternion, "quaternion attitude", {"qw", "qx", "qy", "qz"}, 4},
+    {Group::quaternion_ecef, "ECEF quaternion attitude", {"qw_ecef", "qx_ecef", "qy_ecef", "qz_ecef"}, 4},
+}};
+
+std::string group_columns(const GroupInfo& g) {
+  std::string out;
+  for (int k = 0; k < g.size; ++k) {
+    if (k != 0) out += ",";
+    out += g.names[static_cast<std::size_t>(k)];
+  }
+  return out;
+}
+
+std::string all_column_names() {
+  std::string out;
+  for (const ColumnSpec& spec : kColumns) {
+    if (!out.empty()) out += ", ";
+    out += spec.name;
+  }
+  return out;
+}
+
+// One header column: its spec (nullptr for an ignored extra column) and name.
+struct HeaderColumn {
+  const ColumnSpec* spec = nullptr;
+  std::string name;
+};
+
+struct Layout {
+  std::vector<HeaderColumn> columns;
+  std::size_t header_line = 0;
+  PositionKind position_kind = PositionKind::geodetic;
+  AttitudeKind attitude_kind = AttitudeKind::heading_pitch_roll;
+  std::size_t quaternion_w_column = 0;  // 0-based index of qw / qw_ecef (for messages)
+};
+
+[[noreturn]] void fail(const std::string& file, std::size_t line, std::string column,
+                       std::size_t column_index, std::string expected, std::string detail) {
+  throw TrajectoryFormatError(CsvLocation{file, line, std::move(column), column_index},
+                              std::move(expected), std::move(detail));
+}
+
+// Picks the single complete group among `groups` present in the header.
+template <std::size_t N>
+Group resolve_group(const std::array<GroupInfo, N>& groups, const std::vector<HeaderColumn>& columns,
+                    const std::string& file, std::size_t header_line, std::string_view what) {
+  std::array<int, N> present{};
+  for (const HeaderColumn& c : columns) {
+    if (c.spec == nullptr) continue;
+    for (std::size_t g = 0; g < N; ++g) {
+      if (c.spec->group == groups[g].group) ++present[g];
+    }
+  }
+  std::string options;
+  for (std::size_t g = 0; g < N; ++g) {
+    if (g != 0) options += " or ";
+    options += group_columns(groups[g]);
+  }
+  const std::string expected = "exactly one complete " + std::string(what) + " group: " + options;
+  std::size_t chosen = N;
+  for (std::size_t g = 0; g < N; ++g) {
+    if (present[g] == 0) continue;
+    if (chosen != N) {
+      fail(file, header_line, "", 0, expected,
+           "ambiguous " + std::string(what) + ": the header has columns of both the " +
+               std::string(groups[chosen].label) + " (" + group_columns(groups[chosen]) +
+               ") and the " + std::string(groups[g].label) + " (" + group_columns(groups[g]) +
+               ") groups; expected " + expected);
+    }
+    chosen = g;
+  }
+  if (chosen == N) {
+    fail(file, header_line, "", 0, expected,
+         "missing " + std::string(what) + " columns: expected " + expected);
+  }
+  if (present[chosen] != groups[chosen].size) {
+    std::string missing;
+    for (int k = 0; k < groups[chosen].size; ++k) {
+      const std::string_view name = groups[chosen].names[static_cast<std::size_t>(k)];
+      const bool found = std::any_of(columns.begin(), columns.end(), [&](const HeaderColumn& c) {
+        return c.spec != nullptr && c.spec->name == name;
+      });
+      if (!found) missing += (missing.empty() ? "'" : ", '") + std::string(name) + "'";
+    }
+    fail(file, header_line, "", 0, expected,
+         "incomplete " + std::string(groups[chosen].label) + ": missing column(s) " + missing +
+             "; expected all of " + group_columns(groups[chosen]));
+  }
+  return groups[chosen].group;
+}
+
+Layout parse_header(const std::vector<std::string_view>& fields, std::size_t line,
+                    const std::string& file, const TrajectoryReadOptions& options) {
+  Layout layout;
+  layout.header_line = line;
+  layout.columns.reserve(fields.size());
+  for (std::size_t i = 0; i < fields.size(); ++i) {
+    const std::string_view name = fields[i];
+    if (name.empty()) {
+      fail(file, line, "", i + 1, "a column name",
+           "header column " + std::to_string(i + 1) + " has an empty name (a stray comma?)");
+    }
+    const ColumnSpec* spec = find_column(name);
+    if (spec == nullptr && !options.allow_extra_columns) {
+      fail(file, line, std::string(name), i + 1, "a known column name",
+           "unknown column name; expected one of " + all_column_names() +
+               " (names are case-sensitive)");
+    }
+    if (spec != nullptr) {
+      for (std::size_t j = 0; j < i; ++j) {
+        if (layout.columns[j].spec == spec) {
+          fail(file, line, std::string(name), i + 1, "each column once",
+               "duplicate column (also column " + std::to_string(j + 1) + ")");
+        }
+      }
+    }
+    layout.columns.push_back(HeaderColumn{spec, std::string(name)});
+  }
+  const bool has_time = std::any_of(layout.columns.begin(), layout.columns.end(), [](const HeaderColumn& c) {
+    return c.spec != nullptr && c.spec->group == Group::time;
+  });
+  if (!has_time) fail(file, line, "", 0, "a time_s column", "missing column 'time_s'");
+
+  switch (resolve_group(kPositionGroups, layout.columns, file, line, "position")) {
+    case Group::geodetic: layout.position_kind = PositionKind::geodetic; break;
+    case Group::ecef: layout.position_kind = PositionKind::ecef; break;
+    default: layout.position_kind = PositionKind::local_ned; break;
+  }
+  switch (resolve_group(kAttitudeGroups, layout.columns, file, line, "attitude")) {
+    case Group::hpr: layout.attitude_kind = AttitudeKind::heading_pitch_roll; break;
+    case Group::quaternion: layout.attitude_kind = AttitudeKind::quaternion; break;
+    default: layout.attitude_kind = AttitudeKind::quaternion_ecef; break;
+  }
+  if (layout.attitude_kind == AttitudeKind::quaternion_ecef &&
+      layout.position_kind == PositionKind::local_ned) {
+    fail(file, line, "", 0, "an Earth-fixed position with an ECEF attitude",
+         "an ECEF attitude (qw_ecef, ...) needs an Earth-fixed position (lat_deg,lon_deg,h_m or "
+         "x_m,y_m,z_m), not a local NED one");
+  }
+  for (std::size_t i = 0; i < layout.columns.size(); ++i) {
+    const ColumnSpec* spec = layout.columns[i].spec;
+    if (spec != nullptr && spec->slot == 0 &&
+        (spec->group == Group::quaternion || spec->group == Group::quaternion_ecef)) {
+      layout.quaternion_w_column = i;
+    }
+  }
+  return layout;
+}
+
+}  // namespace
+
+Trajectory parse_trajectory_csv(std::string_view text, const std::string& source_name,
+                                const TrajectoryReadOptions& options) {
+  const std::string& file = source_name;
+  detail::CsvLineReader reader(text);
+  if (!reader.next()) {
+    fail(file, 0, "", 0, "a header row",
+         "no header row: the file is empty or holds only comments and blank lines");
+  }
+  const Layout layout = parse_header(reader.fields(), reader.line_number(), file, options);
+  const std::size_t width = layout.columns.size();
+
+  Trajectory trajectory;
+  trajectory.source = source_name;
+  trajectory.position_kind = layout.position_kind;
+  trajectory.attitude_kind = layout.attitude_kind;
+  trajectory.records.reserve(detail::count_lines(text) + 1);
+
+  bool have_previous = false;
+  TimeNs previous_ns = 0;
+  std::string_view previous_text;
+  std::size_t previous_line = 0;
+
+  while (reader.next()) {
+    const std::vector<std::string_view>& fields = reader.fields();
+    const std::size_t line = reader.line_number();
+    if (fields.size() != width) {
+      fail(file, line, "", 0, std::to_string(width) + " fields",
+           "expected " + std::to_string(width) + " comma-separated fields as named by the header (line " +
+               std::to_string(layout.header_line) + "), got " + std::to_string(fields.size()));
+    }
+    TrajectoryRecord record;
+    record.position_kind = layout.position_kind;
+    record.attitude_kind = layout.attitude_kind;
+    record.line = line;
+    std::string_view time_text;
+    std::size_t time_column = 0;
+    for (std::size_t i = 0; i < width; ++i) {
+      const ColumnSpec* spec = layout.columns[i].spec;
+      if (spec == nullptr) continue;  // allowed extra column
+      const std::string_view field = fields[i];
+      if (spec->group == Group::time) {
+        const TimeParse t = try_parse_decimal_seconds(field);
+        if (t.status != NumberStatus::ok) {
+          fail(file, line, layout.columns[i].name, i + 1, std::string(spec->expected),
+               "expected " + std::string(spec->expected) + ", got '" + detail::printable(field) + "' (" +
+                   std::string(describe(t.status)) + ")");
+        }
+        record.t_ns = t.ns;
+        time_text = field;
+        time_column = i;
+        continue;
+      }
+      const DoubleParse v = try_parse_double(field);
+      if (v.status != NumberStatus::ok) {
+        fail(file, line, layout.columns[i].name, i + 1, std::string(spec->expected),
+             "expected " + std::string(spec->expected) + ", got '" + detail::printable(field) + "' (" +
+                 std::string(describe(v.status)) + ")");
+      }
+      if (v.value < spec->min || v.value > spec->max) {
+        fail(file, line, layout.columns[i].name, i + 1, std::string(spec->expected),
+             "expected " + std::string(spec->expected) + ", got '" + detail::printable(field) + "'");
+      }
+      switch (spec->group) {
+        case Group::geodetic:
+        case Group::ecef:
+        case Group::local_ned: record.position[spec->slot] = v.value; break;
+        default: record.attitude[spec->slot] = v.value; break;
+      }
+    }
+    if (have_previous && record.t_ns <= previous_ns) {
+      fail(file, line, layout.columns[time_column].name, time_column + 1,
+           "a time after the previous record's",
+           "time " + detail::printable(time_text) + " s is not after the previous record's " +
+               detail::printable(previous_text) + " s (line " + std::to_string(previous_line) + ")");
+    }
+    if (layout.attitude_kind != AttitudeKind::heading_pitch_roll) {
+      // The components are finite but may be huge: squaring 1e200 gives inf,
+      // which the tolerance test rejects like any other non-unit quaternion.
+      const double norm = record.attitude.norm();
+      if (!(std::abs(norm - 1.0) <= kQuaternionNormTolerance)) {
+        const std::size_t qc = layout.quaternion_w_column;
+        fail(file, line, layout.columns[qc].name, qc + 1, "a unit quaternion",
+             "expected a unit quaternion (|q| within 1e-6 of 1), got |q| = " + detail::format_double(norm));
+      }
+      record.attitude /= norm;
+    }
+    have_previous = true;
+    previous_ns = record.t_ns;
+    previous_text = time_text;
+    previous_line = line;
+    trajectory.records.push_back(record);
+  }
+  if (trajectory.records.empty()) {
+    fail(file, 0, "", 0, "at least one record",
+         "no records after the header (line " + std::to_string(layout.header_line) + ")");
+  }
+  return trajectory;
+}
+
+Trajectory read_trajectory_csv(const std::string& path, const TrajectoryReadOptions& options) {
+  std::string text;
+  if (const int error = read_whole_file(path, text); error != 0) {
+    fail(path, 0, "", 0, "a readable file",
+         "cannot read the trajectory file: " + std::generic_category().message(error));
+  }
+  return parse_trajectory_csv(text, path, options);
+}
+
+}  // namespace imuemu::io
