@@ -5,7 +5,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 flavour=${1:-release}
 case "$flavour" in
-  release) extra=(-DCMAKE_BUILD_TYPE=Release) ;;
+  release) extra=(-DCMAKE_BUILD_TYPE=Release -DIMUEMU_SANITIZE=OFF -DIMUEMU_BUILD_BENCH=ON) ;;
   asan) extra=(-DCMAKE_BUILD_TYPE=RelWithDebInfo -DIMUEMU_SANITIZE=ON -DIMUEMU_BUILD_BENCH=OFF) ;;
   *) echo "usage: $0 release|asan" >&2; exit 2 ;;
 esac
