@@ -29,11 +29,6 @@ std::string knot_name(std::size_t index, TimeNs t_ns) {
   return std::to_string(index) + " (t=" + format_time(t_ns) + " s)";
 }
 
-// Fraction of the way from t0 to t1, computed from the exact int64 offsets.
-double fraction(TimeNs t0_ns, TimeNs t1_ns, TimeNs t_ns) {
-  return static_cast<double>(t_ns - t0_ns) / static_cast<double>(t1_ns - t0_ns);
-}
-
 // Natural cubic spline through the knot positions (thesis §3.5: d^(4) = 0
 // gives cubic position segments; §3.6.1 suggests a C2 cubic spline). Returns
 // the second derivatives M_j (m/s^2) at the knots, M_0 = M_n = 0, from the
@@ -165,7 +160,9 @@ std::vector<ParkRavaniSegment> park_ravani_coefficients(const std::vector<Pose>&
 }
 
 std::vector<Pose> interpolate(const std::vector<Pose>& knots, const std::vector<TimeNs>& times,
-                              const Options& options) {
+                              const Options& options, std::span<const double> extra_ns) {
+  if (!extra_ns.empty() && extra_ns.size() != times.size())
+    throw std::invalid_argument("interpolate: extra_ns must be empty or match times");
   check_knots(knots);
   const std::size_t n = knots.size();
   if (!times.empty() && (times.front() < knots.front().t_ns || times.back() > knots.back().t_ns)) {
@@ -207,13 +204,14 @@ std::vector<Pose> interpolate(const std::vector<Pose>& knots, const std::vector<
     // At a knot time return the knot itself: every method interpolates the
     // knots (p(0) = 0, p(1) = 1; r(0) = 0, r(1) = r_i), so this only removes
     // rounding.
-    if (t == k0.t_ns || t == k1.t_ns) {
+    const double extra = extra_ns.empty() ? 0.0 : extra_ns[k];
+    if (extra == 0.0 && (t == k0.t_ns || t == k1.t_ns)) {
       const Pose& kn = (t == k0.t_ns) ? k0 : k1;
       o.position_m = kn.position_m;
       o.attitude = kn.attitude;
       continue;
     }
-    const double tau = fraction(k0.t_ns, k1.t_ns, t);
+    const double tau = (static_cast<double>(t - k0.t_ns) + extra) / static_cast<double>(k1.t_ns - k0.t_ns);
     switch (options.method) {
       case Method::geodesic:
         o.attitude.noalias() = k0.attitude * so3::exp(tau * seg_log[i]);

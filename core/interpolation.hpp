@@ -8,6 +8,7 @@
 // All three stay in the product for comparison.
 #pragma once
 
+#include <span>
 #include <stdexcept>
 #include <string>
 #include <vector>
@@ -53,8 +54,11 @@ double min_acceleration_warp(double tau, double sigma, double mu);
 // [knots.front().t_ns, knots.back().t_ns]; sorted ascending). Knot times may be
 // non-uniform for geodesic/min_acceleration; Park-Ravani uses each segment's
 // own duration for tau.
+// `extra_ns` (empty, or one per time, each in [0, 1)) adds a sub-nanosecond
+// offset to each time, so a grid like k/3000 s can be evaluated at its exact
+// instants while its timestamps stay integer nanoseconds.
 std::vector<Pose> interpolate(const std::vector<Pose>& knots, const std::vector<TimeNs>& times,
-                              const Options& options);
+                              const Options& options, std::span<const double> extra_ns = {});
 
 // Validates knots (throws InterpolationError naming the offending knots).
 void check_knots(const std::vector<Pose>& knots);

@@ -1,6 +1,7 @@
 #include "core/pipeline.hpp"
 
 #include <algorithm>
+#include <cmath>
 #include <stdexcept>
 #include <string>
 
@@ -15,6 +16,20 @@ Chart chart_from_string(const std::string& name) {
 }
 
 std::string to_string(Chart c) { return c == Chart::global ? "global" : "local"; }
+
+Derivatives derivatives_from_string(const std::string& name) {
+  if (name == "kernel") return Derivatives::kernel;
+  if (name == "finite-difference") return Derivatives::finite_difference;
+  throw std::invalid_argument("derivatives '" + name + "': expected kernel or finite-difference");
+}
+
+std::string to_string(Derivatives d) { return d == Derivatives::kernel ? "kernel" : "finite-difference"; }
+
+GapPolicy gap_policy_from_string(const std::string& name) {
+  if (name == "error") return GapPolicy::error;
+  if (name == "split") return GapPolicy::split;
+  throw std::invalid_argument("gap policy '" + name + "': expected error or split");
+}
 
 std::vector<TimeNs> output_grid(TimeNs t_first_ns, TimeNs t_last_ns, std::int64_t rate_hz) {
   if (rate_hz <= 0 || rate_hz > 1'000'000)
@@ -33,6 +48,11 @@ std::vector<TimeNs> output_grid(TimeNs t_first_ns, TimeNs t_last_ns, std::int64_
   return times;
 }
 
+double output_grid_fraction_ns(std::size_t k, std::int64_t rate_hz) {
+  const auto ks = static_cast<std::int64_t>(k);
+  return static_cast<double>(((ks % rate_hz) * kNsPerSecond) % rate_hz) / static_cast<double>(rate_hz);
+}
+
 namespace {
 
 void report(const ProgressFn& progress, double fraction) {
@@ -49,17 +69,29 @@ Vec3 thesis_derivative(const At& at, std::size_t i, std::size_t n, double h_s) {
   return (-at(i + 2) + 8.0 * (at(i + 1) - at(i - 1)) + at(i - 2)) / (12.0 * h_s);  // Eq. 3.74
 }
 
+// C2 step from 0 to 1 on [0, 1] (quintic smoothstep) and its derivative: blends
+// two charts' attitudes so the angular rate stays continuous.
+double smoothstep(double x) {
+  x = std::clamp(x, 0.0, 1.0);
+  return x * x * x * (10.0 + x * (-15.0 + 6.0 * x));
+}
+double smoothstep_rate(double x) {
+  if (x <= 0.0 || x >= 1.0) return 0.0;
+  return 30.0 * x * x * (1.0 - x) * (1.0 - x);
+}
+
 // Smooths one block of output samples [begin, end) in a chart at its middle
 // sample (or, for the global chart, at the identity and the origin).
 // Positions, velocities and accelerations are final and written straight into
 // the result (position smoothing is linear, so every chart gives the same
-// answer). Attitudes are chart dependent at second order, so the block also
-// returns its smoothed attitudes `overlap` samples beyond each end, for the
-// caller to blend with the neighbouring block.
+// answer). Attitudes (and, with kernel derivatives, body rates) are chart
+// dependent at second order, so the block returns them `overlap` samples
+// beyond each end, for the caller to blend with the neighbouring block.
 class BlockSolver {
  public:
-  BlockSolver(const std::vector<Pose>& dense, const smoothing::UniformKernel& kernel, double period_s)
-      : dense_(dense), kernel_(kernel), h_s_(period_s), n_(dense.size()) {}
+  BlockSolver(const std::vector<Pose>& dense, const smoothing::UniformKernel& kernel, double period_s,
+              Derivatives derivatives)
+      : dense_(dense), kernel_(kernel), h_s_(period_s), n_(dense.size()), derivatives_(derivatives) {}
 
   // Returns false (writing nothing) if some sample of the window is too far
   // from the reference for the local chart.
@@ -69,7 +101,7 @@ class BlockSolver {
     const Mat3 R_ref = global ? Mat3::Identity() : dense_[ref].attitude;
     const Vec3 d_ref = global ? Vec3::Zero() : dense_[ref].position_m;
     // Attitudes are needed on [a_lo, a_hi) (block plus overlap), positions on
-    // the block +-4 (velocity stencil of the velocity stencil), and Eq. 3.68
+    // the block +-4 (finite differences of finite differences), and Eq. 3.68
     // reads +-Delta around those.
     a_lo_ = begin > overlap ? begin - overlap : 0;
     a_hi_ = std::min(n_, end + overlap);
@@ -84,14 +116,34 @@ class BlockSolver {
       if (!global && rho_[j - lo_].norm() > kMaxChartAngleRad) return false;
       delta_[j - lo_] = dense_[j].position_m - d_ref;
     }
-    // Eq. 3.68's clipping at the true ends happens because [lo_, hi) stops
-    // short of the full window only at index 0 or n.
+    // The local arrays stop short of a full window only at the true ends 0
+    // and n, so clipping them reproduces Eq. 3.68's one-sided windows.
     attitudes_.resize(a_hi_ - a_lo_);
-    for (std::size_t j = a_lo_; j < a_hi_; ++j) attitudes_[j - a_lo_] = R_ref * so3::exp(smooth_local(rho_, j, hi));
+    rates_.resize(a_hi_ - a_lo_);
+    for (std::size_t j = a_lo_; j < a_hi_; ++j) {
+      if (derivatives_ == Derivatives::kernel) {
+        const smoothing::Smoothed r = smoothing::smooth_with_derivatives(kernel_, rho_, j - lo_);
+        attitudes_[j - a_lo_] = R_ref * so3::exp(r.value);
+        rates_[j - a_lo_] = so3::W(r.value) * r.rate;  // Eq. 3.59-3.60, exact r~'
+      } else {
+        attitudes_[j - a_lo_] = R_ref * so3::exp(smoothing::smooth_at(kernel_, rho_, j - lo_));
+      }
+    }
+    if (derivatives_ == Derivatives::kernel) {
+      for (std::size_t i = begin; i < end; ++i) {
+        const smoothing::Smoothed d = smoothing::smooth_with_derivatives(kernel_, delta_, i - lo_);
+        Kinematics& kin = out.trajectory[i];
+        kin.t_ns = times[i];
+        kin.position_m = d_ref + d.value;
+        kin.velocity_m_s = d.rate;
+        kin.acceleration_m_s2 = d.accel;
+      }
+      return true;
+    }
     const std::size_t s_lo = begin >= 4 ? begin - 4 : 0;
     const std::size_t s_hi = std::min(n_, end + 4);
     delta_s_.resize(m);
-    for (std::size_t j = s_lo; j < s_hi; ++j) delta_s_[j - lo_] = smooth_local(delta_, j, hi);
+    for (std::size_t j = s_lo; j < s_hi; ++j) delta_s_[j - lo_] = smoothing::smooth_at(kernel_, delta_, j - lo_);
     auto at_delta = [&](std::size_t j) -> const Vec3& { return delta_s_[j - lo_]; };
     velocity_.resize(m);
     const std::size_t v_lo = begin >= 2 ? begin - 2 : 0;
@@ -108,64 +160,65 @@ class BlockSolver {
     return true;
   }
 
-  // Smoothed attitudes of the last successful solve, on [a_lo(), a_hi()).
+  // Smoothed attitudes (and kernel-derived body rates) of the last successful
+  // solve, on [a_lo(), a_hi()).
   std::size_t a_lo() const { return a_lo_; }
   std::size_t a_hi() const { return a_hi_; }
   const Mat3& attitude(std::size_t j) const { return attitudes_[j - a_lo_]; }
+  const Vec3& rate(std::size_t j) const { return rates_[j - a_lo_]; }
 
  private:
-  Vec3 smooth_local(const std::vector<Vec3>& f, std::size_t j, std::size_t hi) const {
-    const auto delta = static_cast<std::size_t>(kernel_.delta());
-    const std::size_t a = std::max(lo_, j >= delta ? j - delta : 0);
-    const std::size_t b = std::min(hi - 1, j + delta);
-    const Vec3& fj = f[j - lo_];
-    Vec3 weighted = Vec3::Zero();
-    double weight_sum = 0.0;
-    for (std::size_t k = a; k <= b; ++k) {
-      const double w = kernel_.weight(static_cast<int>(static_cast<std::ptrdiff_t>(k) - static_cast<std::ptrdiff_t>(j)));
-      weighted += w * (f[k - lo_] - fj);
-      weight_sum += w;
-    }
-    return fj + weighted / weight_sum;
-  }
-
   const std::vector<Pose>& dense_;
   const smoothing::UniformKernel& kernel_;
   double h_s_;
   std::size_t n_;
+  Derivatives derivatives_;
   std::size_t lo_ = 0, a_lo_ = 0, a_hi_ = 0;
-  std::vector<Vec3> rho_, delta_, delta_s_, velocity_;
+  std::vector<Vec3> rho_, delta_, delta_s_, velocity_, rates_;
   std::vector<Mat3> attitudes_;
 };
 
-// C2 step from 0 to 1 on [0, 1] (quintic smoothstep): blends two charts'
-// attitudes so the angular rate and its derivative stay continuous.
-double smoothstep(double x) {
-  x = std::clamp(x, 0.0, 1.0);
-  return x * x * x * (10.0 + x * (-15.0 + 6.0 * x));
+// Moves (R, omega) a fraction s of the way to (R_b, omega_b) along the
+// geodesic between them, with s'(t) = s_rate: R = R_a exp(s D), D =
+// log(R_a^T R_b), and the exact body rate of that curve,
+//   omega = exp(sD)^T omega_a + W(sD) (s' D + s D'),
+//   D' = W(D)^-1 (omega_b - exp(D)^T omega_a)   (from R_b = R_a exp(D)).
+void blend(Mat3& R, Vec3& omega, const Mat3& R_b, const Vec3& omega_b, double s, double s_rate, bool with_rate) {
+  const Vec3 D = so3::log(R.transpose() * R_b);
+  const Mat3 E = so3::exp(s * D);
+  if (with_rate) {
+    const Vec3 D_dot = so3::W_inverse(D) * (omega_b - so3::exp(D).transpose() * omega);
+    omega = E.transpose() * omega + so3::W(s * D) * (s_rate * D + s * D_dot);
+  }
+  R = R * E;
 }
 
-}  // namespace
-
-BatchResult run_batch(const std::vector<Pose>& knots, const PipelineOptions& options,
-                      const ProgressFn& progress) {
-  interp::check_knots(knots);
+BatchResult run_segment(const std::vector<Pose>& knots, const PipelineOptions& options, const ProgressFn& progress) {
   const std::vector<TimeNs> times = output_grid(knots.front().t_ns, knots.back().t_ns, options.rate_hz);
   const std::size_t n = times.size();
-  if (n < 2) throw std::invalid_argument("trajectory shorter than two output samples");
+  if (n < 2)
+    throw std::invalid_argument("trajectory from " + std::to_string(knots.front().t_ns) + " ns is shorter than two output samples");
   const double period_s = 1.0 / static_cast<double>(options.rate_hz);
-
-  const std::vector<Pose> dense = interp::interpolate(knots, times, options.interpolation);
+  std::vector<double> extra_ns(n);
+  for (std::size_t k = 0; k < n; ++k) extra_ns[k] = output_grid_fraction_ns(k, options.rate_hz);
+  const std::vector<Pose> dense = interp::interpolate(knots, times, options.interpolation, extra_ns);
   report(progress, 0.2);
 
   const smoothing::UniformKernel kernel(options.kernel, period_s);
+  const bool kernel_rates = options.derivatives == Derivatives::kernel;
+  if (kernel_rates && kernel.delta() < 1)
+    throw std::invalid_argument("kernel derivatives need a window: Delta >= 1");
   BatchResult result;
   result.trajectory.resize(n);
   result.imu.resize(n);
-  BlockSolver solver(dense, kernel, period_s);
+  std::vector<Vec3> rates(kernel_rates ? n : 0);
+  BlockSolver solver(dense, kernel, period_s, options.derivatives);
   if (options.chart == Chart::global) {
     solver.solve(0, n, 0, true, times, result);
-    for (std::size_t i = 0; i < n; ++i) result.trajectory[i].attitude = solver.attitude(i);
+    for (std::size_t i = 0; i < n; ++i) {
+      result.trajectory[i].attitude = solver.attitude(i);
+      if (kernel_rates) rates[i] = solver.rate(i);
+    }
   } else {
     // Local chart: blocks of 2*Delta samples (so each log serves ~2 outputs),
     // halved while the window strays more than kMaxChartAngleRad from the
@@ -190,13 +243,17 @@ BatchResult run_batch(const std::vector<Pose>& knots, const PipelineOptions& opt
       const double blend_len = static_cast<double>(begin + overlap - blend_lo);
       for (std::size_t j = solver.a_lo(); j < solver.a_hi(); ++j) {
         Mat3& R = result.trajectory[j].attitude;
+        Vec3 unused = Vec3::Zero();
+        Vec3& omega = kernel_rates ? rates[j] : unused;
         if (begin == 0 || j >= begin + overlap) {
           R = solver.attitude(j);
+          if (kernel_rates) omega = solver.rate(j);
         } else {
           // Samples before begin+overlap already hold the previous blocks'
           // value: move it towards this block's along the geodesic.
-          const double s = smoothstep((static_cast<double>(j - blend_lo) + 0.5) / blend_len);
-          R = R * so3::exp(s * so3::log(R.transpose() * solver.attitude(j)));
+          const double x = (static_cast<double>(j - blend_lo) + 0.5) / blend_len;
+          blend(R, omega, solver.attitude(j), kernel_rates ? solver.rate(j) : unused, smoothstep(x),
+                smoothstep_rate(x) / (blend_len * period_s), kernel_rates);
         }
       }
       begin += length;
@@ -206,20 +263,66 @@ BatchResult run_batch(const std::vector<Pose>& knots, const PipelineOptions& opt
       }
     }
   }
-  // Body rate from the final smoothed attitudes, in each sample's own chart:
-  // rho_j = log(R~_i^T R~_j) is 0 at i, where W(0) = I, so omega_i is the
-  // thesis derivative (Eq. 3.71-3.74) of rho at i (Eq. 3.59-3.60).
   for (std::size_t i = 0; i < n; ++i) {
-    const Mat3 Rt = result.trajectory[i].attitude.transpose();
-    auto at_rho = [&](std::size_t j) -> Vec3 {
-      return j == i ? Vec3::Zero() : so3::log(Rt * result.trajectory[j].attitude);
-    };
     Kinematics& kin = result.trajectory[i];
-    kin.angular_rate_rad_s = thesis_derivative(at_rho, i, n, period_s);
+    if (kernel_rates) {
+      kin.angular_rate_rad_s = rates[i];
+    } else {
+      // Thesis stencils on the final smoothed attitudes, in each sample's own
+      // chart: rho_j = log(R~_i^T R~_j) is 0 at i where W(0) = I, so omega_i
+      // is the Eq. 3.71-3.74 derivative of rho at i (Eq. 3.59-3.60).
+      const Mat3 Rt = kin.attitude.transpose();
+      auto at_rho = [&](std::size_t j) -> Vec3 {
+        return j == i ? Vec3::Zero() : so3::log(Rt * result.trajectory[j].attitude);
+      };
+      kin.angular_rate_rad_s = thesis_derivative(at_rho, i, n, period_s);
+    }
     result.imu[i] = imu_from_kinematics(options.scene, kin);
   }
   report(progress, 1.0);
   return result;
+}
+
+std::string knot_time(TimeNs t_ns) {
+  const double s = static_cast<double>(t_ns) * 1e-9;
+  return std::to_string(s) + " s";
+}
+
+}  // namespace
+
+BatchResult run_batch(const std::vector<Pose>& knots, const PipelineOptions& options,
+                      const ProgressFn& progress) {
+  interp::check_knots(knots);
+  if (!(options.max_gap_s > 0.0)) throw std::invalid_argument("max gap must be > 0 s");
+  const auto max_gap_ns = static_cast<TimeNs>(std::min(options.max_gap_s, 1e9) * 1e9);
+  // Cut the knots at every gap longer than the limit.
+  std::vector<std::size_t> cuts{0};
+  for (std::size_t i = 1; i < knots.size(); ++i) {
+    if (knots[i].t_ns - knots[i - 1].t_ns <= max_gap_ns) continue;
+    if (options.gap_policy == GapPolicy::error)
+      throw GapError("knots " + std::to_string(i - 1) + " (t=" + knot_time(knots[i - 1].t_ns) + ") and " +
+                     std::to_string(i) + " (t=" + knot_time(knots[i].t_ns) + ") are " +
+                     knot_time(knots[i].t_ns - knots[i - 1].t_ns) + " apart, more than the " +
+                     std::to_string(options.max_gap_s) +
+                     " s gap limit: raise the limit or split the trajectory at gaps");
+    cuts.push_back(i);
+  }
+  cuts.push_back(knots.size());
+  BatchResult all;
+  for (std::size_t c = 0; c + 1 < cuts.size(); ++c) {
+    const std::vector<Pose> segment(knots.begin() + static_cast<std::ptrdiff_t>(cuts[c]),
+                                    knots.begin() + static_cast<std::ptrdiff_t>(cuts[c + 1]));
+    if (segment.size() < 2)
+      throw GapError("knot " + std::to_string(cuts[c]) + " (t=" + knot_time(segment.front().t_ns) +
+                     ") is isolated between two gaps: a segment needs at least two knots");
+    const double base = static_cast<double>(cuts[c]) / static_cast<double>(knots.size());
+    const double span = static_cast<double>(cuts[c + 1] - cuts[c]) / static_cast<double>(knots.size());
+    BatchResult part = run_segment(segment, options, [&](double f) { report(progress, base + span * f); });
+    if (cuts.size() == 2) return part;
+    all.trajectory.insert(all.trajectory.end(), part.trajectory.begin(), part.trajectory.end());
+    all.imu.insert(all.imu.end(), part.imu.begin(), part.imu.end());
+  }
+  return all;
 }
 
 }  // namespace imuemu

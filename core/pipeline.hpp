@@ -37,9 +37,36 @@ std::string to_string(Chart c);
 // beyond it is an error (the window itself spans too much rotation).
 inline constexpr double kMaxChartAngleRad = 3.0;
 
+// How the smoothed trajectory is differentiated.
+enum class Derivatives {
+  // The thesis' stencils (Eq. 3.71-3.74): forward/backward/centred at the
+  // ends, five-point inside; velocity differentiated again for acceleration.
+  // Their error grows as rounding/h^2: at ECEF magnitudes and kHz rates the
+  // accelerometer error reaches 1e-3 m/s^2 and more.
+  finite_difference,
+  // Exact derivatives of the smoothed signal of Eq. 3.68 as a function of
+  // time: the bump kernel is C-infinity, so d/dt and d2/dt2 go through the
+  // kernel weights (smoothing::smooth_with_derivatives). No cancellation.
+  kernel,
+};
+
+Derivatives derivatives_from_string(const std::string& name);  // finite-difference|kernel
+std::string to_string(Derivatives d);
+
+// What to do when consecutive knots are further apart than max_gap_s.
+enum class GapPolicy {
+  error,  // refuse, naming the two knots
+  split,  // process each side as its own trajectory (own one-sided windows);
+          // the output has the same gap
+};
+GapPolicy gap_policy_from_string(const std::string& name);  // error|split
+
 struct PipelineOptions {
   SceneModel scene;
   Chart chart = Chart::local;
+  Derivatives derivatives = Derivatives::kernel;
+  GapPolicy gap_policy = GapPolicy::error;
+  double max_gap_s = 10.0;  // longest knot interval interpolated across
   std::int64_t rate_hz = 400;  // output rate, integer Hz
   interp::Options interpolation;
   smoothing::KernelOptions kernel;
@@ -57,9 +84,20 @@ std::vector<TimeNs> output_grid(TimeNs t_first_ns, TimeNs t_last_ns, std::int64_
 // Reports progress in [0, 1]; may be empty.
 using ProgressFn = std::function<void(double)>;
 
+// Sub-nanosecond part of grid time k: (k * 1e9 mod rate) / rate ns. The
+// pipeline evaluates the physics at the exact instant t_first + k/rate s and
+// stamps the sample with the integer floor (timestamps are int64 ns).
+double output_grid_fraction_ns(std::size_t k, std::int64_t rate_hz);
+
+// Thrown for knot spacings the gap policy refuses; names both knots.
+struct GapError : interp::InterpolationError {
+  using interp::InterpolationError::InterpolationError;
+};
+
 // Runs the whole batch method. Throws interp::InterpolationError for knots the
-// method cannot interpolate and std::invalid_argument for bad options (rate not
-// positive or above 1 MHz, fewer than two output samples).
+// method cannot interpolate (GapError for gaps) and std::invalid_argument for
+// bad options (rate not positive or above 1 MHz, fewer than two output
+// samples, a window spanning more rotation than a chart holds).
 BatchResult run_batch(const std::vector<Pose>& knots, const PipelineOptions& options,
                       const ProgressFn& progress = {});
 

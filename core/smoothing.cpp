@@ -49,11 +49,27 @@ UniformKernel::UniformKernel(const KernelOptions& options, double period_s) : de
     case KernelWidth::seconds: half_width_s_ = options.half_width_s; break;
   }
   if (delta_ > 0 && !(half_width_s_ > 0.0)) throw std::invalid_argument("kernel half width must be > 0");
-  weights_.resize(static_cast<std::size_t>(2 * delta_ + 1));
+  const auto size = static_cast<std::size_t>(2 * delta_ + 1);
+  weights_.assign(size, 0.0);
+  rates_.assign(size, 0.0);
+  accels_.assign(size, 0.0);
   for (int k = -delta_; k <= delta_; ++k) {
-    // Delta = 0 means no smoothing: the single weight must be non-zero.
-    weights_[static_cast<std::size_t>(k + delta_)] =
-        delta_ == 0 ? 1.0 : bump(k * period_s / half_width_s_);
+    const auto idx = static_cast<std::size_t>(k + delta_);
+    if (delta_ == 0) {  // no smoothing: the single weight must be non-zero
+      weights_[idx] = 1.0;
+      continue;
+    }
+    const double x = k * period_s / half_width_s_;
+    const double phi = bump(x);
+    weights_[idx] = phi;
+    if (phi == 0.0) continue;
+    // Phi' = Phi g1, Phi'' = Phi (g1^2 + g1'), g1 = -2x/(1-x^2)^2,
+    // g1' = -(2 + 6x^2)/(1-x^2)^3.
+    const double u = 1.0 - x * x;
+    const double g1 = -2.0 * x / (u * u);
+    const double g1_prime = -(2.0 + 6.0 * x * x) / (u * u * u);
+    rates_[idx] = -phi * g1 / half_width_s_;
+    accels_[idx] = phi * (g1 * g1 + g1_prime) / (half_width_s_ * half_width_s_);
   }
   if (weights_[static_cast<std::size_t>(delta_)] <= 0.0)
     throw std::invalid_argument("kernel centre weight is zero");
@@ -73,6 +89,37 @@ Vec3 smooth_at(const UniformKernel& kernel, std::span<const Vec3> f, std::size_t
     weight_sum += w;
   }
   return fi + weighted / weight_sum;
+}
+
+Smoothed smooth_with_derivatives(const UniformKernel& kernel, std::span<const Vec3> f, std::size_t i,
+                                 std::size_t first_valid) {
+  // f[first_valid..] are real samples; earlier entries are never read. The
+  // window is clipped at 0/first_valid and at f.size() like Eq. 3.68.
+  const auto delta = static_cast<std::size_t>(kernel.delta());
+  const std::size_t lo = std::max(first_valid, i >= delta ? i - delta : 0);
+  const std::size_t hi = std::min(f.size() - 1, i + delta);
+  const Vec3& fi = f[i];
+  Vec3 s0 = Vec3::Zero(), s1 = Vec3::Zero(), s2 = Vec3::Zero();
+  double d0 = 0.0, d1 = 0.0, d2 = 0.0;
+  for (std::size_t j = lo; j <= hi; ++j) {
+    const int k = static_cast<int>(static_cast<std::ptrdiff_t>(j) - static_cast<std::ptrdiff_t>(i));
+    const double w = kernel.weight(k), wr = kernel.weight_rate(k), wa = kernel.weight_accel(k);
+    const Vec3 g = f[j] - fi;
+    s0 += w * g;
+    s1 += wr * g;
+    s2 += wa * g;
+    d0 += w;
+    d1 += wr;
+    d2 += wa;
+  }
+  // N/D with N = f_i D + S0: (N/D)' = (S1 D - S0 D1)/D^2 and
+  // (N/D)'' = S2/D - 2 S1 D1/D^2 - S0 D2/D^2 + 2 S0 D1^2/D^3.
+  const double inv = 1.0 / d0;
+  Smoothed out;
+  out.value = fi + s0 * inv;
+  out.rate = (s1 - s0 * (d1 * inv)) * inv;
+  out.accel = (s2 - 2.0 * s1 * (d1 * inv) - s0 * (d2 * inv) + 2.0 * s0 * (d1 * d1 * inv * inv)) * inv;
+  return out;
 }
 
 void smooth(const UniformKernel& kernel, std::span<const Vec3> f, std::span<Vec3> out) {

@@ -46,14 +46,30 @@ class UniformKernel {
   int delta() const { return delta_; }
   // Weight for offset k in [-delta, delta].
   double weight(int k) const { return weights_[static_cast<std::size_t>(k + delta_)]; }
+  // First and second time derivatives of that weight as the output time t
+  // moves (the sample time t_j stays): d/dt Phi((t_j - t)/s) = -Phi'(x)/s and
+  // d2/dt2 = Phi''(x)/s^2, with x = (t_j - t)/s and s the half width.
+  double weight_rate(int k) const { return rates_[static_cast<std::size_t>(k + delta_)]; }
+  double weight_accel(int k) const { return accels_[static_cast<std::size_t>(k + delta_)]; }
   // Half width of the bump in seconds (support is +-this).
   double half_width_s() const { return half_width_s_; }
 
  private:
   int delta_;
   double half_width_s_;
-  std::vector<double> weights_;
+  std::vector<double> weights_, rates_, accels_;
 };
+
+// The smoothed value of Eq. 3.68 at sample i and its first and second time
+// derivatives, differentiating the kernel weights exactly (the bump is C-inf):
+// the derivative of the function t -> sum Phi((t_j - t)/s) f_j / sum Phi(..)
+// at t = t_i, over the same clipped window. Computed on offsets f_j - f_i, so
+// nothing cancels at ECEF magnitudes. Needs delta >= 1.
+struct Smoothed {
+  Vec3 value, rate, accel;
+};
+Smoothed smooth_with_derivatives(const UniformKernel& kernel, std::span<const Vec3> f, std::size_t i,
+                                 std::size_t first_valid = 0);
 
 // Eq. 3.68 on a uniformly sampled sequence, including its one-sided windows at
 // both ends (the sums are clipped to the available samples and renormalised).

@@ -117,6 +117,9 @@ int generate(const GenerateArgs& args) {
     opt.scene = scene_model(args.scene, args.gravity_m_s2);
     opt.rate_hz = args.rate_hz;
     opt.chart = chart_from_string(args.chart);
+    opt.derivatives = derivatives_from_string(args.derivatives);
+    opt.gap_policy = gap_policy_from_string(args.gap_policy);
+    opt.max_gap_s = args.max_gap_s;
     opt.interpolation.method = interp::method_from_string(args.method);
     opt.interpolation.sigma = args.sigma;
     opt.interpolation.mu = args.mu;
@@ -137,7 +140,7 @@ int generate(const GenerateArgs& args) {
       const double wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start).count();
       std::cerr << "imuemu: " << knots.size() << " knots -> " << result.imu.size() << " samples at " << args.rate_hz
                 << " Hz (" << args.scene << ", " << args.method << ", Delta " << opt.kernel.delta << ", " << args.kernel
-                << " kernel, " << args.chart << " chart) in " << number(std::round(wall_s * 1000) / 1000)
+                << " kernel, " << args.chart << " chart, " << args.derivatives << " derivatives) in " << number(std::round(wall_s * 1000) / 1000)
                 << " s -> " << args.out_path << "\n";
     }
     return static_cast<int>(kOk);

@@ -26,6 +26,9 @@ struct GenerateArgs {
   std::string kernel = "window";
   double kernel_half_width_s = 1.0;
   std::string chart = "local";
+  std::string derivatives = "kernel";
+  std::string gap_policy = "error";
+  double max_gap_s = 10.0;
   std::string scene = "ecef";
   double gravity_m_s2 = 9.80665;
   bool quiet = false;

@@ -24,6 +24,11 @@ int main(int argc, char** argv) {
   g->add_option("--kernel-half-width-s", gen.kernel_half_width_s, "Bump half width for --kernel seconds")->capture_default_str();
   g->add_option("--chart", gen.chart, "Where to smooth: local (default) or global (the thesis' log R)")->capture_default_str()
       ->check(CLI::IsMember({"local", "global"}));
+  g->add_option("--derivatives", gen.derivatives, "kernel (exact, through the bump kernel) or finite-difference (thesis Eq. 3.71-3.74)")
+      ->capture_default_str()->check(CLI::IsMember({"kernel", "finite-difference"}));
+  g->add_option("--gap-policy", gen.gap_policy, "Knot intervals longer than --max-gap-s: error, or split into independent segments")
+      ->capture_default_str()->check(CLI::IsMember({"error", "split"}));
+  g->add_option("--max-gap-s", gen.max_gap_s, "Longest knot interval interpolated across")->capture_default_str()->check(CLI::PositiveNumber);
   g->add_option("--scene", gen.scene, "Physics: ecef (Earth rate, Coriolis, normal gravity) or flat")->capture_default_str()
       ->check(CLI::IsMember({"ecef", "flat"}));
   g->add_option("--gravity", gen.gravity_m_s2, "flat scene: gravity magnitude (m/s^2), along NED down")->capture_default_str();
