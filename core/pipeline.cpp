@@ -25,6 +25,12 @@ Derivatives derivatives_from_string(const std::string& name) {
 
 std::string to_string(Derivatives d) { return d == Derivatives::kernel ? "kernel" : "finite-difference"; }
 
+Ends ends_from_string(const std::string& name) {
+  if (name == "clip") return Ends::clip;
+  if (name == "extrapolate") return Ends::extrapolate;
+  throw std::invalid_argument("ends '" + name + "': expected clip or extrapolate");
+}
+
 GapPolicy gap_policy_from_string(const std::string& name) {
   if (name == "error") return GapPolicy::error;
   if (name == "split") return GapPolicy::split;
@@ -283,6 +289,67 @@ BatchResult run_segment(const std::vector<Pose>& knots, const PipelineOptions& o
   return result;
 }
 
+// Ends::extrapolate: virtual knots continue the first and last segments along
+// their geodesics (Eq. 3.44 with tau outside [0, 1]) for a whole number of
+// seconds covering the window, so the padded grid contains the real grid's
+// instants exactly; the padded samples are computed and then dropped.
+BatchResult run_segment_extrapolated(const std::vector<Pose>& knots, const PipelineOptions& options,
+                                     const ProgressFn& progress) {
+  const std::int64_t pad_samples = options.kernel.delta + 8;
+  const std::int64_t pad_s = (pad_samples + options.rate_hz - 1) / options.rate_hz;
+  const TimeNs pad_ns = pad_s * kNsPerSecond;
+  auto extend = [&](const Pose& from, const Pose& towards, bool before) {
+    // Virtual knots at from.t -+ k*h continuing the segment (from <- towards).
+    std::vector<Pose> out;
+    const TimeNs h = std::abs(towards.t_ns - from.t_ns);
+    const Vec3 xi = so3::log(towards.attitude.transpose() * from.attitude);  // one step away from `towards`
+    const Vec3 step_m = from.position_m - towards.position_m;
+    for (std::int64_t k = 1; k * h < pad_ns + h; ++k) {
+      const double kd = static_cast<double>(k);
+      out.push_back({from.t_ns + (before ? -k * h : k * h), from.position_m + kd * step_m,
+                     from.attitude * so3::exp(kd * xi)});
+    }
+    return out;
+  };
+  std::vector<Pose> head = extend(knots[0], knots[1], true);
+  const std::vector<Pose> tail = extend(knots[knots.size() - 1], knots[knots.size() - 2], false);
+  std::vector<Pose> padded(head.rbegin(), head.rend());
+  padded.insert(padded.end(), knots.begin(), knots.end());
+  padded.insert(padded.end(), tail.begin(), tail.end());
+  // Grid from t_0 - pad_s to t_n + pad_s: whole seconds, so aligned.
+  std::vector<Pose> clipped_knots = padded;
+  PipelineOptions clip = options;
+  clip.ends = Ends::clip;
+  const TimeNs first = knots.front().t_ns - pad_ns, last = knots.back().t_ns + pad_ns;
+  // Trim the virtual knots to exactly [first, last] by re-timing the outermost
+  // ones: interpolate them at the grid ends along their own segment.
+  auto at_time = [](const Pose& a, const Pose& b, TimeNs t) {
+    return interp::geodesic(a, b, static_cast<double>(t - a.t_ns) / static_cast<double>(b.t_ns - a.t_ns));
+  };
+  while (clipped_knots.size() > 2 && clipped_knots[1].t_ns <= first) clipped_knots.erase(clipped_knots.begin());
+  if (clipped_knots.front().t_ns < first) {
+    Pose p = at_time(clipped_knots[0], clipped_knots[1], first);
+    p.t_ns = first;
+    clipped_knots.front() = p;
+  }
+  while (clipped_knots.size() > 2 && clipped_knots[clipped_knots.size() - 2].t_ns >= last) clipped_knots.pop_back();
+  if (clipped_knots.back().t_ns > last) {
+    const std::size_t m = clipped_knots.size();
+    Pose p = at_time(clipped_knots[m - 2], clipped_knots[m - 1], last);
+    p.t_ns = last;
+    clipped_knots.back() = p;
+  }
+  BatchResult full = run_segment(clipped_knots, clip, progress);
+  const auto skip = static_cast<std::size_t>(pad_s * options.rate_hz);
+  const std::size_t count = output_grid(knots.front().t_ns, knots.back().t_ns, options.rate_hz).size();
+  BatchResult out;
+  out.trajectory.assign(full.trajectory.begin() + static_cast<std::ptrdiff_t>(skip),
+                        full.trajectory.begin() + static_cast<std::ptrdiff_t>(skip + count));
+  out.imu.assign(full.imu.begin() + static_cast<std::ptrdiff_t>(skip),
+                 full.imu.begin() + static_cast<std::ptrdiff_t>(skip + count));
+  return out;
+}
+
 std::string knot_time(TimeNs t_ns) {
   const double s = static_cast<double>(t_ns) * 1e-9;
   return std::to_string(s) + " s";
@@ -317,7 +384,9 @@ BatchResult run_batch(const std::vector<Pose>& knots, const PipelineOptions& opt
                      ") is isolated between two gaps: a segment needs at least two knots");
     const double base = static_cast<double>(cuts[c]) / static_cast<double>(knots.size());
     const double span = static_cast<double>(cuts[c + 1] - cuts[c]) / static_cast<double>(knots.size());
-    BatchResult part = run_segment(segment, options, [&](double f) { report(progress, base + span * f); });
+    const ProgressFn part_progress = [&](double f) { report(progress, base + span * f); };
+    BatchResult part = options.ends == Ends::extrapolate ? run_segment_extrapolated(segment, options, part_progress)
+                                                         : run_segment(segment, options, part_progress);
     if (cuts.size() == 2) return part;
     all.trajectory.insert(all.trajectory.end(), part.trajectory.begin(), part.trajectory.end());
     all.imu.insert(all.imu.end(), part.imu.begin(), part.imu.end());

@@ -61,8 +61,21 @@ enum class GapPolicy {
 };
 GapPolicy gap_policy_from_string(const std::string& name);  // error|split
 
+// What Eq. 3.68 sees beyond the first and last knot.
+enum class Ends {
+  // The thesis: the window is clipped and renormalised (one-sided windows).
+  // Biased: a constant-rate motion shows a rate error of up to ~50% there.
+  clip,
+  // The first and last knot segments are continued along their geodesic
+  // (constant body rate and velocity) by virtual knots, so every output sample
+  // sees a full window. Exact for constant-rate motion.
+  extrapolate,
+};
+Ends ends_from_string(const std::string& name);  // clip|extrapolate
+
 struct PipelineOptions {
   SceneModel scene;
+  Ends ends = Ends::extrapolate;
   Chart chart = Chart::local;
   Derivatives derivatives = Derivatives::kernel;
   GapPolicy gap_policy = GapPolicy::error;

@@ -118,6 +118,7 @@ int generate(const GenerateArgs& args) {
     opt.rate_hz = args.rate_hz;
     opt.chart = chart_from_string(args.chart);
     opt.derivatives = derivatives_from_string(args.derivatives);
+    opt.ends = ends_from_string(args.ends);
     opt.gap_policy = gap_policy_from_string(args.gap_policy);
     opt.max_gap_s = args.max_gap_s;
     opt.interpolation.method = interp::method_from_string(args.method);

@@ -27,6 +27,7 @@ struct GenerateArgs {
   double kernel_half_width_s = 1.0;
   std::string chart = "local";
   std::string derivatives = "kernel";
+  std::string ends = "extrapolate";
   std::string gap_policy = "error";
   double max_gap_s = 10.0;
   std::string scene = "ecef";

@@ -26,6 +26,8 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({"local", "global"}));
   g->add_option("--derivatives", gen.derivatives, "kernel (exact, through the bump kernel) or finite-difference (thesis Eq. 3.71-3.74)")
       ->capture_default_str()->check(CLI::IsMember({"kernel", "finite-difference"}));
+  g->add_option("--ends", gen.ends, "Beyond the first/last knot: extrapolate (continue the end segments' geodesics) or clip (the thesis' one-sided windows)")
+      ->capture_default_str()->check(CLI::IsMember({"extrapolate", "clip"}));
   g->add_option("--gap-policy", gen.gap_policy, "Knot intervals longer than --max-gap-s: error, or split into independent segments")
       ->capture_default_str()->check(CLI::IsMember({"error", "split"}));
   g->add_option("--max-gap-s", gen.max_gap_s, "Longest knot interval interpolated across")->capture_default_str()->check(CLI::PositiveNumber);
