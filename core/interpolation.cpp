@@ -62,6 +62,71 @@ std::vector<Vec3> natural_spline_second_derivatives(const std::vector<Pose>& kno
   return M;
 }
 
+// Body rate at every knot for Method::hermite. The ends are clamped to the
+// second-order one-sided difference of the neighbours' exponential
+// coordinates in the end knot's own chart (where rho = 0 and W(0) = I, so
+// rho' is the body rate). Interior rates make the Hermite curve C2 in the
+// charts: the cubic-spline condition at knot k,
+//   h_k m_{k-1} + 2 (h_{k-1} + h_k) m_k + h_{k-1} m_{k+1}
+//     = 3 (h_{k-1}/h_k f_{k+1} - h_k/h_{k-1} f_{k-1}),   f_k = 0,
+// written in knot k's chart with f_{k+1} = xi_k = log(R_k^T R_{k+1}),
+// f_{k-1} = eta_k = log(R_k^T R_{k-1}), m_k = w_k and the neighbours'
+// tangents carried into the chart by W^-1 (Eq. 3.63): m_{k+-1} = W^-1 w_{k+-1}.
+// A block-tridiagonal system (3x3 blocks) solved by block elimination.
+std::vector<Vec3> hermite_knot_rates(const std::vector<Pose>& knots, const std::vector<Vec3>& seg_log) {
+  const std::size_t n = knots.size();
+  std::vector<Vec3> w(n);
+  auto h = [&](std::size_t j) { return seconds_between(knots[j].t_ns, knots[j + 1].t_ns); };
+  if (n == 2) {
+    w[0] = w[1] = seg_log[0] / h(0);
+    return w;
+  }
+  {
+    const double b1 = h(0), b2 = h(0) + h(1);
+    const Vec3 f1 = seg_log[0];
+    const Vec3 f2 = so3::log(knots[0].attitude.transpose() * knots[2].attitude);
+    w[0] = b2 / (b1 * (b2 - b1)) * f1 - b1 / (b2 * (b2 - b1)) * f2;
+  }
+  {
+    const double a1 = h(n - 2), a2 = h(n - 2) + h(n - 3);
+    const Vec3 f1 = so3::log(knots[n - 1].attitude.transpose() * knots[n - 2].attitude);
+    const Vec3 f2 = so3::log(knots[n - 1].attitude.transpose() * knots[n - 3].attitude);
+    w[n - 1] = -a2 / (a1 * (a2 - a1)) * f1 + a1 / (a2 * (a2 - a1)) * f2;
+  }
+  if (n == 3) {
+    // One interior knot: solve its row directly.
+    const Vec3 eta = so3::log(knots[1].attitude.transpose() * knots[0].attitude);
+    const double a = h(0), b = h(1);
+    const Vec3 rhs = 3.0 * (a / b * seg_log[1] - b / a * eta) - b * (so3::W_inverse(eta) * w[0]) -
+                     a * (so3::W_inverse(seg_log[1]) * w[2]);
+    w[1] = rhs / (2.0 * (a + b));
+    return w;
+  }
+  // Rows k = 1..n-2: L_k w_{k-1} + D_k w_k + U_k w_{k+1} = r_k.
+  const std::size_t m = n - 2;
+  std::vector<Mat3> lower(m), diag(m), upper(m);
+  std::vector<Vec3> rhs(m);
+  for (std::size_t r = 0; r < m; ++r) {
+    const std::size_t k = r + 1;
+    const double a = h(k - 1), b = h(k);
+    const Vec3 eta = so3::log(knots[k].attitude.transpose() * knots[k - 1].attitude);
+    lower[r] = b * so3::W_inverse(eta);
+    diag[r] = 2.0 * (a + b) * Mat3::Identity();
+    upper[r] = a * so3::W_inverse(seg_log[k]);
+    rhs[r] = 3.0 * (a / b * seg_log[k] - b / a * eta);
+  }
+  rhs[0] -= lower[0] * w[0];
+  rhs[m - 1] -= upper[m - 1] * w[n - 1];
+  for (std::size_t r = 1; r < m; ++r) {
+    const Mat3 factor = lower[r] * diag[r - 1].inverse();
+    diag[r] -= factor * upper[r - 1];
+    rhs[r] -= factor * rhs[r - 1];
+  }
+  w[m] = diag[m - 1].inverse() * rhs[m - 1];
+  for (std::size_t r = m - 1; r-- > 0;) w[r + 1] = diag[r].inverse() * (rhs[r] - upper[r] * w[r + 2]);
+  return w;
+}
+
 }  // namespace
 
 double min_acceleration_warp(double tau, double sigma, double mu) {
@@ -177,6 +242,7 @@ std::vector<Pose> interpolate(const std::vector<Pose>& knots, const std::vector<
   std::vector<Vec3> seg_log;
   std::vector<ParkRavaniSegment> pr;
   std::vector<Vec3> spline_M;
+  std::vector<Vec3> knot_rate;  // hermite: body rate at each knot (rad/s)
   if (options.method == Method::park_ravani) {
     pr = park_ravani_coefficients(knots, options);
     spline_M = natural_spline_second_derivatives(knots);
@@ -185,6 +251,14 @@ std::vector<Pose> interpolate(const std::vector<Pose>& knots, const std::vector<
     for (std::size_t i = 0; i + 1 < n; ++i) {
       seg_log[i] = so3::log(knots[i].attitude.transpose() * knots[i + 1].attitude);
     }
+  }
+  std::vector<Vec3> end_tangent;  // hermite: h W^-1(xi_m) w_{m+1}, per segment
+  if (options.method == Method::hermite) {
+    spline_M = natural_spline_second_derivatives(knots);
+    knot_rate = hermite_knot_rates(knots, seg_log);
+    end_tangent.resize(n - 1);
+    for (std::size_t m = 0; m + 1 < n; ++m)
+      end_tangent[m] = seconds_between(knots[m].t_ns, knots[m + 1].t_ns) * (so3::W_inverse(seg_log[m]) * knot_rate[m + 1]);
   }
 
   std::vector<Pose> out(times.size());
@@ -224,6 +298,20 @@ std::vector<Pose> interpolate(const std::vector<Pose>& knots, const std::vector<
         o.position_m = k0.position_m + p * (k1.position_m - k0.position_m);
         break;
       }
+      case Method::hermite: {
+        // Cubic Hermite in tau with rho(0) = 0, rho(1) = xi, rho'(0) = h w_m,
+        // rho'(1) = h W^-1(xi) w_{m+1} (tau units).
+        const double h = seconds_between(k0.t_ns, k1.t_ns);
+        const double t2 = tau * tau, t3 = t2 * tau;
+        const Vec3& xi = seg_log[i];
+        const Vec3 rho = (t3 - 2.0 * t2 + tau) * h * knot_rate[i] + (3.0 * t2 - 2.0 * t3) * xi +
+                         (t3 - t2) * end_tangent[i];
+        o.attitude.noalias() = k0.attitude * so3::exp(rho);
+        const double A = 1.0 - tau;
+        o.position_m = k0.position_m + (tau * (k1.position_m - k0.position_m) +
+                                        ((A * A * A - A) * spline_M[i] + (t3 - tau) * spline_M[i + 1]) * (h * h / 6.0));
+        break;
+      }
       case Method::park_ravani: {
         const ParkRavaniSegment& s = pr[i];
         const Vec3 r = ((s.a * tau + s.b) * tau + s.c) * tau;  // Eq. 3.64
@@ -245,8 +333,9 @@ Method method_from_string(const std::string& name) {
   if (name == "geodesic") return Method::geodesic;
   if (name == "min-accel") return Method::min_acceleration;
   if (name == "park-ravani") return Method::park_ravani;
+  if (name == "hermite") return Method::hermite;
   throw std::invalid_argument("unknown interpolation method '" + name +
-                              "' (expected geodesic, min-accel or park-ravani)");
+                              "' (expected geodesic, min-accel, park-ravani or hermite)");
 }
 
 std::string to_string(Method m) {
@@ -257,6 +346,8 @@ std::string to_string(Method m) {
       return "min-accel";
     case Method::park_ravani:
       return "park-ravani";
+    case Method::hermite:
+      return "hermite";
   }
   return "unknown";
 }

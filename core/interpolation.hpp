@@ -17,7 +17,19 @@
 
 namespace imuemu::interp {
 
-enum class Method { geodesic, min_acceleration, park_ravani };
+enum class Method {
+  geodesic,
+  min_acceleration,
+  park_ravani,
+  // Cubic Hermite in each segment's chart at its first knot,
+  // R(tau) = R_m exp(rho(tau)), with knot body rates from the cubic-spline
+  // (C2) condition written in each knot's own chart (no branch cut is ever
+  // near) and carried between charts by W^-1 (as in Eq. 3.63): body rate
+  // continuous across knots, angular acceleration continuous to first order
+  // in the knot step. Ends clamped to one-sided second-order rates.
+  // Positions: natural cubic spline (C2). Interpolates the knots.
+  hermite,
+};
 
 struct Options {
   Method method = Method::geodesic;
@@ -77,7 +89,7 @@ struct ParkRavaniSegment {
 std::vector<ParkRavaniSegment> park_ravani_coefficients(const std::vector<Pose>& knots,
                                                         const Options& options);
 
-Method method_from_string(const std::string& name);  // "geodesic", "min-accel", "park-ravani"
+Method method_from_string(const std::string& name);  // "geodesic", "min-accel", "park-ravani", "hermite"
 std::string to_string(Method m);
 
 }  // namespace imuemu::interp

@@ -81,8 +81,11 @@ struct PipelineOptions {
   GapPolicy gap_policy = GapPolicy::error;
   double max_gap_s = 10.0;  // longest knot interval interpolated across
   std::int64_t rate_hz = 400;  // output rate, integer Hz
-  interp::Options interpolation;
-  smoothing::KernelOptions kernel;
+  // Default: the C2 Hermite base curve (the thesis' geodesic polygon needs a
+  // wide positive kernel to hide its knot kinks, which then attenuates the
+  // motion itself; see docs/accuracy.md) smoothed by the fourth-order bump.
+  interp::Options interpolation{.method = interp::Method::hermite};
+  smoothing::KernelOptions kernel{.delta = 10, .width = smoothing::KernelWidth::window, .half_width_s = 1.0, .order = 4};
 };
 
 struct BatchResult {

@@ -53,6 +53,19 @@ UniformKernel::UniformKernel(const KernelOptions& options, double period_s) : de
   weights_.assign(size, 0.0);
   rates_.assign(size, 0.0);
   accels_.assign(size, 0.0);
+  if (options.order != 2 && options.order != 4) throw std::invalid_argument("kernel order must be 2 or 4");
+  // Fourth order: c = -sum Phi x^2 / sum Phi x^4 over the window's samples.
+  double c = 0.0;
+  if (options.order == 4 && delta_ > 0) {
+    double m2 = 0.0, m4 = 0.0;
+    for (int k = -delta_; k <= delta_; ++k) {
+      const double x = k * period_s / half_width_s_;
+      m2 += bump(x) * x * x;
+      m4 += bump(x) * x * x * x * x;
+    }
+    if (!(m4 > 0.0)) throw std::invalid_argument("fourth-order kernel needs a window of several samples");
+    c = -m2 / m4;
+  }
   for (int k = -delta_; k <= delta_; ++k) {
     const auto idx = static_cast<std::size_t>(k + delta_);
     if (delta_ == 0) {  // no smoothing: the single weight must be non-zero
@@ -61,15 +74,18 @@ UniformKernel::UniformKernel(const KernelOptions& options, double period_s) : de
     }
     const double x = k * period_s / half_width_s_;
     const double phi = bump(x);
-    weights_[idx] = phi;
     if (phi == 0.0) continue;
     // Phi' = Phi g1, Phi'' = Phi (g1^2 + g1'), g1 = -2x/(1-x^2)^2,
-    // g1' = -(2 + 6x^2)/(1-x^2)^3.
+    // g1' = -(2 + 6x^2)/(1-x^2)^3; weight w = Phi q with q = 1 + c x^2:
+    // w' = Phi (g1 q + q'), w'' = Phi ((g1^2 + g1') q + 2 g1 q' + q'').
     const double u = 1.0 - x * x;
     const double g1 = -2.0 * x / (u * u);
     const double g1_prime = -(2.0 + 6.0 * x * x) / (u * u * u);
-    rates_[idx] = -phi * g1 / half_width_s_;
-    accels_[idx] = phi * (g1 * g1 + g1_prime) / (half_width_s_ * half_width_s_);
+    const double q = 1.0 + c * x * x, q1 = 2.0 * c * x, q2 = 2.0 * c;
+    weights_[idx] = phi * q;
+    // d/dt of w((t_j - t)/s) = -w'(x)/s; d2/dt2 = w''(x)/s^2.
+    rates_[idx] = -phi * (g1 * q + q1) / half_width_s_;
+    accels_[idx] = phi * ((g1 * g1 + g1_prime) * q + 2.0 * g1 * q1 + q2) / (half_width_s_ * half_width_s_);
   }
   if (weights_[static_cast<std::size_t>(delta_)] <= 0.0)
     throw std::invalid_argument("kernel centre weight is zero");
@@ -92,7 +108,7 @@ Vec3 smooth_at(const UniformKernel& kernel, std::span<const Vec3> f, std::size_t
 }
 
 Smoothed smooth_with_derivatives(const UniformKernel& kernel, std::span<const Vec3> f, std::size_t i,
-                                 std::size_t first_valid) {
+                                 std::size_t first_valid, bool want_accel) {
   // f[first_valid..] are real samples; earlier entries are never read. The
   // window is clipped at 0/first_valid and at f.size() like Eq. 3.68.
   const auto delta = static_cast<std::size_t>(kernel.delta());
@@ -103,14 +119,17 @@ Smoothed smooth_with_derivatives(const UniformKernel& kernel, std::span<const Ve
   double d0 = 0.0, d1 = 0.0, d2 = 0.0;
   for (std::size_t j = lo; j <= hi; ++j) {
     const int k = static_cast<int>(static_cast<std::ptrdiff_t>(j) - static_cast<std::ptrdiff_t>(i));
-    const double w = kernel.weight(k), wr = kernel.weight_rate(k), wa = kernel.weight_accel(k);
+    const double w = kernel.weight(k), wr = kernel.weight_rate(k);
     const Vec3 g = f[j] - fi;
     s0 += w * g;
     s1 += wr * g;
-    s2 += wa * g;
     d0 += w;
     d1 += wr;
-    d2 += wa;
+    if (want_accel) {
+      const double wa = kernel.weight_accel(k);
+      s2 += wa * g;
+      d2 += wa;
+    }
   }
   // N/D with N = f_i D + S0: (N/D)' = (S1 D - S0 D1)/D^2 and
   // (N/D)'' = S2/D - 2 S1 D1/D^2 - S0 D2/D^2 + 2 S0 D1^2/D^3.

@@ -34,6 +34,12 @@ struct KernelOptions {
   int delta = 10;  // Delta of Eq. 3.68: window is +-delta samples
   KernelWidth width = KernelWidth::window;
   double half_width_s = 1.0;  // used by KernelWidth::seconds only
+  // 2: the thesis' bump Phi (positive; preserves linear motion, attenuates
+  //    curvature by ~sigma^2 f''/2).
+  // 4: Phi(x) (1 + c x^2) with c chosen so the discrete second moment
+  //    vanishes: still C-infinity with compact support, preserves cubic
+  //    motion, attenuation ~sigma^4 f^(4). Has small negative lobes.
+  int order = 2;
 };
 
 KernelWidth kernel_width_from_string(const std::string& name);  // thesis|window|seconds
@@ -68,8 +74,10 @@ class UniformKernel {
 struct Smoothed {
   Vec3 value, rate, accel;
 };
+// With want_accel false the second derivative is skipped (left zero): a third
+// less work where only the rate is needed (attitude).
 Smoothed smooth_with_derivatives(const UniformKernel& kernel, std::span<const Vec3> f, std::size_t i,
-                                 std::size_t first_valid = 0);
+                                 std::size_t first_valid = 0, bool want_accel = true);
 
 // Eq. 3.68 on a uniformly sampled sequence, including its one-sided windows at
 // both ends (the sums are clipped to the available samples and renormalised).

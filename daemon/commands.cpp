@@ -55,17 +55,17 @@ class ProgressBar {
   std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
 };
 
-// Default window: +-2 median knot intervals. The chord polygon of the
-// two-point interpolation has impulsive acceleration at the knots; a bump one
-// knot interval wide leaves an 18% ripple at the knot rate, two intervals 0.7%
-// (tests/test_pipeline.cpp, circle).
-int auto_delta(const std::vector<Pose>& knots, std::int64_t rate_hz) {
+// Default window in median knot intervals: the C2 Hermite base curve needs
+// only +-1; the two-point methods' chord polygon has impulsive acceleration at
+// the knots, and a bump one interval wide leaves an 18% ripple at the knot
+// rate, two intervals 0.7% (tests/test_pipeline.cpp, circle).
+int auto_delta(const std::vector<Pose>& knots, std::int64_t rate_hz, double intervals) {
   if (knots.size() < 2) return 0;
   std::vector<TimeNs> steps;
   for (std::size_t i = 1; i < knots.size(); ++i) steps.push_back(knots[i].t_ns - knots[i - 1].t_ns);
   std::nth_element(steps.begin(), steps.begin() + static_cast<std::ptrdiff_t>(steps.size() / 2), steps.end());
   const double median_s = static_cast<double>(steps[steps.size() / 2]) * 1e-9;
-  return std::max(1, static_cast<int>(std::lround(2.0 * median_s * static_cast<double>(rate_hz))));
+  return std::max(1, static_cast<int>(std::lround(intervals * median_s * static_cast<double>(rate_hz))));
 }
 
 Physics physics_from(const std::string& scene) { return scene == "flat" ? Physics::flat : Physics::ecef; }
@@ -127,8 +127,10 @@ int generate(const GenerateArgs& args) {
     opt.kernel.delta = args.delta;
     opt.kernel.width = smoothing::kernel_width_from_string(args.kernel);
     opt.kernel.half_width_s = args.kernel_half_width_s;
+    opt.kernel.order = args.kernel_order;
     const std::vector<Pose> knots = io::poses_in_scene(trajectory, opt.scene.physics);
-    if (args.delta < 0) opt.kernel.delta = auto_delta(knots, args.rate_hz);
+    if (args.delta < 0)
+      opt.kernel.delta = auto_delta(knots, args.rate_hz, opt.interpolation.method == interp::Method::hermite ? 1.0 : 2.0);
     BatchResult result;
     {
       ProgressBar bar(!args.quiet);
@@ -141,7 +143,7 @@ int generate(const GenerateArgs& args) {
       const double wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start).count();
       std::cerr << "imuemu: " << knots.size() << " knots -> " << result.imu.size() << " samples at " << args.rate_hz
                 << " Hz (" << args.scene << ", " << args.method << ", Delta " << opt.kernel.delta << ", " << args.kernel
-                << " kernel, " << args.chart << " chart, " << args.derivatives << " derivatives) in " << number(std::round(wall_s * 1000) / 1000)
+                << " order-" << args.kernel_order << " kernel, " << args.chart << " chart, " << args.derivatives << " derivatives) in " << number(std::round(wall_s * 1000) / 1000)
                 << " s -> " << args.out_path << "\n";
     }
     return static_cast<int>(kOk);

@@ -20,8 +20,9 @@ enum ExitCode : int {
 struct GenerateArgs {
   std::string in_path, out_path, trajectory_out_path;
   std::int64_t rate_hz = 400;
-  int delta = -1;  // < 0: two knot intervals' worth of output samples
-  std::string method = "geodesic";
+  int delta = -1;  // < 0: one knot interval (hermite) or two (others) of output samples
+  std::string method = "hermite";
+  int kernel_order = 4;
   double sigma = 1.0, mu = 1.0;
   std::string kernel = "window";
   double kernel_half_width_s = 1.0;

@@ -15,8 +15,10 @@ int main(int argc, char** argv) {
   g->add_option("--trajectory-out", gen.trajectory_out_path, "Also write the smoothed trajectory CSV");
   g->add_option("--rate", gen.rate_hz, "Output rate in Hz (integer)")->capture_default_str()->check(CLI::Range(1, 1000000));
   g->add_option("--delta", gen.delta, "Window half-length Delta of Eq. 3.68, in output samples (default: two median knot intervals)")->check(CLI::Range(0, 1000000));
-  g->add_option("--method", gen.method, "Two-point/multi-point interpolation")->capture_default_str()
-      ->check(CLI::IsMember({"geodesic", "min-accel", "park-ravani"}));
+  g->add_option("--method", gen.method, "Base curve: hermite (C2 in local charts), geodesic (Eq. 3.44), min-accel (Lemma 3.22), park-ravani (3.6.1)")->capture_default_str()
+      ->check(CLI::IsMember({"hermite", "geodesic", "min-accel", "park-ravani"}));
+  g->add_option("--kernel-order", gen.kernel_order, "Bump kernel order: 4 (preserves cubic motion) or 2 (the thesis' positive bump)")
+      ->capture_default_str()->check(CLI::IsMember({2, 4}));
   g->add_option("--sigma", gen.sigma, "min-accel: start speed factor (Lemma 3.22)")->capture_default_str();
   g->add_option("--mu", gen.mu, "min-accel: end speed factor (Lemma 3.22)")->capture_default_str();
   g->add_option("--kernel", gen.kernel, "Bump time axis: window (support = window), thesis (t in seconds, literal Eq. 3.68), seconds")
