@@ -62,6 +62,47 @@ std::vector<Vec3> natural_spline_second_derivatives(const std::vector<Pose>& kno
   return M;
 }
 
+// Clamped cubic spline through the knot positions for Method::hermite: end
+// slopes from second-order one-sided differences (a natural spline forces zero
+// acceleration at both ends, which is wrong for a vehicle that is turning or
+// accelerating there). Returns the second derivatives M_j at every knot.
+std::vector<Vec3> clamped_spline_second_derivatives(const std::vector<Pose>& knots) {
+  const std::size_t n = knots.size();
+  std::vector<Vec3> M(n, Vec3::Zero());
+  if (n < 3) return M;  // two knots: the straight line
+  std::vector<double> h(n - 1);
+  for (std::size_t j = 0; j + 1 < n; ++j) h[j] = seconds_between(knots[j].t_ns, knots[j + 1].t_ns);
+  auto y = [&](std::size_t j) -> const Vec3& { return knots[j].position_m; };
+  // Slopes at the ends: derivative of the parabola through three knots.
+  const double b1 = h[0], b2 = h[0] + h[1];
+  const Vec3 s0 = b2 / (b1 * (b2 - b1)) * (y(1) - y(0)) - b1 / (b2 * (b2 - b1)) * (y(2) - y(0));
+  const double a1 = h[n - 2], a2 = h[n - 2] + h[n - 3];
+  const Vec3 sn = -a2 / (a1 * (a2 - a1)) * (y(n - 2) - y(n - 1)) + a1 / (a2 * (a2 - a1)) * (y(n - 3) - y(n - 1));
+  // Rows 0..n-1 of the tridiagonal system (sub, diag, super, rhs).
+  std::vector<double> sub(n, 0.0), diag(n), sup(n, 0.0);
+  std::vector<Vec3> rhs(n);
+  diag[0] = 2.0 * h[0];
+  sup[0] = h[0];
+  rhs[0] = 6.0 * ((y(1) - y(0)) / h[0] - s0);
+  for (std::size_t j = 1; j + 1 < n; ++j) {
+    sub[j] = h[j - 1];
+    diag[j] = 2.0 * (h[j - 1] + h[j]);
+    sup[j] = h[j];
+    rhs[j] = 6.0 * ((y(j + 1) - y(j)) / h[j] - (y(j) - y(j - 1)) / h[j - 1]);
+  }
+  sub[n - 1] = h[n - 2];
+  diag[n - 1] = 2.0 * h[n - 2];
+  rhs[n - 1] = 6.0 * (sn - (y(n - 1) - y(n - 2)) / h[n - 2]);
+  for (std::size_t j = 1; j < n; ++j) {
+    const double factor = sub[j] / diag[j - 1];
+    diag[j] -= factor * sup[j - 1];
+    rhs[j] -= factor * rhs[j - 1];
+  }
+  M[n - 1] = rhs[n - 1] / diag[n - 1];
+  for (std::size_t j = n - 1; j-- > 0;) M[j] = (rhs[j] - sup[j] * M[j + 1]) / diag[j];
+  return M;
+}
+
 // Body rate at every knot for Method::hermite. The ends are clamped to the
 // second-order one-sided difference of the neighbours' exponential
 // coordinates in the end knot's own chart (where rho = 0 and W(0) = I, so
@@ -254,7 +295,7 @@ std::vector<Pose> interpolate(const std::vector<Pose>& knots, const std::vector<
   }
   std::vector<Vec3> end_tangent;  // hermite: h W^-1(xi_m) w_{m+1}, per segment
   if (options.method == Method::hermite) {
-    spline_M = natural_spline_second_derivatives(knots);
+    spline_M = clamped_spline_second_derivatives(knots);
     knot_rate = hermite_knot_rates(knots, seg_log);
     end_tangent.resize(n - 1);
     for (std::size_t m = 0; m + 1 < n; ++m)

@@ -27,7 +27,8 @@ enum class Method {
   // near) and carried between charts by W^-1 (as in Eq. 3.63): body rate
   // continuous across knots, angular acceleration continuous to first order
   // in the knot step. Ends clamped to one-sided second-order rates.
-  // Positions: natural cubic spline (C2). Interpolates the knots.
+  // Positions: cubic spline (C2), clamped to one-sided second-order end
+  // slopes. Interpolates the knots.
   hermite,
 };
 

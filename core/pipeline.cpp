@@ -298,21 +298,31 @@ BatchResult run_segment_extrapolated(const std::vector<Pose>& knots, const Pipel
   const std::int64_t pad_samples = options.kernel.delta + 8;
   const std::int64_t pad_s = (pad_samples + options.rate_hz - 1) / options.rate_hz;
   const TimeNs pad_ns = pad_s * kNsPerSecond;
-  auto extend = [&](const Pose& from, const Pose& towards, bool before) {
-    // Virtual knots at from.t -+ k*h continuing the segment (from <- towards).
+  auto extend = [&](const Pose& from, const Pose& towards, const Pose& beyond, bool before) {
+    // Virtual knots at from.t -+ k*h: attitude continues the end segment's
+    // geodesic (constant body rate); position follows the parabola through the
+    // three end knots (constant acceleration), or the line if only two exist.
     std::vector<Pose> out;
     const TimeNs h = std::abs(towards.t_ns - from.t_ns);
     const Vec3 xi = so3::log(towards.attitude.transpose() * from.attitude);  // one step away from `towards`
-    const Vec3 step_m = from.position_m - towards.position_m;
+    const double t1 = seconds_between(from.t_ns, towards.t_ns), t2 = seconds_between(from.t_ns, beyond.t_ns);
+    const Vec3 y1 = towards.position_m - from.position_m, y2 = beyond.position_m - from.position_m;
+    const bool quadratic = &beyond != &towards;
     for (std::int64_t k = 1; k * h < pad_ns + h; ++k) {
       const double kd = static_cast<double>(k);
-      out.push_back({from.t_ns + (before ? -k * h : k * h), from.position_m + kd * step_m,
-                     from.attitude * so3::exp(kd * xi)});
+      const TimeNs t_ns = from.t_ns + (before ? -k * h : k * h);
+      const double t = seconds_between(from.t_ns, t_ns);
+      // Lagrange through (0, 0), (t1, y1), (t2, y2), relative to `from`.
+      const Vec3 offset = quadratic ? Vec3(t * (t - t2) / (t1 * (t1 - t2)) * y1 + t * (t - t1) / (t2 * (t2 - t1)) * y2)
+                                    : Vec3(t / t1 * y1);
+      out.push_back({t_ns, from.position_m + offset, from.attitude * so3::exp(kd * xi)});
     }
     return out;
   };
-  std::vector<Pose> head = extend(knots[0], knots[1], true);
-  const std::vector<Pose> tail = extend(knots[knots.size() - 1], knots[knots.size() - 2], false);
+  const std::size_t last_knot = knots.size() - 1;
+  std::vector<Pose> head = extend(knots[0], knots[1], knots.size() > 2 ? knots[2] : knots[1], true);
+  const std::vector<Pose> tail =
+      extend(knots[last_knot], knots[last_knot - 1], knots.size() > 2 ? knots[last_knot - 2] : knots[last_knot - 1], false);
   std::vector<Pose> padded(head.rbegin(), head.rend());
   padded.insert(padded.end(), knots.begin(), knots.end());
   padded.insert(padded.end(), tail.begin(), tail.end());

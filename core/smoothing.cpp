@@ -87,6 +87,33 @@ UniformKernel::UniformKernel(const KernelOptions& options, double period_s) : de
     rates_[idx] = -phi * (g1 * q + q1) / half_width_s_;
     accels_[idx] = phi * ((g1 * g1 + g1_prime) * q + 2.0 * g1 * q1 + q2) / (half_width_s_ * half_width_s_);
   }
+  // The derivative weights above differentiate the continuous-time sum
+  // sum_j w((t_j - t)/s) f_j / sum_j w(..), which ripples between samples when
+  // the window holds few of them (Poisson summation): at Delta = 10 its
+  // derivative at a sample is off by 4e-3 (rate) and far more (acceleration).
+  // Rescale them so that, over a full window, the rate is exact for linear and
+  // the acceleration exact for quadratic motion on the sample grid:
+  //   rate:  sum_k r_k (k h) = sum_k w_k,
+  //   accel: sum_k a_k (k h)^2 - (sum_k w_k (k h)^2)(sum_k a_k)/(sum_k w_k) = 2 sum_k w_k.
+  // For Delta >= ~100 the factors differ from 1 by < 1e-9.
+  if (delta_ > 0) {
+    double w0 = 0.0, w2 = 0.0, r1 = 0.0, a0 = 0.0, a2 = 0.0;
+    for (int k = -delta_; k <= delta_; ++k) {
+      const auto idx = static_cast<std::size_t>(k + delta_);
+      const double x = k * period_s;
+      w0 += weights_[idx];
+      w2 += weights_[idx] * x * x;
+      r1 += rates_[idx] * x;
+      a0 += accels_[idx];
+      a2 += accels_[idx] * x * x;
+    }
+    const double accel_moment = a2 - w2 * a0 / w0;
+    if (r1 != 0.0 && accel_moment != 0.0) {
+      const double rate_scale = w0 / r1, accel_scale = 2.0 * w0 / accel_moment;
+      for (double& r : rates_) r *= rate_scale;
+      for (double& a : accels_) a *= accel_scale;
+    }
+  }
   if (weights_[static_cast<std::size_t>(delta_)] <= 0.0)
     throw std::invalid_argument("kernel centre weight is zero");
 }

@@ -132,3 +132,25 @@ TEST(Derivatives, FivePointErrorIsFourthOrder) {
   std::cout << "  [five-point] error h=0.02: " << err[0] << ", h=0.01: " << err[1] << "\n";
   EXPECT_NEAR(err[0] / err[1], 16.0, 0.5);
 }
+
+TEST(KernelDerivatives, ExactForQuadraticMotionEvenWithFewSamplesPerWindow) {
+  // Regression (found by tests/test_hard_cases.cpp): differentiating the
+  // continuous-time sum gave -66% acceleration at Delta = 10. The derivative
+  // weights are rescaled so a full window is exact for quadratics.
+  const double h = 0.01;
+  const auto f = sampled(201, h, [](double t) { return Vec3(0.5 * 3.0 * t * t + 2.0 * t, -t, 7.0); });
+  double worst_rate = 0, worst_accel = 0;
+  for (int order : {2, 4}) {
+    for (int delta : {2, 3, 5, 10, 20, 100}) {
+      const smoothing::UniformKernel k({delta, smoothing::KernelWidth::window, 0.0, order}, h);
+      const smoothing::Smoothed s = smoothing::smooth_with_derivatives(k, f, 100);
+      const double t = 1.0;
+      worst_rate = std::max(worst_rate, (s.rate - Vec3(3.0 * t + 2.0, -1.0, 0.0)).norm());
+      worst_accel = std::max(worst_accel, (s.accel - Vec3(3.0, 0.0, 0.0)).norm());
+    }
+  }
+  std::cout << "  [kernel derivatives, Delta 2..100] worst rate error " << worst_rate << ", accel error " << worst_accel
+            << "\n";
+  EXPECT_LT(worst_rate, 1e-10);
+  EXPECT_LT(worst_accel, 1e-8);
+}
