@@ -349,7 +349,16 @@ BatchResult run_segment_extrapolated(const std::vector<Pose>& knots, const Pipel
     p.t_ns = last;
     clipped_knots.back() = p;
   }
-  BatchResult full = run_segment(clipped_knots, clip, progress);
+  BatchResult full;
+  try {
+    full = run_segment(clipped_knots, clip, progress);
+  } catch (const interp::InterpolationError& e) {
+    // Knot numbers in the message count the virtual knots; the times are right.
+    throw interp::InterpolationError(std::string(e.what()) + " [knot numbers include " +
+                                     std::to_string(clipped_knots.size() - knots.size()) +
+                                     " virtual knots of the extrapolated ends, " + std::to_string(head.size()) +
+                                     " before the first; the times are the input's]");
+  }
   const auto skip = static_cast<std::size_t>(pad_s * options.rate_hz);
   const std::size_t count = output_grid(knots.front().t_ns, knots.back().t_ns, options.rate_hz).size();
   BatchResult out;

@@ -407,7 +407,7 @@ TEST_F(FlightAccuracy, EcefAllMethods) {
   prod50.kernel.delta = 50;
   prod200.kernel.delta = 200;
   run_row("hermite", sd.knots, prod50, sd.truth);
-  const Stats p200 = run_row("hermite", sd.knots, prod200, sd.truth);
+  run_row("hermite", sd.knots, prod200, sd.truth);
 
   // The thesis' method: geodesic polygon + positive bump over +-2 knot
   // intervals.
@@ -419,7 +419,7 @@ TEST_F(FlightAccuracy, EcefAllMethods) {
   EXPECT_LT(p.core_gyro_rms_rad_s, 0.2 * t.core_gyro_rms_rad_s);
   // The same polygon under the fourth-order kernel: its negative lobes pass
   // more of the knot-rate ripple.
-  const Stats t4 = run_row("geodesic", sd.knots, options_for(Physics::ecef, Method::geodesic, 200, 4), sd.truth);
+  run_row("geodesic", sd.knots, options_for(Physics::ecef, Method::geodesic, 200, 4), sd.truth);
 
   // The thesis' derivative stencils (Eq. 3.71-3.74) instead of differentiating
   // the kernel, and its clipped one-sided windows at the ends (Eq. 3.68)
@@ -474,9 +474,10 @@ TEST_F(FlightAccuracy, EcefAllMethods) {
                               sd.truth);
   const Stats th10 = run_row("geodesic", sd.knots, options_for(Physics::ecef, Method::geodesic, 10, 2, KernelWidth::thesis),
                              sd.truth);
-  // Same with the thesis' stencils: this bump is cut off by the window at
-  // nonzero weight, which kernel derivatives do not see (printed, not
-  // asserted: it documents a limitation, not a property to keep).
+  // Same with the thesis' stencils (Eq. 3.71-3.74), for comparison: with 21
+  // samples of a bump cut off at nonzero weight, differentiating the kernel
+  // and differencing the smoothed samples are different estimators (printed
+  // only).
   PipelineOptions th10_fd = options_for(Physics::ecef, Method::geodesic, 10, 2, KernelWidth::thesis);
   th10_fd.derivatives = Derivatives::finite_difference;
   run_row("geodesic", short_knots, th10_fd, sd.truth, short_label);
@@ -575,8 +576,6 @@ TEST_F(FlightAccuracy, EcefAllMethods) {
       << "park-ravani, 12 knots: gyro RMS " << pr_exact_12.gyro_rms_rad_s;
 
   check_global_chart(Physics::ecef, "hermite (product default)", prod, kProductBounds);
-  (void)p200;
-  (void)t4;
 }
 
 TEST_F(FlightAccuracy, FlatDefaultAndGlobalChart) {
