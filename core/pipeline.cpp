@@ -354,9 +354,11 @@ BatchResult run_segment_extrapolated(const std::vector<Pose>& knots, const Pipel
     full = run_segment(clipped_knots, clip, progress);
   } catch (const interp::InterpolationError& e) {
     // Knot numbers in the message count the virtual knots; the times are right.
+    const auto before = std::count_if(clipped_knots.begin(), clipped_knots.end(),
+                                      [&](const Pose& p) { return p.t_ns < knots.front().t_ns; });
     throw interp::InterpolationError(std::string(e.what()) + " [knot numbers include " +
                                      std::to_string(clipped_knots.size() - knots.size()) +
-                                     " virtual knots of the extrapolated ends, " + std::to_string(head.size()) +
+                                     " virtual knots of the extrapolated ends, " + std::to_string(before) +
                                      " before the first; the times are the input's]");
   }
   const auto skip = static_cast<std::size_t>(pad_s * options.rate_hz);
