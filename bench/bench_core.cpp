@@ -62,6 +62,10 @@ static void BM_smooth_per_sample(benchmark::State& state) {
 BENCHMARK(BM_smooth_per_sample)->Arg(10)->Arg(50)->Arg(500);
 
 // The whole batch pipeline: one hour of 1 Hz knots (ecef flight) -> 400 Hz.
+// config 0: the product default (Hermite base, 4th-order kernel, local chart,
+// kernel derivatives, extrapolated ends); config 1: the thesis baseline
+// (geodesic, literal Eq. 3.68 kernel, global chart, Eq. 3.71-3.74, clipped
+// ends) at the same window.
 static void BM_pipeline_one_hour_400Hz(benchmark::State& state) {
   const reference::AircraftFlight flight(Physics::ecef);
   const std::vector<Pose> knots = reference::sample_knots(flight, kNsPerSecond);
@@ -69,9 +73,14 @@ static void BM_pipeline_one_hour_400Hz(benchmark::State& state) {
   opt.scene.physics = Physics::ecef;
   opt.rate_hz = 400;
   opt.kernel.delta = static_cast<int>(state.range(0));
-  // Park-Ravani is not benchmarked here: its recursion diverges (~3.7x per
-  // knot) long before an hour of 1 Hz knots (tests/test_interpolation.cpp).
-  opt.interpolation.method = static_cast<interp::Method>(state.range(1));
+  if (state.range(1) == 1) {
+    opt.interpolation.method = interp::Method::geodesic;
+    opt.kernel.width = smoothing::KernelWidth::thesis;
+    opt.kernel.order = 2;
+    opt.chart = Chart::global;
+    opt.derivatives = Derivatives::finite_difference;
+    opt.ends = Ends::clip;
+  }
   std::size_t samples = 0;
   for (auto _ : state) {
     const BatchResult r = run_batch(knots, opt);
@@ -81,10 +90,11 @@ static void BM_pipeline_one_hour_400Hz(benchmark::State& state) {
   state.counters["samples_per_s"] = benchmark::Counter(static_cast<double>(samples), benchmark::Counter::kIsRate);
 }
 BENCHMARK(BM_pipeline_one_hour_400Hz)
-    ->ArgNames({"delta", "method"})
-    ->Args({400, static_cast<int>(interp::Method::geodesic)})
-    ->Args({50, static_cast<int>(interp::Method::geodesic)})
-    ->Args({400, static_cast<int>(interp::Method::min_acceleration)})
+    ->ArgNames({"delta", "thesis"})
+    ->Args({400, 0})
+    ->Args({400, 1})
+    ->Args({50, 0})
+    ->Args({50, 1})
     ->Unit(benchmark::kMillisecond)
     ->Iterations(2);
 
