@@ -24,6 +24,7 @@
 #include <string>
 #include <vector>
 
+#include "core/attitude.hpp"
 #include "core/interpolation.hpp"
 #include "core/so3.hpp"
 
@@ -44,18 +45,15 @@ struct Hpr {
   double heading_deg, pitch_deg, roll_deg;
 };
 
-// Eq. 1.2: R_b^l = R_z(psi) R_y(theta) R_x(gamma).
+// Eq. 1.2 through the product's own attitude room (the tests check it
+// against an independent Eigen AngleAxis product).
 Mat3 rotation_from_hpr_deg(const Hpr& a) {
-  return (Eigen::AngleAxisd(a.heading_deg * kDeg, Vec3::UnitZ()) *
-          Eigen::AngleAxisd(a.pitch_deg * kDeg, Vec3::UnitY()) *
-          Eigen::AngleAxisd(a.roll_deg * kDeg, Vec3::UnitX()))
-      .toRotationMatrix();
+  return imuemu::attitude::rotation_from_hpr({a.heading_deg * kDeg, a.pitch_deg * kDeg, a.roll_deg * kDeg});
 }
 
 Hpr hpr_deg_from_rotation(const Mat3& R) {
-  return {std::atan2(R(1, 0), R(0, 0)) / kDeg,
-          std::atan2(-R(2, 0), std::hypot(R(2, 1), R(2, 2))) / kDeg,
-          std::atan2(R(2, 1), R(2, 2)) / kDeg};
+  const imuemu::attitude::HeadingPitchRoll a = imuemu::attitude::hpr_from_rotation(R);
+  return {a.heading_rad / kDeg, a.pitch_rad / kDeg, a.roll_rad / kDeg};
 }
 
 struct Knot {

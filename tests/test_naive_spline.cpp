@@ -25,6 +25,7 @@
 #include "core/naive_spline.hpp"
 #include "core/reference_motion.hpp"
 #include "core/so3.hpp"
+#include "tests/support/imu_errors.hpp"
 
 using namespace imuemu;
 
@@ -42,13 +43,7 @@ constexpr TimeNs kKnotPeriod_ns = kNsPerSecond;  // knots at 1 Hz
 // kEdge_ns of the first or last knot are reported separately.
 constexpr TimeNs kEdge_ns = 10 * kNsPerSecond;
 
-struct Stats {
-  double gyro_rms_rad_s = 0.0, gyro_max_rad_s = 0.0;
-  double accel_rms_m_s2 = 0.0, accel_max_m_s2 = 0.0;
-  double end_gyro_max_rad_s = 0.0, end_accel_max_m_s2 = 0.0;
-  double ns_per_sample = 0.0;
-  std::size_t samples = 0;
-};
+using Stats = test_support::ImuErrorStats;
 
 // Runs `method` on 1 Hz knots of `motion` and compares every output sample
 // with truth_imu of the motion at the same t_ns; samples within kEdge_ns of the
@@ -61,27 +56,10 @@ Stats measure(const Method& method, const reference::Motion& motion, std::int64_
   const auto t0 = std::chrono::steady_clock::now();
   const BatchResult out = method(knots, scene, rate_hz);
   const auto t1 = std::chrono::steady_clock::now();
-  Stats s;
+  Stats s = test_support::imu_errors_against_truth(out, motion, scene, knots.front().t_ns + kEdge_ns,
+                                              knots.back().t_ns - kEdge_ns);
   s.ns_per_sample = static_cast<double>(std::chrono::duration_cast<std::chrono::nanoseconds>(t1 - t0).count()) /
                     static_cast<double>(out.imu.size());
-  double g2 = 0.0, a2 = 0.0;
-  for (const ImuSample& e : out.imu) {
-    const ImuSample t = reference::truth_imu(motion, scene, e.t_ns);
-    const double g = (e.gyro_rad_s - t.gyro_rad_s).norm(), a = (e.accel_m_s2 - t.accel_m_s2).norm();
-    EXPECT_TRUE(std::isfinite(g) && std::isfinite(a)) << "sample at " << e.t_ns << " ns";
-    if (e.t_ns < knots.front().t_ns + kEdge_ns || e.t_ns > knots.back().t_ns - kEdge_ns) {
-      s.end_gyro_max_rad_s = std::max(s.end_gyro_max_rad_s, g);
-      s.end_accel_max_m_s2 = std::max(s.end_accel_max_m_s2, a);
-      continue;
-    }
-    ++s.samples;
-    g2 += g * g;
-    a2 += a * a;
-    s.gyro_max_rad_s = std::max(s.gyro_max_rad_s, g);
-    s.accel_max_m_s2 = std::max(s.accel_max_m_s2, a);
-  }
-  s.gyro_rms_rad_s = std::sqrt(g2 / static_cast<double>(std::max<std::size_t>(1, s.samples)));
-  s.accel_rms_m_s2 = std::sqrt(a2 / static_cast<double>(std::max<std::size_t>(1, s.samples)));
   return s;
 }
 
@@ -97,25 +75,12 @@ void print_row(const std::string& method, const std::string& scene, std::int64_t
   ::testing::Test::RecordProperty(key + "_accel_max", std::to_string(s.accel_max_m_s2));
 }
 
-struct Bounds {
-  double gyro_rms, gyro_max, accel_rms, accel_max;
-};
-
-void expect_within(const Stats& s, const Bounds& b, const std::string& what) {
-  EXPECT_LT(s.gyro_rms_rad_s, b.gyro_rms) << what;
-  EXPECT_LT(s.gyro_max_rad_s, b.gyro_max) << what;
-  EXPECT_LT(s.accel_rms_m_s2, b.accel_rms) << what;
-  EXPECT_LT(s.accel_max_m_s2, b.accel_max) << what;
-}
+using Bounds = test_support::ErrorBounds;
+using test_support::central_difference;
+using test_support::expect_within;
 
 Mat3 R_xyz(double x, double y, double z) { return so3::exp(Vec3(x, y, z)); }
 
-// 4th-order central difference of f at 0 with step h: exact for quartics.
-template <typename F>
-Vec3 central_difference(const F& f, double h) {
-  const Vec3 near = f(h) - f(-h), far = f(2.0 * h) - f(-2.0 * h);
-  return (8.0 * near - far) / (12.0 * h);
-}
 
 TimeNs step_ns(double s) { return static_cast<TimeNs>(std::llround(s * 1e9)); }
 
