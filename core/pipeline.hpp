@@ -1,8 +1,11 @@
-// The batch trajectory-to-IMU pipeline of thesis §3.6.2 + §3.7:
-//   knots --interpolate (Eq. 3.44 / Lemma 3.22 / §3.6.1)--> dense poses on the
-//   output grid --r = log R (Eq. 3.13-3.17)--> smooth r and d (Eq. 3.68)
-//   --> R~ = exp(r~) --> derivatives (Eq. 3.71-3.74) --> omega = W(r~) r~'
-//   (Eq. 3.59), a = d~'' --> ideal IMU (Eq. 3.70) in the scene's physics.
+// The batch trajectory-to-IMU pipeline: thesis §3.6.2 + §3.7 and what the
+// product does beyond it (each step selectable back to the thesis' form):
+//   knots --interpolate (hermite default | Eq. 3.44 | Lemma 3.22 | §3.6.1)-->
+//   dense poses on the output grid (exact rational instants) --> per block,
+//   in a local chart (or the thesis' global r = log R): smooth with Eq. 3.68
+//   (bump of Eq. 3.66, order 2 or 4) and differentiate through the kernel
+//   (or Eq. 3.71-3.74) --> omega = W(r~) r~' (Eq. 3.59-3.60), a = d~'' -->
+//   ideal IMU (Eq. 3.70) in the scene's physics.
 #pragma once
 
 #include <functional>
