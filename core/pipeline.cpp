@@ -5,6 +5,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "core/derivatives.hpp"
 #include "core/so3.hpp"
 
 namespace imuemu {
@@ -63,16 +64,6 @@ namespace {
 
 void report(const ProgressFn& progress, double fraction) {
   if (progress) progress(fraction);
-}
-
-// Eq. 3.71-3.74 at global index i of a sequence of n samples, reading samples
-// through `at(j)` (global indices), with the thesis' rules at both ends.
-template <typename At>
-Vec3 thesis_derivative(const At& at, std::size_t i, std::size_t n, double h_s) {
-  if (i == 0) return (at(1) - at(0)) / h_s;                                   // Eq. 3.71
-  if (i == n - 1) return (at(n - 1) - at(n - 2)) / h_s;                       // Eq. 3.72
-  if (i == 1 || i == n - 2) return (at(i + 1) - at(i - 1)) / (2.0 * h_s);     // Eq. 3.73
-  return (-at(i + 2) + 8.0 * (at(i + 1) - at(i - 1)) + at(i - 2)) / (12.0 * h_s);  // Eq. 3.74
 }
 
 // C2 step from 0 to 1 on [0, 1] (quintic smoothstep) and its derivative: blends
@@ -154,14 +145,14 @@ class BlockSolver {
     velocity_.resize(m);
     const std::size_t v_lo = begin >= 2 ? begin - 2 : 0;
     const std::size_t v_hi = std::min(n_, end + 2);
-    for (std::size_t j = v_lo; j < v_hi; ++j) velocity_[j - lo_] = thesis_derivative(at_delta, j, n_, h_s_);
+    for (std::size_t j = v_lo; j < v_hi; ++j) velocity_[j - lo_] = derivatives::stencil(at_delta, j, n_, h_s_);
     auto at_velocity = [&](std::size_t j) -> const Vec3& { return velocity_[j - lo_]; };
     for (std::size_t i = begin; i < end; ++i) {
       Kinematics& kin = out.trajectory[i];
       kin.t_ns = times[i];
       kin.position_m = d_ref + delta_s_[i - lo_];
       kin.velocity_m_s = velocity_[i - lo_];
-      kin.acceleration_m_s2 = thesis_derivative(at_velocity, i, n_, h_s_);
+      kin.acceleration_m_s2 = derivatives::stencil(at_velocity, i, n_, h_s_);
     }
     return true;
   }
@@ -281,7 +272,7 @@ BatchResult run_segment(const std::vector<Pose>& knots, const PipelineOptions& o
       auto at_rho = [&](std::size_t j) -> Vec3 {
         return j == i ? Vec3::Zero() : so3::log(Rt * result.trajectory[j].attitude);
       };
-      kin.angular_rate_rad_s = thesis_derivative(at_rho, i, n, period_s);
+      kin.angular_rate_rad_s = derivatives::stencil(at_rho, i, n, period_s);
     }
     result.imu[i] = imu_from_kinematics(options.scene, kin);
   }
