@@ -370,6 +370,38 @@ std::vector<Pose> interpolate(const std::vector<Pose>& knots, const std::vector<
   return out;
 }
 
+std::vector<PositionCubic> position_cubics(const std::vector<Pose>& knots, const Options& options) {
+  const std::size_t n = knots.size();
+  std::vector<PositionCubic> out(n - 1);
+  std::vector<Vec3> M;
+  if (options.method == Method::park_ravani) M = natural_spline_second_derivatives(knots);
+  if (options.method == Method::hermite) M = clamped_spline_second_derivatives(knots);
+  for (std::size_t m = 0; m + 1 < n; ++m) {
+    const Vec3 step = knots[m + 1].position_m - knots[m].position_m;
+    switch (options.method) {
+      case Method::geodesic:
+        out[m] = {step, Vec3::Zero(), Vec3::Zero()};
+        break;
+      case Method::min_acceleration: {
+        // p = sigma (tau - 2tau^2 + tau^3) + (3tau^2 - 2tau^3) + mu (tau^3 - tau^2)
+        const double s = options.sigma, u = options.mu;
+        out[m] = {s * step, (3.0 - 2.0 * s - u) * step, (s + u - 2.0) * step};
+        break;
+      }
+      case Method::park_ravani:
+      case Method::hermite: {
+        // tau step + ((A^3 - A) M_m + (tau^3 - tau) M_{m+1}) h^2/6, A = 1 - tau,
+        // A^3 - A = -2tau + 3tau^2 - tau^3.
+        const double h = seconds_between(knots[m].t_ns, knots[m + 1].t_ns);
+        const double k = h * h / 6.0;
+        out[m] = {step + (-2.0 * M[m] - M[m + 1]) * k, 3.0 * M[m] * k, (M[m + 1] - M[m]) * k};
+        break;
+      }
+    }
+  }
+  return out;
+}
+
 Method method_from_string(const std::string& name) {
   if (name == "geodesic") return Method::geodesic;
   if (name == "min-accel") return Method::min_acceleration;

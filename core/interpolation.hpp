@@ -8,6 +8,7 @@
 // All three stay in the product for comparison.
 #pragma once
 
+#include <array>
 #include <span>
 #include <stdexcept>
 #include <string>
@@ -80,6 +81,14 @@ void check_knots(const std::vector<Pose>& knots);
 // between knots i-1 and i, R(t) = R_{i-1} exp([a tau^3 + b tau^2 + c tau]) with
 // tau = (t - t_{i-1}) / (t_i - t_{i-1}). The coefficients are in tau units, so
 // the body rate is W(r) r'(tau) / duration_s.
+// Position of every method as a cubic in tau on each knot segment m:
+//   d(tau) = d_m + c[0] tau + c[1] tau^2 + c[2] tau^3,  tau in [0, 1],
+// the same curve interpolate() evaluates (geodesic: linear; min-accel: the
+// Lemma 3.22 warp; park-ravani: natural spline; hermite: clamped spline).
+// Lets the smoother integrate the kernel against it in closed form.
+using PositionCubic = std::array<Vec3, 3>;
+std::vector<PositionCubic> position_cubics(const std::vector<Pose>& knots, const Options& options);
+
 struct ParkRavaniSegment {
   Vec3 a = Vec3::Zero();
   Vec3 b = Vec3::Zero();

@@ -1,6 +1,8 @@
 #include "core/pipeline.hpp"
 
 #include <algorithm>
+#include <array>
+#include <optional>
 #include <cmath>
 #include <stdexcept>
 #include <string>
@@ -77,6 +79,51 @@ double smoothstep_rate(double x) {
   return 30.0 * x * x * (1.0 - x) * (1.0 - x);
 }
 
+// Prefix sums of the kernel's weights times k^p (p = 0..3) for the weight,
+// its rate and its acceleration: sum_{k=k1..k2} w_k k^p in O(1).
+class KernelMoments {
+ public:
+  explicit KernelMoments(const smoothing::UniformKernel& kernel) : delta_(kernel.delta()) {
+    const auto size = static_cast<std::size_t>(2 * delta_ + 2);
+    for (auto& by_type : prefix_)
+      for (auto& v : by_type) v.assign(size, 0.0);
+    long double acc[3][4] = {};
+    for (int k = -delta_; k <= delta_; ++k) {
+      const double w[3] = {kernel.weight(k), kernel.weight_rate(k), kernel.weight_accel(k)};
+      long double kp = 1.0L;
+      for (int p = 0; p < 4; ++p) {
+        for (int t = 0; t < 3; ++t) {
+          acc[t][p] += static_cast<long double>(w[t]) * kp;
+          prefix_[t][p][static_cast<std::size_t>(k + delta_ + 1)] = static_cast<double>(acc[t][p]);
+        }
+        kp *= k;
+      }
+    }
+  }
+  // sum over k in [k1, k2] of weight-type t (0 value, 1 rate, 2 accel) times k^p.
+  double sum(int t, int p, int k1, int k2) const {
+    const auto& v = prefix_[static_cast<std::size_t>(t)][static_cast<std::size_t>(p)];
+    return v[static_cast<std::size_t>(k2 + delta_ + 1)] - v[static_cast<std::size_t>(k1 + delta_)];
+  }
+
+ private:
+  int delta_;
+  std::array<std::array<std::vector<double>, 4>, 3> prefix_;
+};
+
+// The dense positions as the piecewise cubic the interpolation defines
+// (interp::position_cubics), so Eq. 3.68 and its kernel derivatives can be
+// integrated segment by segment in closed form: O(knots in the window) per
+// output sample instead of O(Delta).
+struct PositionModel {
+  const std::vector<Pose>* knots = nullptr;
+  std::vector<interp::PositionCubic> cubics;
+  std::vector<std::size_t> first_index;  // first grid index of each segment (+ n at the end)
+  const std::vector<TimeNs>* times = nullptr;
+  const std::vector<double>* extra_ns = nullptr;
+  std::int64_t rate_hz = 1;
+};
+
 // Smooths one block of output samples [begin, end) in a chart at its middle
 // sample (or, for the global chart, at the identity and the origin).
 // Positions, velocities and accelerations are final and written straight into
@@ -87,8 +134,10 @@ double smoothstep_rate(double x) {
 class BlockSolver {
  public:
   BlockSolver(const std::vector<Pose>& dense, const smoothing::UniformKernel& kernel, double period_s,
-              Derivatives derivatives)
-      : dense_(dense), kernel_(kernel), h_s_(period_s), n_(dense.size()), derivatives_(derivatives) {}
+              Derivatives derivatives, const PositionModel* model = nullptr)
+      : dense_(dense), kernel_(kernel), h_s_(period_s), n_(dense.size()), derivatives_(derivatives), model_(model) {
+    if (model_ != nullptr) moments_.emplace(kernel);
+  }
 
   // Returns false (writing nothing) if some sample of the window is too far
   // from the reference for the local chart.
@@ -125,6 +174,17 @@ class BlockSolver {
       } else {
         attitudes_[j - a_lo_] = R_ref * so3::exp(smoothing::smooth_at(kernel_, rho_, j - lo_));
       }
+    }
+    if (derivatives_ == Derivatives::kernel && model_ != nullptr) {
+      for (std::size_t i = begin; i < end; ++i) {
+        const smoothing::Smoothed d = smooth_position_in_closed_form(i, d_ref);
+        Kinematics& kin = out.trajectory[i];
+        kin.t_ns = times[i];
+        kin.position_m = d_ref + d.value;
+        kin.velocity_m_s = d.rate;
+        kin.acceleration_m_s2 = d.accel;
+      }
+      return true;
     }
     if (derivatives_ == Derivatives::kernel) {
       for (std::size_t i = begin; i < end; ++i) {
@@ -165,11 +225,72 @@ class BlockSolver {
   const Vec3& rate(std::size_t j) const { return rates_[j - a_lo_]; }
 
  private:
+  // smoothing::smooth_with_derivatives of the dense positions (relative to
+  // d_ref) at sample i, with the sums over each knot segment's samples done in
+  // closed form: on segment m the offset is a cubic in k (the sample offset
+  // from i), d(k) = d_m - d_ref + e0 + e1 k + e2 k^2 + e3 k^3, so
+  // sum_k w_k d(k) = sum_p e_p (sum_k w_k k^p) from the prefix moments.
+  smoothing::Smoothed smooth_position_in_closed_form(std::size_t i, const Vec3& d_ref) const {
+    const PositionModel& pm = *model_;
+    const auto delta = static_cast<std::ptrdiff_t>(kernel_.delta());
+    const auto ii = static_cast<std::ptrdiff_t>(i);
+    const auto k_lo = static_cast<int>(std::max<std::ptrdiff_t>(-delta, -ii));
+    const auto k_hi = static_cast<int>(std::min<std::ptrdiff_t>(delta, static_cast<std::ptrdiff_t>(n_) - 1 - ii));
+    // Exact instant of grid sample i in ns, as interp::interpolate uses it.
+    const double t_i = static_cast<double>((*pm.times)[i] - (*pm.knots)[0].t_ns) + (*pm.extra_ns)[i];
+    const double step_ns = 1e9 / static_cast<double>(pm.rate_hz);
+    // Polynomial of segment m in k around i: coefficients e0..e3 (relative to d_m).
+    auto coefficients = [&](std::size_t m, Vec3 e[4]) {
+      const double h_ns = static_cast<double>((*pm.knots)[m + 1].t_ns - (*pm.knots)[m].t_ns);
+      const double u0 = (t_i - static_cast<double>((*pm.knots)[m].t_ns - (*pm.knots)[0].t_ns)) / h_ns;
+      const double sk = step_ns / h_ns;
+      const interp::PositionCubic& c = pm.cubics[m];
+      e[0] = ((c[2] * u0 + c[1]) * u0 + c[0]) * u0;
+      e[1] = (c[0] + (2.0 * c[1] + 3.0 * c[2] * u0) * u0) * sk;
+      e[2] = (c[1] + 3.0 * c[2] * u0) * (sk * sk);
+      e[3] = c[2] * (sk * sk * sk);
+    };
+    auto segment_of = [&](std::size_t j) {
+      const auto it = std::upper_bound(pm.first_index.begin(), pm.first_index.end(), j);
+      return static_cast<std::size_t>(it - pm.first_index.begin()) - 1;
+    };
+    // The value at i itself: its own segment's polynomial at k = 0.
+    Vec3 e[4];
+    const std::size_t m_i = segment_of(i);
+    coefficients(m_i, e);
+    const Vec3 f_i = (*pm.knots)[m_i].position_m - d_ref + e[0];
+    Vec3 s_sum[3] = {Vec3::Zero(), Vec3::Zero(), Vec3::Zero()};
+    const std::size_t j_lo = static_cast<std::size_t>(ii + k_lo), j_hi = static_cast<std::size_t>(ii + k_hi);
+    for (std::size_t m = segment_of(j_lo); m + 1 < pm.first_index.size() && pm.first_index[m] <= j_hi; ++m) {
+      const auto k1 = static_cast<int>(std::max<std::ptrdiff_t>(static_cast<std::ptrdiff_t>(pm.first_index[m]) - ii, k_lo));
+      const auto k2 = static_cast<int>(std::min<std::ptrdiff_t>(static_cast<std::ptrdiff_t>(pm.first_index[m + 1]) - 1 - ii, k_hi));
+      if (k2 < k1) continue;
+      coefficients(m, e);
+      const Vec3 base = (*pm.knots)[m].position_m - d_ref + e[0] - f_i;
+      for (int t = 0; t < 3; ++t)
+        s_sum[t] += base * moments_->sum(t, 0, k1, k2) + e[1] * moments_->sum(t, 1, k1, k2) +
+                    e[2] * moments_->sum(t, 2, k1, k2) + e[3] * moments_->sum(t, 3, k1, k2);
+    }
+    const double d0 = moments_->sum(0, 0, k_lo, k_hi), d1 = moments_->sum(1, 0, k_lo, k_hi),
+                 d2 = moments_->sum(2, 0, k_lo, k_hi);
+    // Same quotient-rule combination as smoothing::smooth_with_derivatives.
+    const double inv = 1.0 / d0;
+    smoothing::Smoothed out;
+    out.value = f_i + s_sum[0] * inv;
+    out.rate = (s_sum[1] - s_sum[0] * (d1 * inv)) * inv;
+    out.accel = (s_sum[2] - 2.0 * s_sum[1] * (d1 * inv) - s_sum[0] * (d2 * inv) +
+                 2.0 * s_sum[0] * (d1 * d1 * inv * inv)) *
+                inv;
+    return out;
+  }
+
   const std::vector<Pose>& dense_;
   const smoothing::UniformKernel& kernel_;
   double h_s_;
   std::size_t n_;
   Derivatives derivatives_;
+  const PositionModel* model_;
+  std::optional<KernelMoments> moments_;
   std::size_t lo_ = 0, a_lo_ = 0, a_hi_ = 0;
   std::vector<Vec3> rho_, delta_, delta_s_, velocity_, rates_;
   std::vector<Mat3> attitudes_;
@@ -209,7 +330,21 @@ BatchResult run_segment(const std::vector<Pose>& knots, const PipelineOptions& o
   result.trajectory.resize(n);
   result.imu.resize(n);
   std::vector<Vec3> rates(kernel_rates ? n : 0);
-  BlockSolver solver(dense, kernel, period_s, options.derivatives);
+  PositionModel model;
+  const bool closed_form = kernel_rates && options.closed_form_positions;
+  if (closed_form) {
+    model.knots = &knots;
+    model.cubics = interp::position_cubics(knots, options.interpolation);
+    model.times = &times;
+    model.extra_ns = &extra_ns;
+    model.rate_hz = options.rate_hz;
+    model.first_index.resize(knots.size());
+    for (std::size_t m = 0; m < knots.size(); ++m)
+      model.first_index[m] = static_cast<std::size_t>(
+          std::lower_bound(times.begin(), times.end(), knots[m].t_ns) - times.begin());
+    model.first_index.back() = n;  // the last knot closes the last segment
+  }
+  BlockSolver solver(dense, kernel, period_s, options.derivatives, closed_form ? &model : nullptr);
   if (options.chart == Chart::global) {
     solver.solve(0, n, 0, true, times, result);
     for (std::size_t i = 0; i < n; ++i) {

@@ -83,6 +83,11 @@ struct PipelineOptions {
   Derivatives derivatives = Derivatives::kernel;
   GapPolicy gap_policy = GapPolicy::error;
   double max_gap_s = 10.0;  // longest knot interval interpolated across
+  // With kernel derivatives: integrate the kernel against each knot segment's
+  // position cubic in closed form (O(knots in window) per sample) instead of
+  // summing over the 2*Delta+1 dense samples. Same result to rounding; the
+  // dense sum is kept for comparison (tests/test_pipeline.cpp).
+  bool closed_form_positions = true;
   std::int64_t rate_hz = 400;  // output rate, integer Hz
   // Default: the C2 Hermite base curve (the thesis' geodesic polygon needs a
   // wide positive kernel to hide its knot kinks, which then attenuates the

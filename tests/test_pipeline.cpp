@@ -9,6 +9,7 @@
 #include "core/attitude.hpp"
 #include "core/earth.hpp"
 #include "core/pipeline.hpp"
+#include "core/reference_motion.hpp"
 #include "core/so3.hpp"
 
 using namespace imuemu;
@@ -166,4 +167,41 @@ TEST(Pipeline, GlobalChartBreaksWhereTheRotationAngleCrossesPiAndTheLocalChartDo
             << " rad/s\n";
   EXPECT_GT(worst[0], 0.05);  // garbage: comparable to the rate itself
   EXPECT_LT(worst[1], 1e-9);
+}
+
+TEST(Pipeline, ClosedFormPositionSmoothingEqualsTheDenseSum) {
+  // The closed-form integration of the kernel against each segment's cubic
+  // must give what summing over the dense samples gives, for every method,
+  // at ECEF magnitudes, at a rate whose period is not a whole number of ns.
+  const reference::AircraftFlight flight(Physics::ecef, reference::AircraftFlight::default_origin(), 0,
+                                         60 * kNsPerSecond);
+  std::vector<Pose> knots = reference::sample_knots(flight, kNsPerSecond);
+  for (std::size_t k = 1; k + 1 < knots.size(); ++k) knots[k].t_ns += (k % 3 == 0 ? 1 : -1) * 123'456'789;  // non-uniform
+  for (interp::Method method : {interp::Method::hermite, interp::Method::geodesic, interp::Method::min_acceleration}) {
+    for (Ends ends : {Ends::extrapolate, Ends::clip}) {
+      PipelineOptions opt;
+      opt.scene.physics = Physics::ecef;
+      opt.rate_hz = 300;
+      opt.kernel.delta = 300;
+      opt.ends = ends;
+      opt.interpolation.method = method;
+      opt.interpolation.sigma = 0.8;
+      opt.interpolation.mu = 1.3;
+      const BatchResult fast = run_batch(knots, opt);
+      opt.closed_form_positions = false;
+      const BatchResult dense = run_batch(knots, opt);
+      ASSERT_EQ(fast.trajectory.size(), dense.trajectory.size());
+      double dp = 0, dv = 0, da = 0;
+      for (std::size_t i = 0; i < fast.trajectory.size(); ++i) {
+        dp = std::max(dp, (fast.trajectory[i].position_m - dense.trajectory[i].position_m).norm());
+        dv = std::max(dv, (fast.trajectory[i].velocity_m_s - dense.trajectory[i].velocity_m_s).norm());
+        da = std::max(da, (fast.trajectory[i].acceleration_m_s2 - dense.trajectory[i].acceleration_m_s2).norm());
+      }
+      std::cout << "  [closed form vs dense, " << interp::to_string(method) << (ends == Ends::clip ? ", clip" : "")
+                << "] position " << dp << " m, velocity " << dv << " m/s, acceleration " << da << " m/s^2\n";
+      EXPECT_LT(dp, 1e-8);
+      EXPECT_LT(dv, 1e-8);
+      EXPECT_LT(da, 1e-7);
+    }
+  }
 }
