@@ -13,8 +13,8 @@ packages=(
   libserialport-dev libgpiod-dev linux-libc-dev libboost-dev libsystemd-dev
   # configuration and command line
   libtomlplusplus-dev libcli11-dev
-  # tests and benchmarks
-  libgtest-dev libgmock-dev libbenchmark-dev
+  # tests, benchmarks, and libFuzzer (clang's runtime) for the parsers
+  libgtest-dev libgmock-dev libbenchmark-dev clang libclang-rt-14-dev
   # plots (run under Debian's /usr/bin/python3)
   python3 python3-numpy python3-matplotlib
 )
