@@ -111,30 +111,6 @@ std::vector<Method> methods() {
   return m;
 }
 
-struct Errors {
-  double gyro_rms = 0, gyro_max = 0, accel_rms = 0, accel_max = 0;
-};
-
-Errors errors_against_truth(const BatchResult& out, const reference::Motion& motion, const SceneModel& scene,
-                            TimeNs skip_ns) {
-  Errors e;
-  double g2 = 0, a2 = 0;
-  std::size_t count = 0;
-  for (const ImuSample& s : out.imu) {
-    if (s.t_ns < motion.start_ns() + skip_ns || s.t_ns > motion.end_ns() - skip_ns) continue;
-    const ImuSample t = reference::truth_imu(motion, scene, s.t_ns);
-    const double eg = (s.gyro_rad_s - t.gyro_rad_s).norm(), ea = (s.accel_m_s2 - t.accel_m_s2).norm();
-    g2 += eg * eg;
-    a2 += ea * ea;
-    e.gyro_max = std::max(e.gyro_max, eg);
-    e.accel_max = std::max(e.accel_max, ea);
-    ++count;
-  }
-  e.gyro_rms = std::sqrt(g2 / static_cast<double>(std::max<std::size_t>(count, 1)));
-  e.accel_rms = std::sqrt(a2 / static_cast<double>(std::max<std::size_t>(count, 1)));
-  return e;
-}
-
 // Integrates the emitted IMU from emitted states over windows of `window`
 // samples; returns {equivalent gyro error, equivalent accel error}.
 std::pair<double, double> self_consistency(const BatchResult& out, const SceneModel& scene, std::size_t window,
@@ -212,18 +188,19 @@ int main(int argc, char** argv) {
         const std::clock_t c0 = std::clock();
         const BatchResult out = m.run(knots, scene, rate);
         const double cpu_s = static_cast<double>(std::clock() - c0) / CLOCKS_PER_SEC;
-        const Errors e = errors_against_truth(out, flight, scene, 5 * kNsPerSecond);
+        const reference::ImuErrors e = reference::compare_with_truth(
+            out.imu, flight, scene, flight.start_ns() + 5 * kNsPerSecond, flight.end_ns() - 5 * kNsPerSecond);
         const auto [self_g, self_a] =
             self_consistency(out, scene, static_cast<std::size_t>(10 * rate), static_cast<std::size_t>(5 * rate));
         const double throughput = static_cast<double>(out.imu.size()) / std::max(cpu_s, 1e-9);
         const char* scene_name = physics == Physics::flat ? "flat" : "ecef";
         std::snprintf(line, sizeof line, "%s,%s,%lld,%.3e,%.3e,%.3e,%.3e,%.3e,%.3e,%.1f,%.4g\n", m.name.c_str(),
-                      scene_name, static_cast<long long>(rate), e.gyro_rms, e.gyro_max, e.accel_rms, e.accel_max,
+                      scene_name, static_cast<long long>(rate), e.gyro_rms_rad_s, e.gyro_max_rad_s, e.accel_rms_m_s2, e.accel_max_m_s2,
                       self_g, self_a, m.lookahead_s(rate), throughput);
         csv << line;
         std::snprintf(line, sizeof line, "| %s | %s | %lld | %.2e | %.2e | %.2e | %.2e | %.2e | %.2e | %.1f | %.3g |\n",
-                      m.name.c_str(), scene_name, static_cast<long long>(rate), e.gyro_rms, e.gyro_max, e.accel_rms,
-                      e.accel_max, self_g, self_a, m.lookahead_s(rate), throughput);
+                      m.name.c_str(), scene_name, static_cast<long long>(rate), e.gyro_rms_rad_s, e.gyro_max_rad_s, e.accel_rms_m_s2,
+                      e.accel_max_m_s2, self_g, self_a, m.lookahead_s(rate), throughput);
         md << line;
         std::cout << line << std::flush;
       }

@@ -168,7 +168,7 @@ class BlockSolver {
     rates_.resize(a_hi_ - a_lo_);
     for (std::size_t j = a_lo_; j < a_hi_; ++j) {
       if (derivatives_ == Derivatives::kernel) {
-        const smoothing::Smoothed r = smoothing::smooth_with_derivatives(kernel_, rho_, j - lo_, 0, false);
+        const smoothing::Smoothed r = smoothing::smooth_with_derivatives(kernel_, rho_, j - lo_, false);
         attitudes_[j - a_lo_] = R_ref * so3::exp(r.value);
         rates_[j - a_lo_] = so3::W(r.value) * r.rate;  // Eq. 3.59-3.60, exact r~'
       } else {

@@ -227,4 +227,32 @@ std::vector<ImuSample> truth_imu_series(const Motion& motion, const SceneModel& 
   return out;
 }
 
+ImuErrors compare_with_truth(const std::vector<ImuSample>& imu, const Motion& motion, const SceneModel& scene,
+                             TimeNs from_ns, TimeNs to_ns) {
+  ImuErrors e;
+  double g2 = 0.0, a2 = 0.0;
+  for (const ImuSample& s : imu) {
+    const ImuSample t = truth_imu(motion, scene, s.t_ns);
+    const double g = (s.gyro_rad_s - t.gyro_rad_s).norm(), a = (s.accel_m_s2 - t.accel_m_s2).norm();
+    if (!std::isfinite(g) || !std::isfinite(a)) {
+      ++e.non_finite;
+      continue;
+    }
+    if (s.t_ns < from_ns || s.t_ns > to_ns) {
+      e.end_gyro_max_rad_s = std::max(e.end_gyro_max_rad_s, g);
+      e.end_accel_max_m_s2 = std::max(e.end_accel_max_m_s2, a);
+      continue;
+    }
+    ++e.samples;
+    g2 += g * g;
+    a2 += a * a;
+    e.gyro_max_rad_s = std::max(e.gyro_max_rad_s, g);
+    e.accel_max_m_s2 = std::max(e.accel_max_m_s2, a);
+  }
+  const auto count = static_cast<double>(std::max<std::size_t>(e.samples, 1));
+  e.gyro_rms_rad_s = std::sqrt(g2 / count);
+  e.accel_rms_m_s2 = std::sqrt(a2 / count);
+  return e;
+}
+
 }  // namespace imuemu::reference

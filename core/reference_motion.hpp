@@ -138,4 +138,17 @@ ImuSample truth_imu(const Motion& motion, const SceneModel& scene, TimeNs t_ns);
 std::vector<ImuSample> truth_imu_series(const Motion& motion, const SceneModel& scene,
                                         TimeNs period_ns);
 
+// Error statistics of IMU samples against truth_imu at the same times.
+// Samples with t_ns in [from_ns, to_ns] make the RMS and max; the others only
+// the end maxima (methods differ in how they treat the ends).
+struct ImuErrors {
+  double gyro_rms_rad_s = 0.0, gyro_max_rad_s = 0.0;
+  double accel_rms_m_s2 = 0.0, accel_max_m_s2 = 0.0;
+  double end_gyro_max_rad_s = 0.0, end_accel_max_m_s2 = 0.0;
+  std::size_t samples = 0;     // inside [from_ns, to_ns]
+  std::size_t non_finite = 0;  // samples with a NaN/Inf error (must be 0)
+};
+ImuErrors compare_with_truth(const std::vector<ImuSample>& imu, const Motion& motion, const SceneModel& scene,
+                             TimeNs from_ns, TimeNs to_ns);
+
 }  // namespace imuemu::reference

@@ -135,11 +135,10 @@ Vec3 smooth_at(const UniformKernel& kernel, std::span<const Vec3> f, std::size_t
 }
 
 Smoothed smooth_with_derivatives(const UniformKernel& kernel, std::span<const Vec3> f, std::size_t i,
-                                 std::size_t first_valid, bool want_accel) {
-  // f[first_valid..] are real samples; earlier entries are never read. The
-  // window is clipped at 0/first_valid and at f.size() like Eq. 3.68.
+                                 bool want_accel) {
+  // The window is clipped at 0 and f.size() like Eq. 3.68.
   const auto delta = static_cast<std::size_t>(kernel.delta());
-  const std::size_t lo = std::max(first_valid, i >= delta ? i - delta : 0);
+  const std::size_t lo = i >= delta ? i - delta : 0;
   const std::size_t hi = std::min(f.size() - 1, i + delta);
   const Vec3& fi = f[i];
   Vec3 s0 = Vec3::Zero(), s1 = Vec3::Zero(), s2 = Vec3::Zero();

@@ -77,7 +77,7 @@ struct Smoothed {
 // With want_accel false the second derivative is skipped (left zero): a third
 // less work where only the rate is needed (attitude).
 Smoothed smooth_with_derivatives(const UniformKernel& kernel, std::span<const Vec3> f, std::size_t i,
-                                 std::size_t first_valid = 0, bool want_accel = true);
+                                 bool want_accel = true);
 
 // Eq. 3.68 on a uniformly sampled sequence, including its one-sided windows at
 // both ends (the sums are clipped to the available samples and renormalised).
