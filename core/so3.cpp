@@ -254,6 +254,17 @@ Vec3 angular_acceleration(const Vec3& r, const Vec3& r_dot, const Vec3& r_ddot) 
          c.t_minus_sin_over_t3 * r_dot.cross(r_x_rd);
 }
 
+void geodesic_blend(Mat3& R, Vec3& omega, const Mat3& R_b, const Vec3& omega_b, double s, double s_rate,
+                    bool with_rate) {
+  const Vec3 D = log(R.transpose() * R_b);
+  const Mat3 E = exp(s * D);
+  if (with_rate) {
+    const Vec3 D_dot = W_inverse(D) * (omega_b - exp(D).transpose() * omega);
+    omega = E.transpose() * omega + W(s * D) * (s_rate * D + s * D_dot);
+  }
+  R = R * E;
+}
+
 Mat3 orthonormalize(const Mat3& R) { return matrix_from_quaternion(quaternion_from_matrix(R)); }
 
 }  // namespace imuemu::so3

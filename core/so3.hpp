@@ -34,6 +34,18 @@ Mat3 W_inverse(const Vec3& r);
 // Angular acceleration of Eq. 3.61: d/dt (W(r) r_dot) in the body frame.
 Vec3 angular_acceleration(const Vec3& r, const Vec3& r_dot, const Vec3& r_ddot);
 
+// Moves (R, omega) a fraction s of the way to (R_b, omega_b) along the
+// geodesic between them, where s = s(t) has rate s_rate = ds/dt (1/s):
+//   R(s) = R_a exp(s D),  D = log(R_a^T R_b),
+// and, if with_rate, the exact body rate of that curve,
+//   omega = exp(sD)^T omega_a + W(sD) (s' D + s D'),
+//   D' = W(D)^-1 (omega_b - exp(D)^T omega_a)   (from R_b = R_a exp(D)),
+// so that a blend weight s(t) gives a consistent (R, omega) pair (Eq. 3.59).
+// Without with_rate only R is moved and omega is left untouched.
+// Shared by the pipeline's chart blending and the live emitter's rejoin blend.
+void geodesic_blend(Mat3& R, Vec3& omega, const Mat3& R_b, const Vec3& omega_b, double s, double s_rate,
+                    bool with_rate);
+
 // Unit quaternion (w, x, y, z), w >= 0, of a rotation matrix (Eq. 1.3 inverse,
 // largest-pivot / Shepperd extraction). Also used by log().
 Eigen::Vector4d quaternion_from_matrix(const Mat3& R);

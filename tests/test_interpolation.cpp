@@ -460,13 +460,18 @@ TEST(ParkRavani, PositionIsTheNaturalCubicSpline) {
   EXPECT_LT(worst_lin, 1e-13);
 
   wk = wiggly_knots();  // positions (t, t^2, 0): curved
+  // The whole-trajectory natural spline: a spline window reaching every knot
+  // (the default window solves the C2 condition over +-4 knots only, see
+  // interp::Options::spline_window_knots; tests/test_stream.cpp measures it).
+  auto whole = with_method(interp::Method::park_ravani);
+  whole.spline_window_knots = static_cast<int>(wk.size()) - 1;
   const TimeNs d = 1'000'000;
   const double d_s = 1e-3;
   auto second = [&](TimeNs t_k, int side) {
     std::vector<TimeNs> ts;
     for (int j = 0; j <= 3; ++j) ts.push_back(t_k + side * j * d);
     if (side < 0) std::reverse(ts.begin(), ts.end());
-    auto o = interp::interpolate(wk, ts, with_method(interp::Method::park_ravani));
+    auto o = interp::interpolate(wk, ts, whole);
     if (side < 0) std::reverse(o.begin(), o.end());
     return Vec3((2.0 * o[0].position_m - 5.0 * o[1].position_m + 4.0 * o[2].position_m - o[3].position_m) / (d_s * d_s));
   };
@@ -474,7 +479,7 @@ TEST(ParkRavani, PositionIsTheNaturalCubicSpline) {
     std::vector<TimeNs> ts;
     for (int j = 0; j <= 3; ++j) ts.push_back(t_k + side * j * d);
     if (side < 0) std::reverse(ts.begin(), ts.end());
-    auto o = interp::interpolate(wk, ts, with_method(interp::Method::park_ravani));
+    auto o = interp::interpolate(wk, ts, whole);
     if (side < 0) std::reverse(o.begin(), o.end());
     // Four-point one-sided first derivative, exact for cubics.
     return Vec3(side * (-11.0 * o[0].position_m + 18.0 * o[1].position_m - 9.0 * o[2].position_m + 2.0 * o[3].position_m) / (6.0 * d_s));

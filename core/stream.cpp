@@ -1,0 +1,578 @@
+#include "core/stream.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cmath>
+#include <optional>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "core/derivatives.hpp"
+#include "core/so3.hpp"
+
+namespace imuemu {
+namespace {
+
+// Prefix sums of the kernel's weights times k^p (p = 0..3) for the weight,
+// its rate and its acceleration: sum_{k=k1..k2} w_k k^p in O(1).
+class KernelMoments {
+ public:
+  explicit KernelMoments(const smoothing::UniformKernel& kernel) : delta_(kernel.delta()) {
+    const auto size = static_cast<std::size_t>(2 * delta_ + 2);
+    for (auto& by_type : prefix_)
+      for (auto& v : by_type) v.assign(size, 0.0);
+    long double acc[3][4] = {};
+    for (int k = -delta_; k <= delta_; ++k) {
+      const double w[3] = {kernel.weight(k), kernel.weight_rate(k), kernel.weight_accel(k)};
+      long double kp = 1.0L;
+      for (int p = 0; p < 4; ++p) {
+        for (int t = 0; t < 3; ++t) {
+          acc[t][p] += static_cast<long double>(w[t]) * kp;
+          prefix_[t][p][static_cast<std::size_t>(k + delta_ + 1)] = static_cast<double>(acc[t][p]);
+        }
+        kp *= k;
+      }
+    }
+  }
+  // sum over k in [k1, k2] of weight-type t (0 value, 1 rate, 2 accel) times k^p.
+  double sum(int t, int p, int k1, int k2) const {
+    const auto& v = prefix_[static_cast<std::size_t>(t)][static_cast<std::size_t>(p)];
+    return v[static_cast<std::size_t>(k2 + delta_ + 1)] - v[static_cast<std::size_t>(k1 + delta_)];
+  }
+
+ private:
+  int delta_;
+  std::array<std::array<std::vector<double>, 4>, 3> prefix_;
+};
+
+// Virtual knots continuing the trajectory beyond `from` (Ends::extrapolate),
+// away from `towards`, until they cover pad_ns: the attitude continues the end
+// segment's geodesic (constant body rate); the position follows the parabola
+// through the three end knots (constant acceleration), or the line if only two
+// exist. Returned nearest first.
+std::vector<Pose> extend(const Pose& from, const Pose& towards, const Pose& beyond, bool quadratic, TimeNs pad_ns) {
+  std::vector<Pose> out;
+  const bool before = towards.t_ns > from.t_ns;
+  const TimeNs h = std::abs(towards.t_ns - from.t_ns);
+  const Vec3 xi = so3::log(towards.attitude.transpose() * from.attitude);  // one step away from `towards`
+  const double t1 = seconds_between(from.t_ns, towards.t_ns), t2 = seconds_between(from.t_ns, beyond.t_ns);
+  const Vec3 y1 = towards.position_m - from.position_m, y2 = beyond.position_m - from.position_m;
+  for (std::int64_t k = 1; k * h < pad_ns + h; ++k) {
+    const double kd = static_cast<double>(k);
+    const TimeNs t_ns = from.t_ns + (before ? -k * h : k * h);
+    const double t = seconds_between(from.t_ns, t_ns);
+    // Lagrange through (0, 0), (t1, y1), (t2, y2), relative to `from`.
+    const Vec3 offset = quadratic ? Vec3(t * (t - t2) / (t1 * (t1 - t2)) * y1 + t * (t - t1) / (t2 * (t2 - t1)) * y2)
+                                  : Vec3(t / t1 * y1);
+    out.push_back({t_ns, from.position_m + offset, from.attitude * so3::exp(kd * xi)});
+  }
+  return out;
+}
+
+// C2 step from 0 to 1 on [0, 1] (quintic smoothstep) and its derivative: blends
+// two charts' attitudes so the angular rate stays continuous.
+double smoothstep(double x) {
+  x = std::clamp(x, 0.0, 1.0);
+  return x * x * x * (10.0 + x * (-15.0 + 6.0 * x));
+}
+double smoothstep_rate(double x) {
+  if (x <= 0.0 || x >= 1.0) return 0.0;
+  return 30.0 * x * x * (1.0 - x) * (1.0 - x);
+}
+
+}  // namespace
+
+// One gap-free stretch of knots. Dense samples live on the grid
+//   g -> base + floor(g * 1e9 / rate) ns (+ the exact sub-ns fraction),
+// g = 0, 1, ...; base is the first knot (Ends::clip) or a whole number of
+// seconds before it (Ends::extrapolate, whose padded samples are computed and
+// dropped), so the output samples sit on the grid of the first knot.
+//
+// Work proceeds in blocks of output samples sharing a chart (PipelineOptions,
+// Chart::local): a block [begin, end) is solved as soon as the dense samples
+// its windows read have been interpolated, which happens once the knots
+// (plus the spline look-ahead) covering them have arrived.
+class StreamPipeline::Run {
+  struct SegmentInfo {
+    interp::Segment segment;
+    std::size_t first_index;  // first dense index with t >= segment.start
+  };
+
+ public:
+  Run(const PipelineOptions& options, std::deque<StreamSample>& out)
+      : opt_(options),
+        out_(out),
+        period_s_(1.0 / static_cast<double>(options.rate_hz)),
+        kernel_(options.kernel, period_s_),
+        builder_(options.interpolation),
+        kernel_rates_(options.derivatives == Derivatives::kernel),
+        closed_form_(kernel_rates_ && options.closed_form_positions),
+        global_(options.chart == Chart::global) {
+    if (kernel_rates_ && kernel_.delta() < 1) throw std::invalid_argument("kernel derivatives need a window: Delta >= 1");
+    if (closed_form_) moments_.emplace(kernel_);
+    const auto delta = static_cast<std::size_t>(kernel_.delta());
+    nominal_ = std::max<std::size_t>(16, 2 * delta);
+    overlap_ = global_ ? 0 : std::max<std::size_t>(4, delta / 4);
+    reach_ = delta + std::max<std::size_t>(overlap_, 4);
+    if (opt_.ends == Ends::extrapolate) {
+      const std::int64_t pad_samples = options.kernel.delta + 8;
+      pad_s_ = (pad_samples + options.rate_hz - 1) / options.rate_hz;
+    }
+  }
+
+  // Knot already validated against the previous one by the caller.
+  void push(const Pose& knot) {
+    if (real_count_ == 0) {
+      t_first_ = knot.t_ns;
+      base_ns_ = t_first_ - pad_s_ * kNsPerSecond;
+    }
+    ++real_count_;
+    t_last_ = knot.t_ns;
+    if (opt_.ends == Ends::extrapolate) {
+      tail_[0] = tail_[1];
+      tail_[1] = tail_[2];
+      tail_[2] = knot;
+      if (!head_done_) {
+        head_.push_back(knot);
+        if (head_.size() < 3) return;
+        push_head();
+        return;
+      }
+    }
+    feed(knot);
+  }
+
+  void finish() {
+    if (opt_.ends == Ends::extrapolate) {
+      if (!head_done_) {
+        if (head_.size() < 2) return;  // caller reports the isolated knot
+        push_head();
+      }
+      // Virtual knots after the last: the mirror of the head.
+      const Pose& last = tail_[2];
+      const Pose& prev = tail_[1];
+      const bool quadratic = real_count_ > 2;
+      dense_end_ns_ = t_last_ + pad_s_ * kNsPerSecond;
+      end_known_ = true;
+      for (const Pose& v : extend(last, prev, quadratic ? tail_[0] : prev, quadratic, pad_s_ * kNsPerSecond)) feed(v);
+    } else {
+      dense_end_ns_ = t_last_;
+      end_known_ = true;
+    }
+    builder_.finish();
+    finished_ = true;
+    take_segments();
+    if (opt_.ends == Ends::clip && dense_count_ < 2)
+      throw std::invalid_argument("trajectory from " + std::to_string(t_first_) +
+                                  " ns is shorter than two output samples");
+    solve_blocks();
+  }
+
+  std::size_t real_knots() const { return real_count_; }
+  std::size_t buffered() const { return dense_.size() + pending_.size(); }
+
+ private:
+  void push_head() {
+    head_done_ = true;
+    const bool quadratic = head_.size() > 2;
+    std::vector<Pose> virtual_knots =
+        extend(head_[0], head_[1], quadratic ? head_[2] : head_[1], quadratic, pad_s_ * kNsPerSecond);
+    for (auto it = virtual_knots.rbegin(); it != virtual_knots.rend(); ++it) builder_.push(*it);
+    for (const Pose& k : head_) feed(k);
+    head_.clear();
+  }
+
+  void feed(const Pose& knot) {
+    builder_.push(knot);
+    take_segments();
+    solve_blocks();
+  }
+
+  // Grid instant of dense index g: integer ns and the sub-ns fraction.
+  TimeNs grid_time(std::size_t g) const {
+    const auto gs = static_cast<std::int64_t>(g);
+    return base_ns_ + (gs / opt_.rate_hz) * kNsPerSecond + (gs % opt_.rate_hz) * kNsPerSecond / opt_.rate_hz;
+  }
+
+  // Interpolates the dense samples of every segment the builder has ready.
+  void take_segments() {
+    auto& ready = builder_.ready();
+    while (!ready.empty()) {
+      segments_.push_back({ready.front(), dense_count_});
+      ready.pop_front();
+      generate(segments_.back(), finished_ && ready.empty());
+    }
+    if (finished_ && !segments_.empty()) generate(segments_.back(), true);
+  }
+
+  // Dense samples on `s` with t < s.end (or <= for the run's last segment),
+  // never beyond the padded end.
+  void generate(const SegmentInfo& s, bool last) {
+    for (;;) {
+      const TimeNs t = grid_time(dense_count_);
+      if (last ? t > s.segment.end.t_ns : t >= s.segment.end.t_ns) break;
+      if (end_known_ && t > dense_end_ns_) break;
+      dense_.push_back(interp::evaluate(s.segment, t, output_grid_fraction_ns(dense_count_, opt_.rate_hz)));
+      ++dense_count_;
+    }
+  }
+
+  const Pose& dense(std::size_t j) const { return dense_[j - dense_first_]; }
+  Kinematics& pending(std::size_t j) { return pending_[j - pending_first_]; }
+
+  void solve_blocks() {
+    while (next_begin_ < dense_count_) {
+      std::size_t length = nominal_;
+      if (finished_) {
+        length = std::min(nominal_, dense_count_ - next_begin_);
+      } else if (next_begin_ + nominal_ + reach_ > dense_count_) {
+        break;  // the windows of a full block are not all here yet
+      }
+      const std::size_t begin = next_begin_;
+      if (global_) {
+        solve(begin, begin + length, true);
+        for (std::size_t j = begin; j < begin + length; ++j) {
+          pending(j).attitude = attitudes_[j - a_lo_];
+          if (kernel_rates_) pending(j).angular_rate_rad_s = rates_[j - a_lo_];
+        }
+      } else {
+        // Halved while the window strays more than kMaxChartAngleRad from the
+        // block's reference.
+        while (!solve(begin, begin + length, false)) {
+          if (length == 1) {
+            throw std::invalid_argument(
+                "the smoothing window around output sample " + std::to_string(begin) +
+                " spans more rotation than a chart can hold (> " + std::to_string(kMaxChartAngleRad) +
+                " rad from its centre): reduce Delta or the kernel width, or add knots");
+          }
+          length = (length + 1) / 2;
+        }
+        // Neighbouring blocks' attitudes differ at second order (smoothing in
+        // exponential coordinates depends on the chart); they are blended
+        // over 2*overlap samples centred on each block boundary.
+        const std::size_t blend_lo = a_lo_;
+        const double blend_len = static_cast<double>(begin + overlap_ - blend_lo);
+        for (std::size_t j = a_lo_; j < a_hi_; ++j) {
+          Kinematics& kin = pending(j);
+          if (begin == 0 || j >= begin + overlap_) {
+            kin.attitude = attitudes_[j - a_lo_];
+            if (kernel_rates_) kin.angular_rate_rad_s = rates_[j - a_lo_];
+          } else {
+            // Samples before begin+overlap already hold the previous blocks'
+            // value: move it towards this block's along the geodesic.
+            const double x = (static_cast<double>(j - blend_lo) + 0.5) / blend_len;
+            Vec3 unused = Vec3::Zero();
+            so3::geodesic_blend(kin.attitude, kernel_rates_ ? kin.angular_rate_rad_s : unused, attitudes_[j - a_lo_],
+                          kernel_rates_ ? rates_[j - a_lo_] : unused, smoothstep(x),
+                          smoothstep_rate(x) / (blend_len * period_s_), kernel_rates_);
+          }
+        }
+      }
+      next_begin_ = begin + length;
+      const bool all = finished_ && next_begin_ == dense_count_;
+      finalize(all ? dense_count_ : (next_begin_ > overlap_ ? next_begin_ - overlap_ : 0), all);
+    }
+  }
+
+  // Smooths block [begin, end) in a chart at its middle sample (or, for the
+  // global chart, at the identity and the origin). Positions, velocities and
+  // accelerations are final and written into the pending samples (position
+  // smoothing is linear, so every chart gives the same answer). Attitudes
+  // (and, with kernel derivatives, body rates) are chart dependent at second
+  // order, so the block leaves them in attitudes_/rates_ on [a_lo_, a_hi_):
+  // `overlap` samples beyond each end, for blending with the neighbours.
+  // Returns false (writing nothing) if some sample of the window is too far
+  // from the reference for the local chart.
+  bool solve(std::size_t begin, std::size_t end, bool global) {
+    // During streaming every index read below is < n: the block waits until
+    // dense samples reach end + reach. Only at the true end is it clipped, so
+    // clipping reproduces Eq. 3.68's one-sided windows there.
+    const std::size_t n = dense_count_;
+    const std::size_t ref = begin + (end - begin) / 2;
+    const Mat3 R_ref = global ? Mat3::Identity() : dense(ref).attitude;
+    const Vec3 d_ref = global ? Vec3::Zero() : dense(ref).position_m;
+    const std::size_t a_lo = begin > overlap_ ? begin - overlap_ : 0;
+    const std::size_t a_hi = std::min(n, end + overlap_);
+    const std::size_t lo = begin > reach_ ? begin - reach_ : 0;
+    const std::size_t hi = std::min(n, end + reach_);
+    const std::size_t m = hi - lo;
+    rho_.resize(m);
+    delta_.resize(m);
+    for (std::size_t j = lo; j < hi; ++j) {
+      rho_[j - lo] = so3::log(R_ref.transpose() * dense(j).attitude);
+      if (!global && rho_[j - lo].norm() > kMaxChartAngleRad) return false;
+      delta_[j - lo] = dense(j).position_m - d_ref;
+    }
+    a_lo_ = a_lo;
+    a_hi_ = a_hi;
+    while (pending_first_ + pending_.size() < a_hi) {
+      pending_.emplace_back();
+      pending_.back().t_ns = grid_time(pending_first_ + pending_.size() - 1);
+    }
+    attitudes_.resize(a_hi - a_lo);
+    rates_.resize(a_hi - a_lo);
+    for (std::size_t j = a_lo; j < a_hi; ++j) {
+      if (kernel_rates_) {
+        const smoothing::Smoothed r = smoothing::smooth_with_derivatives(kernel_, rho_, j - lo, false);
+        attitudes_[j - a_lo] = R_ref * so3::exp(r.value);
+        rates_[j - a_lo] = so3::W(r.value) * r.rate;  // Eq. 3.59-3.60, exact r~'
+      } else {
+        attitudes_[j - a_lo] = R_ref * so3::exp(smoothing::smooth_at(kernel_, rho_, j - lo));
+      }
+    }
+    if (kernel_rates_) {
+      for (std::size_t i = begin; i < end; ++i) {
+        const smoothing::Smoothed d = closed_form_ ? smooth_position_in_closed_form(i, d_ref, n)
+                                                   : smoothing::smooth_with_derivatives(kernel_, delta_, i - lo);
+        Kinematics& kin = pending(i);
+        kin.position_m = d_ref + d.value;
+        kin.velocity_m_s = d.rate;
+        kin.acceleration_m_s2 = d.accel;
+      }
+      return true;
+    }
+    // The thesis' stencils (Eq. 3.71-3.74) on the smoothed positions.
+    const std::size_t s_lo = begin >= 4 ? begin - 4 : 0;
+    const std::size_t s_hi = std::min(n, end + 4);
+    delta_s_.resize(m);
+    for (std::size_t j = s_lo; j < s_hi; ++j) delta_s_[j - lo] = smoothing::smooth_at(kernel_, delta_, j - lo);
+    auto at_delta = [&](std::size_t j) -> const Vec3& { return delta_s_[j - lo]; };
+    velocity_.resize(m);
+    const std::size_t v_lo = begin >= 2 ? begin - 2 : 0;
+    const std::size_t v_hi = std::min(n, end + 2);
+    for (std::size_t j = v_lo; j < v_hi; ++j) velocity_[j - lo] = derivatives::stencil(at_delta, j, n, period_s_);
+    auto at_velocity = [&](std::size_t j) -> const Vec3& { return velocity_[j - lo]; };
+    for (std::size_t i = begin; i < end; ++i) {
+      Kinematics& kin = pending(i);
+      kin.position_m = d_ref + delta_s_[i - lo];
+      kin.velocity_m_s = velocity_[i - lo];
+      kin.acceleration_m_s2 = derivatives::stencil(at_velocity, i, n, period_s_);
+    }
+    return true;
+  }
+
+  // smoothing::smooth_with_derivatives of the dense positions (relative to
+  // d_ref) at sample i, with the sums over each knot segment's samples done in
+  // closed form: on a segment the offset is a cubic in k (the sample offset
+  // from i), d(k) = d_m - d_ref + e0 + e1 k + e2 k^2 + e3 k^3, so
+  // sum_k w_k d(k) = sum_p e_p (sum_k w_k k^p) from the prefix moments.
+  // O(knots in the window) per sample instead of O(Delta).
+  smoothing::Smoothed smooth_position_in_closed_form(std::size_t i, const Vec3& d_ref, std::size_t n) const {
+    const auto delta = static_cast<std::ptrdiff_t>(kernel_.delta());
+    const auto ii = static_cast<std::ptrdiff_t>(i);
+    const auto k_lo = static_cast<int>(std::max<std::ptrdiff_t>(-delta, -ii));
+    const auto k_hi = static_cast<int>(std::min<std::ptrdiff_t>(delta, static_cast<std::ptrdiff_t>(n) - 1 - ii));
+    const TimeNs t_i_ns = grid_time(i);
+    const double extra_i = output_grid_fraction_ns(i, opt_.rate_hz);
+    const double step_ns = 1e9 / static_cast<double>(opt_.rate_hz);
+    // Polynomial of segment s in k around i: coefficients e0..e3 (relative to its start).
+    auto coefficients = [&](const SegmentInfo& s, Vec3 e[4]) {
+      const interp::Segment& seg = s.segment;
+      const double h_ns = static_cast<double>(seg.end.t_ns - seg.start.t_ns);
+      const double u0 = (static_cast<double>(t_i_ns - seg.start.t_ns) + extra_i) / h_ns;
+      const double sk = step_ns / h_ns;
+      const auto& c = seg.position;
+      e[0] = ((c[2] * u0 + c[1]) * u0 + c[0]) * u0;
+      e[1] = (c[0] + (2.0 * c[1] + 3.0 * c[2] * u0) * u0) * sk;
+      e[2] = (c[1] + 3.0 * c[2] * u0) * (sk * sk);
+      e[3] = c[2] * (sk * sk * sk);
+    };
+    auto segment_of = [&](std::size_t j) {
+      const auto it = std::upper_bound(segments_.begin(), segments_.end(), j,
+                                       [](std::size_t v, const SegmentInfo& s) { return v < s.first_index; });
+      return static_cast<std::size_t>(it - segments_.begin()) - 1;
+    };
+    auto segment_end = [&](std::size_t m) {
+      return m + 1 < segments_.size() ? segments_[m + 1].first_index : dense_count_;
+    };
+    // The value at i itself: its own segment's polynomial at k = 0.
+    Vec3 e[4];
+    const std::size_t m_i = segment_of(i);
+    coefficients(segments_[m_i], e);
+    const Vec3 f_i = segments_[m_i].segment.start.position_m - d_ref + e[0];
+    Vec3 s_sum[3] = {Vec3::Zero(), Vec3::Zero(), Vec3::Zero()};
+    const std::size_t j_lo = static_cast<std::size_t>(ii + k_lo), j_hi = static_cast<std::size_t>(ii + k_hi);
+    for (std::size_t m = segment_of(j_lo); m < segments_.size() && segments_[m].first_index <= j_hi; ++m) {
+      const auto k1 = static_cast<int>(std::max<std::ptrdiff_t>(static_cast<std::ptrdiff_t>(segments_[m].first_index) - ii, k_lo));
+      const auto k2 = static_cast<int>(std::min<std::ptrdiff_t>(static_cast<std::ptrdiff_t>(segment_end(m)) - 1 - ii, k_hi));
+      if (k2 < k1) continue;
+      coefficients(segments_[m], e);
+      const Vec3 base = segments_[m].segment.start.position_m - d_ref + e[0] - f_i;
+      for (int t = 0; t < 3; ++t)
+        s_sum[t] += base * moments_->sum(t, 0, k1, k2) + e[1] * moments_->sum(t, 1, k1, k2) +
+                    e[2] * moments_->sum(t, 2, k1, k2) + e[3] * moments_->sum(t, 3, k1, k2);
+    }
+    const double d0 = moments_->sum(0, 0, k_lo, k_hi), d1 = moments_->sum(1, 0, k_lo, k_hi),
+                 d2 = moments_->sum(2, 0, k_lo, k_hi);
+    // Same quotient-rule combination as smoothing::smooth_with_derivatives.
+    const double inv = 1.0 / d0;
+    smoothing::Smoothed out;
+    out.value = f_i + s_sum[0] * inv;
+    out.rate = (s_sum[1] - s_sum[0] * (d1 * inv)) * inv;
+    out.accel = (s_sum[2] - 2.0 * s_sum[1] * (d1 * inv) - s_sum[0] * (d2 * inv) +
+                 2.0 * s_sum[0] * (d1 * d1 * inv * inv)) *
+                inv;
+    return out;
+  }
+
+  // Samples below `final_upto` have their final attitude (no later block
+  // blends them); with all == true the run is complete. Computes what is left
+  // (finite-difference body rates, the IMU), hands the output samples over
+  // and drops what no later block reads.
+  void finalize(std::size_t final_upto, bool all) {
+    // The thesis stencils read attitudes two samples on either side.
+    const std::size_t ready_upto = kernel_rates_ || all ? final_upto : (final_upto > 2 ? final_upto - 2 : 0);
+    for (; next_final_ < ready_upto; ++next_final_) {
+      const std::size_t i = next_final_;
+      Kinematics& kin = pending(i);
+      if (!kernel_rates_) {
+        // Thesis stencils on the final smoothed attitudes, in each sample's
+        // own chart: rho_j = log(R~_i^T R~_j) is 0 at i where W(0) = I, so
+        // omega_i is the Eq. 3.71-3.74 derivative of rho at i (Eq. 3.59-3.60).
+        const Mat3 Rt = kin.attitude.transpose();
+        auto at_rho = [&](std::size_t j) -> Vec3 {
+          return j == i ? Vec3::Zero() : so3::log(Rt * pending(j).attitude);
+        };
+        const std::size_t n = all ? dense_count_ : dense_count_ + 3;  // interior: n is beyond i + 2
+        kin.angular_rate_rad_s = derivatives::stencil(at_rho, i, n, period_s_);
+      }
+      const auto skip = static_cast<std::size_t>(pad_s_ * opt_.rate_hz);
+      if (i >= skip && kin.t_ns <= t_last_) out_.push_back({kin, imu_from_kinematics(opt_.scene, kin)});
+    }
+    // Drop what no later work reads: pending samples before next_final_ - 2
+    // (stencils), dense samples and segments before the next block's reach.
+    const std::size_t keep_pending = next_final_ > 2 ? next_final_ - 2 : 0;
+    while (pending_first_ < keep_pending && !pending_.empty()) {
+      pending_.pop_front();
+      ++pending_first_;
+    }
+    const std::size_t keep_dense = next_begin_ > reach_ ? next_begin_ - reach_ : 0;
+    while (dense_first_ < keep_dense && !dense_.empty()) {
+      dense_.pop_front();
+      ++dense_first_;
+    }
+    while (segments_.size() > 1 && segments_[1].first_index <= keep_dense) segments_.pop_front();
+  }
+
+  const PipelineOptions& opt_;
+  std::deque<StreamSample>& out_;
+  double period_s_;
+  smoothing::UniformKernel kernel_;
+  interp::SegmentBuilder builder_;
+  bool kernel_rates_, closed_form_, global_;
+  std::optional<KernelMoments> moments_;
+  std::size_t nominal_ = 0, overlap_ = 0, reach_ = 0;
+  std::int64_t pad_s_ = 0;
+
+  std::size_t real_count_ = 0;
+  TimeNs t_first_ = 0, t_last_ = 0, base_ns_ = 0, dense_end_ns_ = 0;
+  bool head_done_ = false, finished_ = false, end_known_ = false;
+  std::vector<Pose> head_;
+  std::array<Pose, 3> tail_;
+
+  std::deque<SegmentInfo> segments_;
+  std::deque<Pose> dense_;
+  std::size_t dense_first_ = 0, dense_count_ = 0;
+  std::deque<Kinematics> pending_;
+  std::size_t pending_first_ = 0, next_begin_ = 0, next_final_ = 0;
+
+  // Scratch of one block solve.
+  std::size_t a_lo_ = 0, a_hi_ = 0;
+  std::vector<Vec3> rho_, delta_, delta_s_, velocity_, rates_;
+  std::vector<Mat3> attitudes_;
+};
+
+namespace {
+std::string knot_time(TimeNs t_ns) { return std::to_string(static_cast<double>(t_ns) * 1e-9) + " s"; }
+}  // namespace
+
+StreamPipeline::StreamPipeline(const PipelineOptions& options) : options_(options) {
+  if (options.rate_hz <= 0 || options.rate_hz > 1'000'000)
+    throw std::invalid_argument("output rate " + std::to_string(options.rate_hz) + " Hz: expected 1..1000000");
+  if (!(options.max_gap_s > 0.0)) throw std::invalid_argument("max gap must be > 0 s");
+  // Construct one run now so bad kernel/spline options fail here, not at the first knot.
+  run_ = std::make_unique<Run>(options_, out_);
+}
+
+StreamPipeline::~StreamPipeline() = default;
+
+void StreamPipeline::push(const Pose& knot) {
+  if (finished_) throw std::logic_error("StreamPipeline::push after finish");
+  interp::check_knot_finite(knot, knots_pushed_);
+  if (knots_pushed_ > 0) {
+    interp::check_next_knot(last_knot_, knot, knots_pushed_);
+    const auto max_gap_ns = static_cast<TimeNs>(std::min(options_.max_gap_s, 1e9) * 1e9);
+    if (knot.t_ns - last_knot_.t_ns > max_gap_ns) {
+      if (options_.gap_policy == GapPolicy::error)
+        throw GapError("knots " + std::to_string(knots_pushed_ - 1) + " (t=" + knot_time(last_knot_.t_ns) + ") and " +
+                       std::to_string(knots_pushed_) + " (t=" + knot_time(knot.t_ns) + ") are " +
+                       knot_time(knot.t_ns - last_knot_.t_ns) + " apart, more than the " +
+                       std::to_string(options_.max_gap_s) +
+                       " s gap limit: raise the limit or split the trajectory at gaps");
+      // GapPolicy::split: the stretch before the gap ends here, with its own
+      // end windows; the next starts at this knot.
+      if (run_->real_knots() < 2)
+        throw GapError("knot " + std::to_string(run_first_knot_) + " (t=" + knot_time(last_knot_.t_ns) +
+                       ") is isolated between two gaps: a segment needs at least two knots");
+      run_->finish();
+      run_ = std::make_unique<Run>(options_, out_);
+      run_first_knot_ = knots_pushed_;
+    }
+  }
+  run_->push(knot);
+  last_knot_ = knot;
+  ++knots_pushed_;
+  if (!out_.empty()) {
+    newest_output_ns_ = out_.back().kinematics.t_ns;
+    any_output_ = true;
+  }
+}
+
+void StreamPipeline::finish() {
+  if (finished_) return;
+  if (run_->real_knots() < 2) {
+    if (knots_pushed_ < 2)
+      throw interp::InterpolationError("interpolation needs at least 2 knots, got " + std::to_string(knots_pushed_));
+    throw GapError("knot " + std::to_string(run_first_knot_) + " (t=" + knot_time(last_knot_.t_ns) +
+                   ") is isolated between two gaps: a segment needs at least two knots");
+  }
+  run_->finish();
+  finished_ = true;
+  if (!out_.empty()) {
+    newest_output_ns_ = out_.back().kinematics.t_ns;
+    any_output_ = true;
+  }
+}
+
+bool StreamPipeline::pop(StreamSample& out) {
+  if (out_.empty()) return false;
+  out = out_.front();
+  out_.pop_front();
+  return true;
+}
+
+std::size_t StreamPipeline::buffered_samples() const { return run_->buffered() + out_.size(); }
+
+TimeNs StreamPipeline::current_lag_ns() const {
+  return any_output_ && knots_pushed_ > 0 ? last_knot_.t_ns - newest_output_ns_ : 0;
+}
+
+TimeNs StreamPipeline::lookahead_ns(const PipelineOptions& options, TimeNs knot_interval_ns) {
+  const auto delta = static_cast<std::int64_t>(options.kernel.delta);
+  const bool global = options.chart == Chart::global;
+  const std::int64_t nominal = std::max<std::int64_t>(16, 2 * delta);
+  const std::int64_t overlap = global ? 0 : std::max<std::int64_t>(4, delta / 4);
+  const std::int64_t reach = delta + std::max<std::int64_t>(overlap, 4);
+  // Sample i is final once the block holding i + overlap is solved; that block
+  // (at most nominal long) reads reach beyond its end; the thesis stencils
+  // read two more; a dense sample needs the segment around it, i.e. the next
+  // knot plus the spline look-ahead.
+  const std::int64_t samples = overlap + nominal + reach + 3;
+  const bool tangents = options.interpolation.method == interp::Method::hermite ||
+                        options.interpolation.method == interp::Method::park_ravani;
+  const std::int64_t knots = 1 + (tangents ? options.interpolation.spline_window_knots : 0);
+  return samples * kNsPerSecond / options.rate_hz + knots * knot_interval_ns;
+}
+
+}  // namespace imuemu

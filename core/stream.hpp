@@ -1,0 +1,76 @@
+// The streaming form of the pipeline (core/pipeline.hpp): poses are pushed in
+// as they arrive, IMU samples are pulled out as soon as every input their
+// smoothing window of Eq. 3.68 reads has arrived. run_batch() is a loop over
+// this class, so the stream emits exactly (bit for bit) what batch emits,
+// including the one-sided or extrapolated windows at both ends.
+//
+// Memory is O(window): knots, dense samples and segments are dropped as soon
+// as no future output reads them.
+#pragma once
+
+#include <cstddef>
+#include <deque>
+#include <memory>
+
+#include "core/pipeline.hpp"
+
+namespace imuemu {
+
+struct StreamSample {
+  Kinematics kinematics;  // smoothed trajectory and its exact derivatives
+  ImuSample imu;          // ideal IMU (Eq. 3.70) at the same instant
+};
+
+class StreamPipeline {
+ public:
+  // Throws std::invalid_argument for options the pipeline refuses (rate,
+  // window, spline window).
+  explicit StreamPipeline(const PipelineOptions& options);
+  ~StreamPipeline();
+  StreamPipeline(const StreamPipeline&) = delete;
+  StreamPipeline& operator=(const StreamPipeline&) = delete;
+
+  // Appends a knot (a pose in the scene frame). Throws
+  // interp::InterpolationError for a knot that cannot follow the previous one
+  // (not later, not finite, antipodal step) and GapError for a gap the policy
+  // refuses; a refused knot changes nothing, so a live caller may count it and
+  // go on. std::invalid_argument if a smoothing window spans more rotation
+  // than a chart holds.
+  void push(const Pose& knot);
+  // End of input: computes the end of the trajectory (Ends policy). Throws
+  // GapError for a last run of a single knot, std::invalid_argument for a
+  // run shorter than two output samples (Ends::clip).
+  void finish();
+
+  // Takes the oldest ready sample; false if none is ready.
+  bool pop(StreamSample& out);
+  std::size_t ready() const { return out_.size(); }
+
+  std::size_t knots_pushed() const { return knots_pushed_; }
+  // Output samples held inside the engine (dense samples, pending attitudes,
+  // ready queue): the memory that must stay O(window).
+  std::size_t buffered_samples() const;
+  // Newest knot time minus the time of the newest sample made ready so far:
+  // the look-ahead the engine is actually running at (0 before any output).
+  TimeNs current_lag_ns() const;
+
+  // Upper bound of current_lag_ns() once the first outputs flow, for knots
+  // spaced knot_interval_ns apart: the window (Delta samples), the chart
+  // blocks' own reach, the time to the next knot and the spline look-ahead
+  // (interp::Options::spline_window_knots).
+  static TimeNs lookahead_ns(const PipelineOptions& options, TimeNs knot_interval_ns);
+
+ private:
+  class Run;  // one gap-free stretch of knots
+  PipelineOptions options_;
+  std::unique_ptr<Run> run_;
+  std::deque<StreamSample> out_;
+  std::size_t knots_pushed_ = 0;
+  std::size_t run_first_knot_ = 0;
+  Pose last_knot_;
+  TimeNs newest_output_ns_ = 0;
+  bool any_output_ = false;
+  bool finished_ = false;
+};
+
+}  // namespace imuemu
