@@ -81,6 +81,13 @@ double smoothstep_rate(double x) {
   return 30.0 * x * x * (1.0 - x) * (1.0 - x);
 }
 
+// See PipelineOptions::attitude_node_step.
+std::size_t attitude_node_step(const PipelineOptions& o) {
+  if (o.derivatives != Derivatives::kernel || o.kernel.width != smoothing::KernelWidth::window) return 1;
+  if (o.attitude_node_step > 0) return static_cast<std::size_t>(o.attitude_node_step);
+  return static_cast<std::size_t>(std::max(1, o.kernel.delta / 32));
+}
+
 }  // namespace
 
 // One gap-free stretch of knots. Dense samples live on the grid
@@ -114,7 +121,9 @@ class StreamPipeline::Run {
     const auto delta = static_cast<std::size_t>(kernel_.delta());
     nominal_ = std::max<std::size_t>(16, 2 * delta);
     overlap_ = global_ ? 0 : std::max<std::size_t>(4, delta / 4);
-    reach_ = delta + std::max<std::size_t>(overlap_, 4);
+    node_step_ = attitude_node_step(options);
+    // Nodes reach up to one node step beyond the samples they serve.
+    reach_ = delta + std::max<std::size_t>(overlap_, 4) + (node_step_ > 1 ? node_step_ : 0);
     if (opt_.ends == Ends::extrapolate) {
       const std::int64_t pad_samples = options.kernel.delta + 8;
       pad_s_ = (pad_samples + options.rate_hz - 1) / options.rate_hz;
@@ -312,13 +321,17 @@ class StreamPipeline::Run {
     }
     attitudes_.resize(a_hi - a_lo);
     rates_.resize(a_hi - a_lo);
-    for (std::size_t j = a_lo; j < a_hi; ++j) {
+    if (kernel_rates_ && node_step_ > 1) {
+      smooth_attitude_at_nodes(a_lo, a_hi, lo, n, R_ref);
+    } else {
+      for (std::size_t j = a_lo; j < a_hi; ++j) {
       if (kernel_rates_) {
         const smoothing::Smoothed r = smoothing::smooth_with_derivatives(kernel_, rho_, j - lo, false);
         attitudes_[j - a_lo] = R_ref * so3::exp(r.value);
         rates_[j - a_lo] = so3::W(r.value) * r.rate;  // Eq. 3.59-3.60, exact r~'
       } else {
         attitudes_[j - a_lo] = R_ref * so3::exp(smoothing::smooth_at(kernel_, rho_, j - lo));
+      }
       }
     }
     if (kernel_rates_) {
@@ -350,6 +363,50 @@ class StreamPipeline::Run {
       kin.acceleration_m_s2 = derivatives::stencil(at_velocity, i, n, period_s_);
     }
     return true;
+  }
+
+  // Attitudes and body rates on [a_lo, a_hi) from Eq. 3.68 evaluated (with
+  // its exact first and second time derivatives) at the nodes g = q * step
+  // (and the last sample), quintic Hermite in between:
+  //   rho(u) = h0 v0 + h1 H v0' + h2 H^2 v0'' + h3 v1 + h4 H v1' + h5 H^2 v1'',
+  // u in [0, 1] across a node interval of H seconds; omega = W(rho) rho'.
+  void smooth_attitude_at_nodes(std::size_t a_lo, std::size_t a_hi, std::size_t lo, std::size_t n, const Mat3& R_ref) {
+    const std::size_t step = node_step_;
+    std::size_t q0 = (a_lo / step) * step;
+    smoothing::Smoothed v0 = smoothing::smooth_with_derivatives(kernel_, rho_, q0 - lo, true);
+    std::size_t j = a_lo;
+    while (j < a_hi) {
+      const std::size_t q1 = std::min(q0 + step, n - 1);
+      if (q1 == q0) {  // the run's last sample is itself a node
+        attitudes_[j - a_lo] = R_ref * so3::exp(v0.value);
+        rates_[j - a_lo] = so3::W(v0.value) * v0.rate;
+        ++j;
+        continue;
+      }
+      const smoothing::Smoothed v1 = smoothing::smooth_with_derivatives(kernel_, rho_, q1 - lo, true);
+      const double H = static_cast<double>(q1 - q0) * period_s_;
+      const Vec3 d0 = H * v0.rate, d1 = H * v1.rate, c0 = (H * H) * v0.accel, c1 = (H * H) * v1.accel;
+      const double inv = 1.0 / static_cast<double>(q1 - q0);
+      for (; j < a_hi && (j < q1 || q1 == n - 1); ++j) {
+        const double u = static_cast<double>(j - q0) * inv;
+        const double u2 = u * u, u3 = u2 * u, u4 = u3 * u, u5 = u4 * u;
+        const Vec3 value = (1.0 - 10.0 * u3 + 15.0 * u4 - 6.0 * u5) * v0.value +
+                           (u - 6.0 * u3 + 8.0 * u4 - 3.0 * u5) * d0 +
+                           (0.5 * u2 - 1.5 * u3 + 1.5 * u4 - 0.5 * u5) * c0 +
+                           (10.0 * u3 - 15.0 * u4 + 6.0 * u5) * v1.value + (-4.0 * u3 + 7.0 * u4 - 3.0 * u5) * d1 +
+                           (0.5 * u3 - u4 + 0.5 * u5) * c1;
+        const Vec3 rate = ((-30.0 * u2 + 60.0 * u3 - 30.0 * u4) * v0.value +
+                           (1.0 - 18.0 * u2 + 32.0 * u3 - 15.0 * u4) * d0 +
+                           (u - 4.5 * u2 + 6.0 * u3 - 2.5 * u4) * c0 +
+                           (30.0 * u2 - 60.0 * u3 + 30.0 * u4) * v1.value +
+                           (-12.0 * u2 + 28.0 * u3 - 15.0 * u4) * d1 + (1.5 * u2 - 4.0 * u3 + 2.5 * u4) * c1) /
+                          H;
+        attitudes_[j - a_lo] = R_ref * so3::exp(value);
+        rates_[j - a_lo] = so3::W(value) * rate;  // Eq. 3.59-3.60
+      }
+      q0 = q1;
+      v0 = v1;
+    }
   }
 
   // smoothing::smooth_with_derivatives of the dense positions (relative to
@@ -462,7 +519,7 @@ class StreamPipeline::Run {
   interp::SegmentBuilder builder_;
   bool kernel_rates_, closed_form_, global_;
   std::optional<KernelMoments> moments_;
-  std::size_t nominal_ = 0, overlap_ = 0, reach_ = 0;
+  std::size_t nominal_ = 0, overlap_ = 0, reach_ = 0, node_step_ = 1;
   std::int64_t pad_s_ = 0;
 
   std::size_t real_count_ = 0;
@@ -563,7 +620,8 @@ TimeNs StreamPipeline::lookahead_ns(const PipelineOptions& options, TimeNs knot_
   const bool global = options.chart == Chart::global;
   const std::int64_t nominal = std::max<std::int64_t>(16, 2 * delta);
   const std::int64_t overlap = global ? 0 : std::max<std::int64_t>(4, delta / 4);
-  const std::int64_t reach = delta + std::max<std::int64_t>(overlap, 4);
+  const auto node_step = static_cast<std::int64_t>(attitude_node_step(options));
+  const std::int64_t reach = delta + std::max<std::int64_t>(overlap, 4) + (node_step > 1 ? node_step : 0);
   // Sample i is final once the block holding i + overlap is solved; that block
   // (at most nominal long) reads reach beyond its end; the thesis stencils
   // read two more; a dense sample needs the segment around it, i.e. the next
