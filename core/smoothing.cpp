@@ -172,4 +172,11 @@ void smooth(const UniformKernel& kernel, std::span<const Vec3> f, std::span<Vec3
   for (std::size_t i = 0; i < f.size(); ++i) out[i] = smooth_at(kernel, f, i);
 }
 
+QuinticStep quintic_step(double u) {
+  if (u <= 0.0) return {0.0, 0.0, 0.0};
+  if (u >= 1.0) return {1.0, 0.0, 0.0};
+  const double v = 1.0 - u;
+  return {u * u * u * (10.0 + u * (-15.0 + 6.0 * u)), 30.0 * u * u * v * v, 60.0 * u * v * (1.0 - 2.0 * u)};
+}
+
 }  // namespace imuemu::smoothing

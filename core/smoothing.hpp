@@ -84,6 +84,17 @@ Smoothed smooth_with_derivatives(const UniformKernel& kernel, std::span<const Ve
 // Evaluated as f_i + sum w (f_j - f_i) / sum w, algebraically identical to the
 // thesis' sum w f_j / sum w but exact for constant input and free of the
 // rounding of large offsets (ECEF coordinates ~6.4e6 m).
+// The C2 quintic step s(u) = 10u^3 - 15u^4 + 6u^5 on [0, 1] (0 below, 1
+// above) with its first two derivatives in u: s' and s'' vanish at both ends,
+// so a blend weighted by it meets both curves with matching value, first and
+// second derivative. Used to blend neighbouring charts' attitudes
+// (core/stream.cpp) and extrapolated samples back into exact ones
+// (core/live_emitter.cpp).
+struct QuinticStep {
+  double s, ds_du, d2s_du2;
+};
+QuinticStep quintic_step(double u);
+
 Vec3 smooth_at(const UniformKernel& kernel, std::span<const Vec3> f, std::size_t i);
 void smooth(const UniformKernel& kernel, std::span<const Vec3> f, std::span<Vec3> out);
 

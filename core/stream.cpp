@@ -70,17 +70,6 @@ std::vector<Pose> extend(const Pose& from, const Pose& towards, const Pose& beyo
   return out;
 }
 
-// C2 step from 0 to 1 on [0, 1] (quintic smoothstep) and its derivative: blends
-// two charts' attitudes so the angular rate stays continuous.
-double smoothstep(double x) {
-  x = std::clamp(x, 0.0, 1.0);
-  return x * x * x * (10.0 + x * (-15.0 + 6.0 * x));
-}
-double smoothstep_rate(double x) {
-  if (x <= 0.0 || x >= 1.0) return 0.0;
-  return 30.0 * x * x * (1.0 - x) * (1.0 - x);
-}
-
 // See PipelineOptions::attitude_node_step.
 std::size_t attitude_node_step(const PipelineOptions& o) {
   if (o.derivatives != Derivatives::kernel || o.kernel.width != smoothing::KernelWidth::window) return 1;
@@ -271,10 +260,11 @@ class StreamPipeline::Run {
             // Samples before begin+overlap already hold the previous blocks'
             // value: move it towards this block's along the geodesic.
             const double x = (static_cast<double>(j - blend_lo) + 0.5) / blend_len;
+            const smoothing::QuinticStep w = smoothing::quintic_step(x);
             Vec3 unused = Vec3::Zero();
             so3::geodesic_blend(kin.attitude, kernel_rates_ ? kin.angular_rate_rad_s : unused, attitudes_[j - a_lo_],
-                          kernel_rates_ ? rates_[j - a_lo_] : unused, smoothstep(x),
-                          smoothstep_rate(x) / (blend_len * period_s_), kernel_rates_);
+                          kernel_rates_ ? rates_[j - a_lo_] : unused, w.s,
+                          w.ds_du / (blend_len * period_s_), kernel_rates_);
           }
         }
       }
