@@ -13,6 +13,7 @@
 #include "core/reference_motion.hpp"
 #include "core/smoothing.hpp"
 #include "core/so3.hpp"
+#include "core/strapdown.hpp"
 #include "core/stream.hpp"
 
 using namespace imuemu;
@@ -305,4 +306,78 @@ TEST(Stream, AttitudeNodesMatchPerSampleSmoothing) {
   }
   EXPECT_LT(worst_att, 1e-13);
   EXPECT_LT(worst_gyro, 1e-11);
+}
+
+namespace {
+// Self-consistency of a streamed run (issue: accuracy beyond the thesis): every
+// `every_s` seconds the emitted IMU is integrated (Eq. 3.69, RK4 + Magnus,
+// core/strapdown) for 10 s from the emitted state and compared with the
+// emitted trajectory 10 s later, as the equivalent constant gyro (|dtheta|/T)
+// and accelerometer (2|dp|/T^2) error. Max over the run. Streams, so a
+// four-hour run holds only one 10 s window.
+struct SelfConsistency {
+  double gyro_rad_s = 0.0, accel_m_s2 = 0.0;
+  std::size_t windows = 0, samples = 0;
+};
+SelfConsistency streamed_self_consistency(const std::vector<Pose>& knots, const PipelineOptions& o, int every_s) {
+  SelfConsistency r;
+  StreamPipeline engine(o);
+  const auto window = static_cast<std::size_t>(10 * o.rate_hz + (10 * o.rate_hz) % 2);
+  const auto every = static_cast<std::size_t>(every_s * o.rate_hz);
+  std::vector<StreamSample> held;
+  StreamSample s;
+  auto take = [&] {
+    while (engine.pop(s)) {
+      if (!held.empty() || (r.samples % every == 0 && r.samples >= every)) held.push_back(s);
+      ++r.samples;
+      if (held.size() < window + 1) continue;
+      std::vector<ImuSample> imu;
+      for (const StreamSample& h : held) imu.push_back(h.imu);
+      const Kinematics &k0 = held.front().kinematics, &k1 = held.back().kinematics;
+      const auto states = strapdown::integrate(o.scene, {k0.t_ns, k0.position_m, k0.velocity_m_s, k0.attitude}, imu);
+      const double T = seconds_between(k0.t_ns, k1.t_ns);
+      r.gyro_rad_s = std::max(r.gyro_rad_s, so3::angle(k1.attitude.transpose() * states.back().attitude) / T);
+      r.accel_m_s2 = std::max(r.accel_m_s2, 2.0 * (states.back().position_m - k1.position_m).norm() / (T * T));
+      ++r.windows;
+      held.clear();
+    }
+  };
+  for (const Pose& k : knots) {
+    engine.push(k);
+    take();
+  }
+  engine.finish();
+  take();
+  return r;
+}
+}  // namespace
+
+// ECEF coordinates, the default method: four hours at 100 Hz, and 10 kHz for
+// two minutes (bench/stream_soak runs every rate from 50 Hz to 10 kHz over the
+// full four hours). Targets: gyro <= 1e-9 rad/s, accel <= 1e-7 m/s^2.
+// At 50 Hz (Delta = 50) the accelerometer misses it (measured 3.9e-6 m/s^2,
+// asserted below at its own bound): the kernel-derivative acceleration of a
+// sum over 101 samples carries a ripple at the sample rate that a 50 Hz
+// integrator aliases.
+TEST(Stream, SelfConsistencyAtEcefOverFourHours) {
+  const reference::AircraftFlight four_hours(Physics::ecef, reference::AircraftFlight::default_origin(), 0,
+                                             4 * 3600 * kNsPerSecond);
+  const std::vector<Pose> knots = reference::sample_knots(four_hours, kNsPerSecond);
+  const std::vector<Pose> two_minutes(knots.begin(), knots.begin() + 121);
+  struct Case {
+    std::int64_t rate_hz;
+    const std::vector<Pose>* knots;
+    int every_s;
+    double accel_bound_m_s2;
+  };
+  for (const Case& c : {Case{100, &knots, 600, 1e-7}, Case{10000, &two_minutes, 30, 1e-7},
+                        Case{50, &knots, 600, 1e-5}}) {
+    const PipelineOptions o = flight_options(Physics::ecef, c.rate_hz);
+    const SelfConsistency r = streamed_self_consistency(*c.knots, o, c.every_s);
+    std::cout << c.rate_hz << " Hz, " << r.samples << " samples, " << r.windows << " windows: self-consistency gyro "
+              << r.gyro_rad_s << " rad/s, accel " << r.accel_m_s2 << " m/s^2\n";
+    EXPECT_GT(r.windows, 2u);
+    EXPECT_LE(r.gyro_rad_s, 1e-9);
+    EXPECT_LE(r.accel_m_s2, c.accel_bound_m_s2);
+  }
 }
