@@ -70,6 +70,24 @@ std::vector<Pose> extend(const Pose& from, const Pose& towards, const Pose& beyo
   return out;
 }
 
+// See PipelineOptions::min_kernel_samples: the internal oversampling factor.
+std::int64_t oversampling(const PipelineOptions& o) {
+  if (o.derivatives != Derivatives::kernel || o.kernel.width != smoothing::KernelWidth::window ||
+      o.kernel.delta < 1 || o.kernel.delta >= o.min_kernel_samples)
+    return 1;
+  const std::int64_t m = (o.min_kernel_samples + o.kernel.delta - 1) / o.kernel.delta;
+  return o.rate_hz * m <= 1'000'000 ? m : 1;
+}
+
+// The options the engine runs with internally (oversampled, see above).
+PipelineOptions internal_options(const PipelineOptions& o) {
+  PipelineOptions inner = o;
+  const std::int64_t m = oversampling(o);
+  inner.rate_hz *= m;
+  inner.kernel.delta *= static_cast<int>(m);
+  return inner;
+}
+
 // See PipelineOptions::attitude_node_step.
 std::size_t attitude_node_step(const PipelineOptions& o) {
   if (o.derivatives != Derivatives::kernel || o.kernel.width != smoothing::KernelWidth::window) return 1;
@@ -97,25 +115,26 @@ class StreamPipeline::Run {
 
  public:
   Run(const PipelineOptions& options, std::deque<StreamSample>& out)
-      : opt_(options),
+      : opt_(internal_options(options)),
+        output_every_(static_cast<std::size_t>(oversampling(options))),
         out_(out),
-        period_s_(1.0 / static_cast<double>(options.rate_hz)),
-        kernel_(options.kernel, period_s_),
-        builder_(options.interpolation),
-        kernel_rates_(options.derivatives == Derivatives::kernel),
-        closed_form_(kernel_rates_ && options.closed_form_positions),
-        global_(options.chart == Chart::global) {
+        period_s_(1.0 / static_cast<double>(opt_.rate_hz)),
+        kernel_(opt_.kernel, period_s_),
+        builder_(opt_.interpolation),
+        kernel_rates_(opt_.derivatives == Derivatives::kernel),
+        closed_form_(kernel_rates_ && opt_.closed_form_positions),
+        global_(opt_.chart == Chart::global) {
     if (kernel_rates_ && kernel_.delta() < 1) throw std::invalid_argument("kernel derivatives need a window: Delta >= 1");
     if (closed_form_) moments_.emplace(kernel_);
     const auto delta = static_cast<std::size_t>(kernel_.delta());
     nominal_ = std::max<std::size_t>(16, 2 * delta);
     overlap_ = global_ ? 0 : std::max<std::size_t>(4, delta / 4);
-    node_step_ = attitude_node_step(options);
+    node_step_ = attitude_node_step(opt_);
     // Nodes reach up to one node step beyond the samples they serve.
     reach_ = delta + std::max<std::size_t>(overlap_, 4) + (node_step_ > 1 ? node_step_ : 0);
     if (opt_.ends == Ends::extrapolate) {
-      const std::int64_t pad_samples = options.kernel.delta + 8;
-      pad_s_ = (pad_samples + options.rate_hz - 1) / options.rate_hz;
+      const std::int64_t pad_samples = opt_.kernel.delta + 8;
+      pad_s_ = (pad_samples + opt_.rate_hz - 1) / opt_.rate_hz;
     }
   }
 
@@ -485,7 +504,7 @@ class StreamPipeline::Run {
         kin.angular_rate_rad_s = derivatives::stencil(at_rho, i, n, period_s_);
       }
       const auto skip = static_cast<std::size_t>(pad_s_ * opt_.rate_hz);
-      if (i >= skip && kin.t_ns <= t_last_) out_.push_back({kin, imu_from_kinematics(opt_.scene, kin)});
+      if (i >= skip && (i - skip) % output_every_ == 0 && kin.t_ns <= t_last_) out_.push_back({kin, imu_from_kinematics(opt_.scene, kin)});
     }
     // Drop what no later work reads: pending samples before next_final_ - 2
     // (stencils), dense samples and segments before the next block's reach.
@@ -502,7 +521,8 @@ class StreamPipeline::Run {
     while (segments_.size() > 1 && segments_[1].first_index <= keep_dense) segments_.pop_front();
   }
 
-  const PipelineOptions& opt_;
+  const PipelineOptions opt_;  // as run: oversampled if Delta is small
+  std::size_t output_every_;   // the oversampling factor
   std::deque<StreamSample>& out_;
   double period_s_;
   smoothing::UniformKernel kernel_;
@@ -605,7 +625,8 @@ TimeNs StreamPipeline::current_lag_ns() const {
   return any_output_ && knots_pushed_ > 0 ? last_knot_.t_ns - newest_output_ns_ : 0;
 }
 
-TimeNs StreamPipeline::lookahead_ns(const PipelineOptions& options, TimeNs knot_interval_ns) {
+TimeNs StreamPipeline::lookahead_ns(const PipelineOptions& output_options, TimeNs knot_interval_ns) {
+  const PipelineOptions options = internal_options(output_options);
   const auto delta = static_cast<std::int64_t>(options.kernel.delta);
   const bool global = options.chart == Chart::global;
   const std::int64_t nominal = std::max<std::int64_t>(16, 2 * delta);
