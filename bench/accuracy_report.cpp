@@ -31,6 +31,7 @@
 #include "core/reference_motion.hpp"
 #include "core/so3.hpp"
 #include "core/strapdown.hpp"
+#include "core/stream.hpp"
 
 using namespace imuemu;
 
@@ -69,25 +70,39 @@ PipelineOptions default_options(const SceneModel& scene, std::int64_t rate) {
   return o;
 }
 
+// What the streaming engine (which run_batch loops over) needs beyond an
+// output time for 1 s knots: window, chart blocks, spline look-ahead.
+double engine_lookahead_s(const PipelineOptions& o) {
+  return static_cast<double>(StreamPipeline::lookahead_ns(o, kNsPerSecond)) * 1e-9;
+}
+
 std::vector<Method> methods() {
   std::vector<Method> m;
   m.push_back({"thesis", "geodesic + literal Eq. 3.68 (+-1 s) on log R + Eq. 3.71-3.74 (Appendix C)",
                [](const auto& k, const auto& s, auto r) { return run_batch(k, thesis_options(s, r)); },
-               [](std::int64_t) { return 1.0 + 1.0; }});
+               [](std::int64_t r) { return engine_lookahead_s(thesis_options({}, r)); }});
   m.push_back({"thesis-window", "as thesis, window kernel +-2 s",
                [](const auto& k, const auto& s, auto r) {
                  PipelineOptions o = thesis_options(s, r);
                  o.kernel = {static_cast<int>(2 * r), smoothing::KernelWidth::window, 0.0, 2};
                  return run_batch(k, o);
                },
-               [](std::int64_t) { return 2.0 + 1.0; }});
+               [](std::int64_t r) {
+                 PipelineOptions o = thesis_options({}, r);
+                 o.kernel = {static_cast<int>(2 * r), smoothing::KernelWidth::window, 0.0, 2};
+                 return engine_lookahead_s(o);
+               }});
   m.push_back({"imuemu-fd", "default but finite differences (Eq. 3.71-3.74)",
                [](const auto& k, const auto& s, auto r) {
                  PipelineOptions o = default_options(s, r);
                  o.derivatives = Derivatives::finite_difference;
                  return run_batch(k, o);
                },
-               [](std::int64_t) { return 1.0 + 11.0; }});
+               [](std::int64_t r) {
+                 PipelineOptions o = default_options({}, r);
+                 o.derivatives = Derivatives::finite_difference;
+                 return engine_lookahead_s(o);
+               }});
   m.push_back({"geodesic-local", "geodesic + bump +-2 s, local chart, kernel derivatives, extrapolated ends",
                [](const auto& k, const auto& s, auto r) {
                  PipelineOptions o = default_options(s, r);
@@ -95,13 +110,16 @@ std::vector<Method> methods() {
                  o.kernel = {static_cast<int>(2 * r), smoothing::KernelWidth::window, 0.0, 2};
                  return run_batch(k, o);
                },
-               [](std::int64_t) { return 2.0 + 1.0; }});
+               [](std::int64_t r) {
+                 PipelineOptions o = default_options({}, r);
+                 o.interpolation.method = interp::Method::geodesic;
+                 o.kernel = {static_cast<int>(2 * r), smoothing::KernelWidth::window, 0.0, 2};
+                 return engine_lookahead_s(o);
+               }});
   m.push_back({"imuemu", "default: C2 Hermite in local charts, 4th-order bump +-1 s, kernel derivatives",
                [](const auto& k, const auto& s, auto r) { return run_batch(k, default_options(s, r)); },
-               // +-1 s window plus the Hermite rate solve's reach: global in
-               // principle, its influence decays by 2 - sqrt 3 = 0.27 per knot,
-               // below 1e-6 after 11 knots.
-               [](std::int64_t) { return 1.0 + 11.0; }});
+               // +-1 s window, the chart blocks and the spline's +-4 knots.
+               [](std::int64_t r) { return engine_lookahead_s(default_options({}, r)); }});
   m.push_back({"bspline", "cumulative cubic B-spline on SO(3) x R3 (Sommer et al. 2020)",
                [](const auto& k, const auto& s, auto r) { return bspline::run(k, s, r); },
                [](std::int64_t) { return 2.0; }});

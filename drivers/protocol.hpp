@@ -1,0 +1,118 @@
+// What a wire protocol encoder sees and produces. One direction of data:
+// source -> smoother -> physics -> sensor model -> ENCODER -> transport.
+// An encoder turns one IMU sample (body FRD axes, SI units, as the sensor
+// model emits it) into the bytes or CAN frames of a real device protocol, and
+// converts units and axes explicitly; a decoder (for `imuemu listen` and the
+// tests) does the reverse and counts what it could not accept.
+#pragma once
+
+#include <array>
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <span>
+#include <string>
+#include <vector>
+
+#include "core/types.hpp"
+
+namespace imuemu::drivers {
+
+// Status bits every encoder maps onto its protocol's own fields where it has
+// them (the native frame carries them all).
+enum SampleStatus : std::uint32_t {
+  kStatusExtrapolated = 1u << 0,  // not the smoother's own sample (underrun extrapolation or rejoin blend)
+  kStatusSaturated = 1u << 1,     // a value was clipped to the sensor's range
+  kStatusFault = 1u << 2,         // the emulated sensor reports a fault
+};
+
+// One emulated IMU sample, as the sensor model hands it to an encoder.
+struct ImuFrameInput {
+  std::uint64_t sample_counter = 0;      // 0, 1, 2, ... per device (sync pulses refer to it)
+  TimeNs t_ns = 0;                       // sample instant, trajectory time
+  Vec3 gyro_rad_s = Vec3::Zero();        // angular rate omega_ib^b, body FRD
+  Vec3 accel_m_s2 = Vec3::Zero();        // specific force f^b, body FRD
+  // Integrals over the sample period ending at t_ns (coning/sculling
+  // compensated by the sensor model); zero if the device has none.
+  Vec3 delta_theta_rad = Vec3::Zero();
+  Vec3 delta_velocity_m_s = Vec3::Zero();
+  TimeNs period_ns = 0;                  // the output period
+  std::uint32_t status = 0;              // SampleStatus bits
+};
+
+// A classic CAN or CAN FD frame (SocketCAN's struct can_frame / canfd_frame
+// without the kernel header, so encoders stay testable anywhere).
+struct CanFrame {
+  std::uint32_t id = 0;    // 11-bit or 29-bit identifier
+  bool extended = false;   // 29-bit
+  bool fd = false;         // CAN FD frame (len up to 64)
+  std::uint8_t len = 0;    // data length in bytes
+  std::array<std::uint8_t, 64> data{};
+};
+
+// Byte-stream protocols (UART, pty): frames appended to `out`.
+class StreamEncoder {
+ public:
+  virtual ~StreamEncoder() = default;
+  virtual std::string name() const = 0;
+  // Appends the frame(s) of one sample.
+  virtual void encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out) = 0;
+  // Appends whatever the protocol sends on its own schedule (heartbeats,
+  // status) due at or before now_ns; called once per sample.
+  virtual void periodic(TimeNs now_ns, std::vector<std::uint8_t>& out) { (void)now_ns; (void)out; }
+  // Largest number of bytes one sample (plus periodic traffic, averaged per
+  // sample) puts on the wire: for the link budget.
+  virtual std::size_t max_bytes_per_sample() const = 0;
+};
+
+// CAN protocols: frames appended to `out`.
+class CanEncoder {
+ public:
+  virtual ~CanEncoder() = default;
+  virtual std::string name() const = 0;
+  virtual void encode(const ImuFrameInput& sample, std::vector<CanFrame>& out) = 0;
+  virtual void periodic(TimeNs now_ns, std::vector<CanFrame>& out) { (void)now_ns; (void)out; }
+};
+
+// What a decoder recovered from a frame: the fields the protocol carries
+// (others left at zero), in the same SI units and body FRD axes.
+struct DecodedSample {
+  std::uint64_t sequence = 0;  // the protocol's own counter (widened), if it has one
+  bool has_sequence = false;
+  TimeNs t_ns = 0;             // the protocol's time field converted to ns, if it has one
+  bool has_time = false;
+  Vec3 gyro_rad_s = Vec3::Zero();
+  Vec3 accel_m_s2 = Vec3::Zero();
+  Vec3 delta_theta_rad = Vec3::Zero();
+  Vec3 delta_velocity_m_s = Vec3::Zero();
+  std::uint32_t status = 0;
+};
+
+struct DecoderCounters {
+  std::uint64_t frames = 0;            // valid frames decoded (any message)
+  std::uint64_t samples = 0;           // IMU samples among them
+  std::uint64_t checksum_errors = 0;   // framed but the checksum/CRC failed
+  std::uint64_t resync_bytes = 0;      // bytes skipped looking for the next frame start
+  std::uint64_t sequence_gaps = 0;     // missing sequence numbers
+  std::uint64_t other_errors = 0;      // malformed frames (bad length, unknown id, ...)
+};
+
+using SampleCallback = std::function<void(const DecodedSample&)>;
+
+// Byte-stream decoder: feed any chunking of the stream; resynchronises on the
+// next valid frame after corruption, counting what it skipped.
+class StreamDecoder {
+ public:
+  virtual ~StreamDecoder() = default;
+  virtual void feed(std::span<const std::uint8_t> bytes, const SampleCallback& on_sample) = 0;
+  virtual const DecoderCounters& counters() const = 0;
+};
+
+class CanDecoder {
+ public:
+  virtual ~CanDecoder() = default;
+  virtual void feed(const CanFrame& frame, const SampleCallback& on_sample) = 0;
+  virtual const DecoderCounters& counters() const = 0;
+};
+
+}  // namespace imuemu::drivers
