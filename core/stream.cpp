@@ -114,7 +114,7 @@ class StreamPipeline::Run {
   };
 
  public:
-  Run(const PipelineOptions& options, std::deque<StreamSample>& out)
+  Run(const PipelineOptions& options, std::deque<StreamSample>& out, TimeNs origin_ns)
       : opt_(internal_options(options)),
         output_every_(static_cast<std::size_t>(oversampling(options))),
         out_(out),
@@ -123,7 +123,8 @@ class StreamPipeline::Run {
         builder_(opt_.interpolation),
         kernel_rates_(opt_.derivatives == Derivatives::kernel),
         closed_form_(kernel_rates_ && opt_.closed_form_positions),
-        global_(opt_.chart == Chart::global) {
+        global_(opt_.chart == Chart::global),
+        origin_ns_(origin_ns) {
     if (kernel_rates_ && kernel_.delta() < 1) throw std::invalid_argument("kernel derivatives need a window: Delta >= 1");
     if (closed_form_) moments_.emplace(kernel_);
     const auto delta = static_cast<std::size_t>(kernel_.delta());
@@ -142,7 +143,14 @@ class StreamPipeline::Run {
   void push(const Pose& knot) {
     if (real_count_ == 0) {
       t_first_ = knot.t_ns;
-      base_ns_ = t_first_ - pad_s_ * kNsPerSecond;
+      // The first grid index at or after t_first - pad, on the stream's grid
+      // (origin + floor(k 1e9 / rate)): every run of a split stream stays on
+      // the first run's grid. For the first run it is exactly -pad_s * rate.
+      const TimeNs start = t_first_ - pad_s_ * kNsPerSecond;
+      const TimeNs d = start - origin_ns_;
+      const std::int64_t rem = floor_mod(d, kNsPerSecond);
+      k0_ = (d - rem) / kNsPerSecond * opt_.rate_hz + rem * opt_.rate_hz / kNsPerSecond;  // floor(d rate / 1e9)
+      while (absolute_time(k0_) < start) ++k0_;
     }
     ++real_count_;
     t_last_ = knot.t_ns;
@@ -207,9 +215,17 @@ class StreamPipeline::Run {
   }
 
   // Grid instant of dense index g: integer ns and the sub-ns fraction.
-  TimeNs grid_time(std::size_t g) const {
-    const auto gs = static_cast<std::int64_t>(g);
-    return base_ns_ + (gs / opt_.rate_hz) * kNsPerSecond + (gs % opt_.rate_hz) * kNsPerSecond / opt_.rate_hz;
+  TimeNs grid_time(std::size_t g) const { return absolute_time(k0_ + static_cast<std::int64_t>(g)); }
+  double grid_fraction_ns(std::size_t g) const {
+    const std::int64_t r = floor_mod(k0_ + static_cast<std::int64_t>(g), opt_.rate_hz);
+    return static_cast<double>((r * kNsPerSecond) % opt_.rate_hz) / static_cast<double>(opt_.rate_hz);
+  }
+  static std::int64_t floor_mod(std::int64_t k, std::int64_t m) { return ((k % m) + m) % m; }
+  // origin + floor(k * 1e9 / rate) for any integer k, without overflow.
+  TimeNs absolute_time(std::int64_t k) const {
+    const std::int64_t r = floor_mod(k, opt_.rate_hz);
+    const std::int64_t whole = (k - r) / opt_.rate_hz;
+    return origin_ns_ + whole * kNsPerSecond + r * kNsPerSecond / opt_.rate_hz;
   }
 
   // Interpolates the dense samples of every segment the builder has ready.
@@ -230,7 +246,7 @@ class StreamPipeline::Run {
       const TimeNs t = grid_time(dense_count_);
       if (last ? t > s.segment.end.t_ns : t >= s.segment.end.t_ns) break;
       if (end_known_ && t > dense_end_ns_) break;
-      dense_.push_back(interp::evaluate(s.segment, t, output_grid_fraction_ns(dense_count_, opt_.rate_hz)));
+      dense_.push_back(interp::evaluate(s.segment, t, grid_fraction_ns(dense_count_)));
       ++dense_count_;
     }
   }
@@ -430,7 +446,7 @@ class StreamPipeline::Run {
     const auto k_lo = static_cast<int>(std::max<std::ptrdiff_t>(-delta, -ii));
     const auto k_hi = static_cast<int>(std::min<std::ptrdiff_t>(delta, static_cast<std::ptrdiff_t>(n) - 1 - ii));
     const TimeNs t_i_ns = grid_time(i);
-    const double extra_i = output_grid_fraction_ns(i, opt_.rate_hz);
+    const double extra_i = grid_fraction_ns(i);
     const double step_ns = 1e9 / static_cast<double>(opt_.rate_hz);
     // Polynomial of segment s in k around i: coefficients e0..e3 (relative to its start).
     auto coefficients = [&](const SegmentInfo& s, Vec3 e[4]) {
@@ -503,8 +519,9 @@ class StreamPipeline::Run {
         const std::size_t n = all ? dense_count_ : dense_count_ + 3;  // interior: n is beyond i + 2
         kin.angular_rate_rad_s = derivatives::stencil(at_rho, i, n, period_s_);
       }
-      const auto skip = static_cast<std::size_t>(pad_s_ * opt_.rate_hz);
-      if (i >= skip && (i - skip) % output_every_ == 0 && kin.t_ns <= t_last_) out_.push_back({kin, imu_from_kinematics(opt_.scene, kin)});
+      const auto every = static_cast<std::int64_t>(output_every_);
+      if (kin.t_ns >= t_first_ && kin.t_ns <= t_last_ && floor_mod(k0_ + static_cast<std::int64_t>(i), every) == 0)
+        out_.push_back({kin, imu_from_kinematics(opt_.scene, kin)});
     }
     // Drop what no later work reads: pending samples before next_final_ - 2
     // (stencils), dense samples and segments before the next block's reach.
@@ -533,7 +550,9 @@ class StreamPipeline::Run {
   std::int64_t pad_s_ = 0;
 
   std::size_t real_count_ = 0;
-  TimeNs t_first_ = 0, t_last_ = 0, base_ns_ = 0, dense_end_ns_ = 0;
+  TimeNs origin_ns_;            // the stream's output grid: origin + floor(k 1e9 / rate)
+  std::int64_t k0_ = 0;         // grid index of dense sample 0
+  TimeNs t_first_ = 0, t_last_ = 0, dense_end_ns_ = 0;
   bool head_done_ = false, finished_ = false, end_known_ = false;
   std::vector<Pose> head_;
   std::array<Pose, 3> tail_;
@@ -559,7 +578,7 @@ StreamPipeline::StreamPipeline(const PipelineOptions& options) : options_(option
     throw std::invalid_argument("output rate " + std::to_string(options.rate_hz) + " Hz: expected 1..1000000");
   if (!(options.max_gap_s > 0.0)) throw std::invalid_argument("max gap must be > 0 s");
   // Construct one run now so bad kernel/spline options fail here, not at the first knot.
-  run_ = std::make_unique<Run>(options_, out_);
+  run_ = std::make_unique<Run>(options_, out_, 0);
 }
 
 StreamPipeline::~StreamPipeline() = default;
@@ -583,9 +602,13 @@ void StreamPipeline::push(const Pose& knot) {
         throw GapError("knot " + std::to_string(run_first_knot_) + " (t=" + knot_time(last_knot_.t_ns) +
                        ") is isolated between two gaps: a segment needs at least two knots");
       run_->finish();
-      run_ = std::make_unique<Run>(options_, out_);
+      run_ = std::make_unique<Run>(options_, out_, first_knot_ns_);
       run_first_knot_ = knots_pushed_;
     }
+  }
+  if (knots_pushed_ == 0) {
+    first_knot_ns_ = knot.t_ns;
+    run_ = std::make_unique<Run>(options_, out_, knot.t_ns);  // the output grid starts at the first knot
   }
   run_->push(knot);
   last_knot_ = knot;

@@ -47,6 +47,10 @@ class StreamPipeline {
   std::size_t ready() const { return out_.size(); }
 
   std::size_t knots_pushed() const { return knots_pushed_; }
+  // The output grid is first_knot_ns() + floor(k * 1e9 / rate) ns, for every
+  // run of a stream split at gaps (GapPolicy::split).
+  TimeNs first_knot_ns() const { return first_knot_ns_; }
+  TimeNs last_knot_ns() const { return last_knot_.t_ns; }
   // Output samples held inside the engine (dense samples, pending attitudes,
   // ready queue): the memory that must stay O(window).
   std::size_t buffered_samples() const;
@@ -67,6 +71,7 @@ class StreamPipeline {
   std::deque<StreamSample> out_;
   std::size_t knots_pushed_ = 0;
   std::size_t run_first_knot_ = 0;
+  TimeNs first_knot_ns_ = 0;
   Pose last_knot_;
   TimeNs newest_output_ns_ = 0;
   bool any_output_ = false;

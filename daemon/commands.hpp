@@ -60,6 +60,25 @@ struct SampleArgs {
 };
 int sample_trajectory(const SampleArgs& args);
 
+// Live streaming (docs/streaming.md): poses from a source, IMU CSV lines out
+// (with a status column) in real time on the monotonic clock.
+struct StreamArgs {
+  std::string source;           // file:PATH | udp:ADDR:PORT | tcp:ADDR:PORT | stdin
+  std::string out_path = "-";   // '-' = stdout
+  std::string speed = "1";      // replay speed factor ("2.5", "1/3"), or "max" (file: as fast as possible)
+  std::int64_t rate_hz = 400;
+  double knot_interval_s = 1.0;  // expected pose spacing: sets the default window and the look-ahead
+  int delta = -1;               // < 0: one knot interval of output samples
+  std::string scene = "ecef";
+  double gravity_m_s2 = 9.80665;
+  double max_gap_s = 10.0;      // longer gaps split the stream (each side its own end windows)
+  std::string underrun = "extrapolate";  // extrapolate | pause
+  double blend_s = 0.2;
+  double margin_s = 0.1;        // extra delay beyond the engine's look-ahead: absorbs input jitter
+  double duration_s = -1.0;     // < 0: until the input ends (or SIGINT/SIGTERM)
+};
+int stream(const StreamArgs& args);
+
 // The README's main job: sample flight -> generate -> verify, in out_dir.
 int demo(const std::string& out_dir, std::int64_t rate_hz);
 

@@ -59,6 +59,23 @@ int main(int argc, char** argv) {
   s->add_option("--duration-s", smp.duration_s, "Duration")->capture_default_str()->check(CLI::PositiveNumber);
   s->add_option("--period-s", smp.period_s, "Knot period")->capture_default_str()->check(CLI::PositiveNumber);
 
+  StreamArgs str;
+  auto* st = app.add_subcommand("stream", "Live: poses from a file replay, UDP, TCP or stdin -> IMU CSV lines in real time");
+  st->add_option("--source", str.source, "file:PATH | udp:ADDR:PORT (binary datagrams) | tcp:ADDR:PORT | stdin (text lines); docs/pose-wire-format.md")->required();
+  st->add_option("--out", str.out_path, "IMU CSV with a status column (exact|extrapolated|blending); - for stdout")->capture_default_str();
+  st->add_option("--speed", str.speed, "Replay speed factor (2.5, 1/3), or max for a file as fast as possible")->capture_default_str();
+  st->add_option("--rate", str.rate_hz, "Output rate in Hz")->capture_default_str()->check(CLI::Range(1, 1000000));
+  st->add_option("--knot-interval-s", str.knot_interval_s, "Expected pose spacing: default window and look-ahead")->capture_default_str()->check(CLI::PositiveNumber);
+  st->add_option("--delta", str.delta, "Window half-length Delta (samples); default one knot interval")->check(CLI::Range(1, 1000000));
+  st->add_option("--scene", str.scene, "ecef or flat")->capture_default_str()->check(CLI::IsMember({"ecef", "flat"}));
+  st->add_option("--gravity", str.gravity_m_s2, "flat scene gravity (m/s^2)")->capture_default_str();
+  st->add_option("--max-gap-s", str.max_gap_s, "Longer pose gaps split the stream")->capture_default_str()->check(CLI::PositiveNumber);
+  st->add_option("--underrun", str.underrun, "When a pose is late: extrapolate (flagged, then blended back) or pause")->capture_default_str()
+      ->check(CLI::IsMember({"extrapolate", "pause"}));
+  st->add_option("--blend-s", str.blend_s, "Rejoin blend after an extrapolation")->capture_default_str()->check(CLI::NonNegativeNumber);
+  st->add_option("--margin-s", str.margin_s, "Extra delay beyond the engine's look-ahead")->capture_default_str()->check(CLI::NonNegativeNumber);
+  st->add_option("--duration-s", str.duration_s, "Stop after this much trajectory time");
+
   std::string demo_dir = "out/demo";
   std::int64_t demo_rate = 400;
   auto* d = app.add_subcommand("demo", "Main job on the built-in sample: 10-min flight at 1 Hz -> 400 Hz IMU -> verify");
@@ -75,5 +92,6 @@ int main(int argc, char** argv) {
   if (*v) return verify(ver);
   if (*s) return sample_trajectory(smp);
   if (*d) return demo(demo_dir, demo_rate);
+  if (*st) return stream(str);
   return kUsageError;
 }

@@ -1,10 +1,8 @@
 #include "io/scene_poses.hpp"
 
 #include <numbers>
-#include <optional>
 
 #include "core/attitude.hpp"
-#include "core/earth.hpp"
 #include "core/so3.hpp"
 
 namespace imuemu::io {
@@ -41,34 +39,40 @@ EcefPose to_ecef(const TrajectoryRecord& rec) {
 
 }  // namespace
 
-std::vector<Pose> poses_in_scene(const Trajectory& trajectory, Physics physics) {
-  std::vector<Pose> poses;
-  poses.reserve(trajectory.records.size());
-  if (trajectory.position_kind == PositionKind::local_ned) {
-    if (physics == Physics::ecef) {
-      const auto& rec = trajectory.records.front();
-      throw TrajectoryFormatError({trajectory.source, rec.line, "north_m", 0},
+Pose ScenePoseConverter::convert(const TrajectoryRecord& rec, const std::string& source) {
+  if (rec.position_kind == PositionKind::local_ned) {
+    if (physics_ == Physics::ecef) {
+      throw TrajectoryFormatError({source, rec.line, "north_m", 0},
                                   "geodetic (lat_deg,lon_deg,h_m) or ECEF (x_m,y_m,z_m) positions for the ecef scene",
                                   "local north/east/down positions have no Earth origin");
     }
-    for (const auto& rec : trajectory.records) {
-      if (rec.attitude_kind == AttitudeKind::quaternion_ecef)
-        throw TrajectoryFormatError({trajectory.source, rec.line, "qw", 0},
-                                    "a body-to-NED attitude with local positions", "an ECEF attitude");
-      poses.push_back({rec.t_ns, rec.position, body_to_local(rec)});
-    }
-    return poses;
+    if (rec.attitude_kind == AttitudeKind::quaternion_ecef)
+      throw TrajectoryFormatError({source, rec.line, "qw", 0}, "a body-to-NED attitude with local positions",
+                                  "an ECEF attitude");
+    if (input_frame_ == InputFrame::earth_fixed)
+      throw TrajectoryFormatError({source, rec.line, "north_m", 0},
+                                  "Earth-fixed positions like the records before",
+                                  "a local north/east/down position after Earth-fixed (geodetic or ECEF) ones: "
+                                  "the two have no common frame");
+    input_frame_ = InputFrame::local_ned;
+    return {rec.t_ns, rec.position, body_to_local(rec)};
   }
-  std::optional<earth::LocalNed> tangent;
-  for (const auto& rec : trajectory.records) {
-    const EcefPose p = to_ecef(rec);
-    if (physics == Physics::ecef) {
-      poses.push_back({rec.t_ns, p.x_e, p.R_b_e});
-      continue;
-    }
-    if (!tangent) tangent.emplace(geodetic_of(rec, p.x_e));
-    poses.push_back({rec.t_ns, tangent->ned_from_ecef(p.x_e), tangent->R_n_to_e().transpose() * p.R_b_e});
-  }
+  if (physics_ == Physics::flat && input_frame_ == InputFrame::local_ned)
+    throw TrajectoryFormatError({source, rec.line, "", 0}, "local north/east/down positions like the records before",
+                                "an Earth-fixed (geodetic or ECEF) position after local north/east/down ones: "
+                                "the two have no common frame");
+  const EcefPose p = to_ecef(rec);
+  if (physics_ == Physics::ecef) return {rec.t_ns, p.x_e, p.R_b_e};
+  input_frame_ = InputFrame::earth_fixed;
+  if (!tangent_) tangent_.emplace(geodetic_of(rec, p.x_e));
+  return {rec.t_ns, tangent_->ned_from_ecef(p.x_e), tangent_->R_n_to_e().transpose() * p.R_b_e};
+}
+
+std::vector<Pose> poses_in_scene(const Trajectory& trajectory, Physics physics) {
+  std::vector<Pose> poses;
+  poses.reserve(trajectory.records.size());
+  ScenePoseConverter converter(physics);
+  for (const auto& rec : trajectory.records) poses.push_back(converter.convert(rec, trajectory.source));
   return poses;
 }
 

@@ -85,6 +85,23 @@ CsvLineReader::CsvLineReader(std::string_view text) noexcept : text_(text) {
   if (text_.size() >= 3 && std::memcmp(text_.data(), "\xEF\xBB\xBF", 3) == 0) pos_ = 3;
 }
 
+bool split_csv_line(std::string_view raw_line, std::vector<std::string_view>& fields) {
+  const std::string_view line = trim(raw_line);
+  if (line.empty() || line.front() == '#') return false;
+  fields.clear();
+  std::size_t field_begin = 0;
+  for (;;) {
+    const std::size_t comma = line.find(',', field_begin);
+    if (comma == std::string_view::npos) {
+      fields.push_back(trim(line.substr(field_begin)));
+      break;
+    }
+    fields.push_back(trim(line.substr(field_begin, comma - field_begin)));
+    field_begin = comma + 1;
+  }
+  return true;
+}
+
 bool CsvLineReader::next() {
   while (pos_ < text_.size()) {
     const std::size_t begin = pos_;
@@ -94,20 +111,7 @@ bool CsvLineReader::next() {
                            : text_.size();
     pos_ = end + 1;
     ++line_number_;
-    const std::string_view line = trim(text_.substr(begin, end - begin));
-    if (line.empty() || line.front() == '#') continue;
-    fields_.clear();
-    std::size_t field_begin = 0;
-    for (;;) {
-      const std::size_t comma = line.find(',', field_begin);
-      if (comma == std::string_view::npos) {
-        fields_.push_back(trim(line.substr(field_begin)));
-        break;
-      }
-      fields_.push_back(trim(line.substr(field_begin, comma - field_begin)));
-      field_begin = comma + 1;
-    }
-    return true;
+    if (split_csv_line(text_.substr(begin, end - begin), fields_)) return true;
   }
   return false;
 }
@@ -154,40 +158,46 @@ namespace {
 
 enum class Group { time, geodetic, ecef, local_ned, hpr, quaternion, quaternion_ecef, extra };
 
-struct ColumnSpec {
-  std::string_view name;
+// A column of the format: its rule, and where its value goes in a record.
+struct ColumnSpec : ColumnRule {
   Group group;
-  int slot;                   // index within the group's vector
-  std::string_view expected;  // for messages
-  double min;                 // inclusive range of valid values
-  double max;
+  int slot;  // index within the group's vector
 };
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
 
 constexpr std::array<ColumnSpec, 21> kColumns{{
-    {"time_s", Group::time, 0, "a time in decimal seconds (digits, optional sign and '.', no exponent)", 0, 0},
-    {"lat_deg", Group::geodetic, 0, "a latitude in [-90, 90] degrees", -90.0, 90.0},
-    {"lon_deg", Group::geodetic, 1, "a finite longitude in degrees", -kInf, kInf},
-    {"h_m", Group::geodetic, 2, "a finite ellipsoidal height in metres", -kInf, kInf},
-    {"x_m", Group::ecef, 0, "a finite ECEF coordinate in metres", -kInf, kInf},
-    {"y_m", Group::ecef, 1, "a finite ECEF coordinate in metres", -kInf, kInf},
-    {"z_m", Group::ecef, 2, "a finite ECEF coordinate in metres", -kInf, kInf},
-    {"north_m", Group::local_ned, 0, "a finite coordinate in metres", -kInf, kInf},
-    {"east_m", Group::local_ned, 1, "a finite coordinate in metres", -kInf, kInf},
-    {"down_m", Group::local_ned, 2, "a finite coordinate in metres", -kInf, kInf},
-    {"heading_deg", Group::hpr, 0, "a finite heading in degrees", -kInf, kInf},
-    {"pitch_deg", Group::hpr, 1, "a pitch in [-90, 90] degrees", -90.0, 90.0},
-    {"roll_deg", Group::hpr, 2, "a finite roll in degrees", -kInf, kInf},
-    {"qw", Group::quaternion, 0, "a finite quaternion component", -kInf, kInf},
-    {"qx", Group::quaternion, 1, "a finite quaternion component", -kInf, kInf},
-    {"qy", Group::quaternion, 2, "a finite quaternion component", -kInf, kInf},
-    {"qz", Group::quaternion, 3, "a finite quaternion component", -kInf, kInf},
-    {"qw_ecef", Group::quaternion_ecef, 0, "a finite quaternion component", -kInf, kInf},
-    {"qx_ecef", Group::quaternion_ecef, 1, "a finite quaternion component", -kInf, kInf},
-    {"qy_ecef", Group::quaternion_ecef, 2, "a finite quaternion component", -kInf, kInf},
-    {"qz_ecef", Group::quaternion_ecef, 3, "a finite quaternion component", -kInf, kInf},
+    {{"time_s", "a time in decimal seconds (digits, optional sign and '.', no exponent)", 0, 0}, Group::time, 0},
+    {{"lat_deg", "a latitude in [-90, 90] degrees", -90.0, 90.0}, Group::geodetic, 0},
+    {{"lon_deg", "a finite longitude in degrees", -kInf, kInf}, Group::geodetic, 1},
+    {{"h_m", "a finite ellipsoidal height in metres", -kInf, kInf}, Group::geodetic, 2},
+    {{"x_m", "a finite ECEF coordinate in metres", -kInf, kInf}, Group::ecef, 0},
+    {{"y_m", "a finite ECEF coordinate in metres", -kInf, kInf}, Group::ecef, 1},
+    {{"z_m", "a finite ECEF coordinate in metres", -kInf, kInf}, Group::ecef, 2},
+    {{"north_m", "a finite coordinate in metres", -kInf, kInf}, Group::local_ned, 0},
+    {{"east_m", "a finite coordinate in metres", -kInf, kInf}, Group::local_ned, 1},
+    {{"down_m", "a finite coordinate in metres", -kInf, kInf}, Group::local_ned, 2},
+    {{"heading_deg", "a finite heading in degrees", -kInf, kInf}, Group::hpr, 0},
+    {{"pitch_deg", "a pitch in [-90, 90] degrees", -90.0, 90.0}, Group::hpr, 1},
+    {{"roll_deg", "a finite roll in degrees", -kInf, kInf}, Group::hpr, 2},
+    {{"qw", "a finite quaternion component", -kInf, kInf}, Group::quaternion, 0},
+    {{"qx", "a finite quaternion component", -kInf, kInf}, Group::quaternion, 1},
+    {{"qy", "a finite quaternion component", -kInf, kInf}, Group::quaternion, 2},
+    {{"qz", "a finite quaternion component", -kInf, kInf}, Group::quaternion, 3},
+    {{"qw_ecef", "a finite quaternion component", -kInf, kInf}, Group::quaternion_ecef, 0},
+    {{"qx_ecef", "a finite quaternion component", -kInf, kInf}, Group::quaternion_ecef, 1},
+    {{"qy_ecef", "a finite quaternion component", -kInf, kInf}, Group::quaternion_ecef, 2},
+    {{"qz_ecef", "a finite quaternion component", -kInf, kInf}, Group::quaternion_ecef, 3},
 }};
+
+// First kColumns index of each group, for the rule look-ups below.
+constexpr std::size_t kGeodeticFirst = 1, kEcefFirst = 4, kLocalNedFirst = 7, kHprFirst = 10,
+                      kQuaternionFirst = 13, kQuaternionEcefFirst = 17;
+static_assert(kColumns[kGeodeticFirst].group == Group::geodetic && kColumns[kEcefFirst].group == Group::ecef &&
+              kColumns[kLocalNedFirst].group == Group::local_ned && kColumns[kHprFirst].group == Group::hpr &&
+              kColumns[kQuaternionFirst].group == Group::quaternion &&
+              kColumns[kQuaternionEcefFirst].group == Group::quaternion_ecef &&
+              kColumns[kQuaternionEcefFirst + 3].slot == 3);
 
 const ColumnSpec* find_column(std::string_view name) noexcept {
   for (const ColumnSpec& spec : kColumns) {
@@ -238,12 +248,13 @@ struct HeaderColumn {
   std::string name;
 };
 
-struct Layout {
+struct HeaderLayout {
   std::vector<HeaderColumn> columns;
   std::size_t header_line = 0;
   PositionKind position_kind = PositionKind::geodetic;
   AttitudeKind attitude_kind = AttitudeKind::heading_pitch_roll;
   std::size_t quaternion_w_column = 0;  // 0-based index of qw / qw_ecef (for messages)
+  std::size_t time_column = 0;          // 0-based index of time_s
 };
 
 [[noreturn]] void fail(const std::string& file, std::size_t line, std::string column,
@@ -301,9 +312,8 @@ Group resolve_group(const std::array<GroupInfo, N>& groups, const std::vector<He
   return groups[chosen].group;
 }
 
-Layout parse_header(const std::vector<std::string_view>& fields, std::size_t line,
-                    const std::string& file, const TrajectoryReadOptions& options) {
-  Layout layout;
+void parse_header(const std::vector<std::string_view>& fields, std::size_t line, const std::string& file,
+                  const TrajectoryReadOptions& options, HeaderLayout& layout) {
   layout.header_line = line;
   layout.columns.reserve(fields.size());
   for (std::size_t i = 0; i < fields.size(); ++i) {
@@ -343,8 +353,7 @@ Layout parse_header(const std::vector<std::string_view>& fields, std::size_t lin
     case Group::quaternion: layout.attitude_kind = AttitudeKind::quaternion; break;
     default: layout.attitude_kind = AttitudeKind::quaternion_ecef; break;
   }
-  if (layout.attitude_kind == AttitudeKind::quaternion_ecef &&
-      layout.position_kind == PositionKind::local_ned) {
+  if (!kinds_compatible(layout.position_kind, layout.attitude_kind)) {
     fail(file, line, "", 0, "an Earth-fixed position with an ECEF attitude",
          "an ECEF attitude (qw_ecef, ...) needs an Earth-fixed position (lat_deg,lon_deg,h_m or "
          "x_m,y_m,z_m), not a local NED one");
@@ -355,11 +364,150 @@ Layout parse_header(const std::vector<std::string_view>& fields, std::size_t lin
         (spec->group == Group::quaternion || spec->group == Group::quaternion_ecef)) {
       layout.quaternion_w_column = i;
     }
+    if (spec != nullptr && spec->group == Group::time) layout.time_column = i;
   }
-  return layout;
+}
+
+// One data line against the header (docs/trajectory-format.md): field count,
+// number syntax, ranges, the predecessor's time, the unit quaternion.
+void parse_record_fields(const HeaderLayout& layout, const std::string& file,
+                         const std::vector<std::string_view>& fields, std::size_t line, TrajectoryRecord& record,
+                         const TrajectoryLineParser::Predecessor* predecessor) {
+  const std::size_t width = layout.columns.size();
+  if (fields.size() != width) {
+    fail(file, line, "", 0, std::to_string(width) + " fields",
+         "expected " + std::to_string(width) + " comma-separated fields as named by the header (line " +
+             std::to_string(layout.header_line) + "), got " + std::to_string(fields.size()));
+  }
+  record = TrajectoryRecord{};
+  record.position_kind = layout.position_kind;
+  record.attitude_kind = layout.attitude_kind;
+  record.line = line;
+  for (std::size_t i = 0; i < width; ++i) {
+    const ColumnSpec* spec = layout.columns[i].spec;
+    if (spec == nullptr) continue;  // allowed extra column
+    const std::string_view field = fields[i];
+    if (spec->group == Group::time) {
+      const TimeParse t = try_parse_decimal_seconds(field);
+      if (t.status != NumberStatus::ok) {
+        fail(file, line, layout.columns[i].name, i + 1, std::string(spec->expected),
+             "expected " + std::string(spec->expected) + ", got '" + detail::printable(field) + "' (" +
+                 std::string(describe(t.status)) + ")");
+      }
+      record.t_ns = t.ns;
+      continue;
+    }
+    const DoubleParse v = try_parse_double(field);
+    if (v.status != NumberStatus::ok) {
+      fail(file, line, layout.columns[i].name, i + 1, std::string(spec->expected),
+           "expected " + std::string(spec->expected) + ", got '" + detail::printable(field) + "' (" +
+               std::string(describe(v.status)) + ")");
+    }
+    if (v.value < spec->min || v.value > spec->max) {
+      fail(file, line, layout.columns[i].name, i + 1, std::string(spec->expected),
+           "expected " + std::string(spec->expected) + ", got '" + detail::printable(field) + "'");
+    }
+    switch (spec->group) {
+      case Group::geodetic:
+      case Group::ecef:
+      case Group::local_ned: record.position[spec->slot] = v.value; break;
+      default: record.attitude[spec->slot] = v.value; break;
+    }
+  }
+  if (predecessor != nullptr && record.t_ns <= predecessor->t_ns) {
+    const std::size_t tc = layout.time_column;
+    fail(file, line, layout.columns[tc].name, tc + 1, "a time after the previous record's",
+         "time " + detail::printable(fields[tc]) + " s is not after the previous record's " +
+             detail::printable(predecessor->time_text) + " s (line " + std::to_string(predecessor->line) + ")");
+  }
+  if (layout.attitude_kind != AttitudeKind::heading_pitch_roll) {
+    // The components are finite but may be huge: squaring 1e200 gives inf,
+    // which the tolerance test rejects like any other non-unit quaternion.
+    double norm = 0.0;
+    if (!normalise_unit_quaternion(record.attitude, norm)) {
+      const std::size_t qc = layout.quaternion_w_column;
+      fail(file, line, layout.columns[qc].name, qc + 1, "a unit quaternion",
+           "expected a unit quaternion (|q| within 1e-6 of 1), got |q| = " + detail::format_double(norm));
+    }
+  }
 }
 
 }  // namespace
+
+// ---------------------------------------------------------------- value rules
+
+const ColumnRule& position_column_rule(PositionKind kind, int component) noexcept {
+  const std::size_t first = kind == PositionKind::geodetic ? kGeodeticFirst
+                            : kind == PositionKind::ecef   ? kEcefFirst
+                                                           : kLocalNedFirst;
+  return kColumns[first + static_cast<std::size_t>(std::clamp(component, 0, 2))];
+}
+
+const ColumnRule& attitude_column_rule(AttitudeKind kind, int component) noexcept {
+  const std::size_t first = kind == AttitudeKind::heading_pitch_roll ? kHprFirst
+                            : kind == AttitudeKind::quaternion       ? kQuaternionFirst
+                                                                     : kQuaternionEcefFirst;
+  return kColumns[first + static_cast<std::size_t>(std::clamp(component, 0, attitude_component_count(kind) - 1))];
+}
+
+int attitude_component_count(AttitudeKind kind) noexcept {
+  return kind == AttitudeKind::heading_pitch_roll ? 3 : 4;
+}
+
+bool kinds_compatible(PositionKind position, AttitudeKind attitude) noexcept {
+  return !(attitude == AttitudeKind::quaternion_ecef && position == PositionKind::local_ned);
+}
+
+bool normalise_unit_quaternion(Eigen::Vector4d& q, double& norm) noexcept {
+  norm = q.norm();
+  if (!(std::abs(norm - 1.0) <= kQuaternionNormTolerance)) return false;
+  q /= norm;
+  return true;
+}
+
+// ---------------------------------------------------------------- line parser
+
+struct TrajectoryLineParser::Layout : HeaderLayout {};
+
+TrajectoryLineParser::TrajectoryLineParser(std::string source_name, TrajectoryReadOptions options)
+    : source_name_(std::move(source_name)), options_(options) {}
+TrajectoryLineParser::~TrajectoryLineParser() = default;
+TrajectoryLineParser::TrajectoryLineParser(TrajectoryLineParser&&) noexcept = default;
+TrajectoryLineParser& TrajectoryLineParser::operator=(TrajectoryLineParser&&) noexcept = default;
+
+void TrajectoryLineParser::parse_header(const std::vector<std::string_view>& fields, std::size_t line) {
+  auto layout = std::make_unique<Layout>();
+  imuemu::io::parse_header(fields, line, source_name_, options_, *layout);
+  layout_ = std::move(layout);
+}
+
+void TrajectoryLineParser::parse_record(const std::vector<std::string_view>& fields, std::size_t line,
+                                        TrajectoryRecord& out, const Predecessor* predecessor) const {
+  if (!layout_) throw std::logic_error(source_name_ + ": TrajectoryLineParser::parse_record before a header");
+  parse_record_fields(*layout_, source_name_, fields, line, out, predecessor);
+}
+
+TrajectoryLineParser::LineKind TrajectoryLineParser::feed(std::string_view line, TrajectoryRecord& out) {
+  ++line_number_;
+  // Spreadsheet exports often start with a UTF-8 byte order mark.
+  if (line_number_ == 1 && line.size() >= 3 && std::memcmp(line.data(), "\xEF\xBB\xBF", 3) == 0) {
+    line.remove_prefix(3);
+  }
+  if (!detail::split_csv_line(line, fields_)) return LineKind::skipped;
+  if (!has_header()) {
+    parse_header(fields_, line_number_);
+    return LineKind::header;
+  }
+  parse_record(fields_, line_number_, out);
+  return LineKind::record;
+}
+
+std::size_t TrajectoryLineParser::header_line() const noexcept { return layout_->header_line; }
+PositionKind TrajectoryLineParser::position_kind() const noexcept { return layout_->position_kind; }
+AttitudeKind TrajectoryLineParser::attitude_kind() const noexcept { return layout_->attitude_kind; }
+std::size_t TrajectoryLineParser::time_column() const noexcept { return layout_->time_column; }
+
+// ---------------------------------------------------------------- whole files
 
 Trajectory parse_trajectory_csv(std::string_view text, const std::string& source_name,
                                 const TrajectoryReadOptions& options) {
@@ -369,93 +517,26 @@ Trajectory parse_trajectory_csv(std::string_view text, const std::string& source
     fail(file, 0, "", 0, "a header row",
          "no header row: the file is empty or holds only comments and blank lines");
   }
-  const Layout layout = parse_header(reader.fields(), reader.line_number(), file, options);
-  const std::size_t width = layout.columns.size();
+  TrajectoryLineParser parser(source_name, options);
+  parser.parse_header(reader.fields(), reader.line_number());
 
   Trajectory trajectory;
   trajectory.source = source_name;
-  trajectory.position_kind = layout.position_kind;
-  trajectory.attitude_kind = layout.attitude_kind;
+  trajectory.position_kind = parser.position_kind();
+  trajectory.attitude_kind = parser.attitude_kind();
   trajectory.records.reserve(detail::count_lines(text) + 1);
 
   bool have_previous = false;
-  TimeNs previous_ns = 0;
-  std::string_view previous_text;
-  std::size_t previous_line = 0;
-
+  TrajectoryLineParser::Predecessor previous;
   while (reader.next()) {
-    const std::vector<std::string_view>& fields = reader.fields();
-    const std::size_t line = reader.line_number();
-    if (fields.size() != width) {
-      fail(file, line, "", 0, std::to_string(width) + " fields",
-           "expected " + std::to_string(width) + " comma-separated fields as named by the header (line " +
-               std::to_string(layout.header_line) + "), got " + std::to_string(fields.size()));
-    }
-    TrajectoryRecord record;
-    record.position_kind = layout.position_kind;
-    record.attitude_kind = layout.attitude_kind;
-    record.line = line;
-    std::string_view time_text;
-    std::size_t time_column = 0;
-    for (std::size_t i = 0; i < width; ++i) {
-      const ColumnSpec* spec = layout.columns[i].spec;
-      if (spec == nullptr) continue;  // allowed extra column
-      const std::string_view field = fields[i];
-      if (spec->group == Group::time) {
-        const TimeParse t = try_parse_decimal_seconds(field);
-        if (t.status != NumberStatus::ok) {
-          fail(file, line, layout.columns[i].name, i + 1, std::string(spec->expected),
-               "expected " + std::string(spec->expected) + ", got '" + detail::printable(field) + "' (" +
-                   std::string(describe(t.status)) + ")");
-        }
-        record.t_ns = t.ns;
-        time_text = field;
-        time_column = i;
-        continue;
-      }
-      const DoubleParse v = try_parse_double(field);
-      if (v.status != NumberStatus::ok) {
-        fail(file, line, layout.columns[i].name, i + 1, std::string(spec->expected),
-             "expected " + std::string(spec->expected) + ", got '" + detail::printable(field) + "' (" +
-                 std::string(describe(v.status)) + ")");
-      }
-      if (v.value < spec->min || v.value > spec->max) {
-        fail(file, line, layout.columns[i].name, i + 1, std::string(spec->expected),
-             "expected " + std::string(spec->expected) + ", got '" + detail::printable(field) + "'");
-      }
-      switch (spec->group) {
-        case Group::geodetic:
-        case Group::ecef:
-        case Group::local_ned: record.position[spec->slot] = v.value; break;
-        default: record.attitude[spec->slot] = v.value; break;
-      }
-    }
-    if (have_previous && record.t_ns <= previous_ns) {
-      fail(file, line, layout.columns[time_column].name, time_column + 1,
-           "a time after the previous record's",
-           "time " + detail::printable(time_text) + " s is not after the previous record's " +
-               detail::printable(previous_text) + " s (line " + std::to_string(previous_line) + ")");
-    }
-    if (layout.attitude_kind != AttitudeKind::heading_pitch_roll) {
-      // The components are finite but may be huge: squaring 1e200 gives inf,
-      // which the tolerance test rejects like any other non-unit quaternion.
-      const double norm = record.attitude.norm();
-      if (!(std::abs(norm - 1.0) <= kQuaternionNormTolerance)) {
-        const std::size_t qc = layout.quaternion_w_column;
-        fail(file, line, layout.columns[qc].name, qc + 1, "a unit quaternion",
-             "expected a unit quaternion (|q| within 1e-6 of 1), got |q| = " + detail::format_double(norm));
-      }
-      record.attitude /= norm;
-    }
+    TrajectoryRecord& record = trajectory.records.emplace_back();
+    parser.parse_record(reader.fields(), reader.line_number(), record, have_previous ? &previous : nullptr);
     have_previous = true;
-    previous_ns = record.t_ns;
-    previous_text = time_text;
-    previous_line = line;
-    trajectory.records.push_back(record);
+    previous = {record.t_ns, reader.fields()[parser.time_column()], record.line};
   }
   if (trajectory.records.empty()) {
     fail(file, 0, "", 0, "at least one record",
-         "no records after the header (line " + std::to_string(layout.header_line) + ")");
+         "no records after the header (line " + std::to_string(parser.header_line()) + ")");
   }
   return trajectory;
 }

@@ -13,6 +13,7 @@
 
 #include <Eigen/Core>
 #include <cstddef>
+#include <memory>
 #include <stdexcept>
 #include <string>
 #include <string_view>
@@ -101,6 +102,35 @@ struct Trajectory {
 // it, the quaternion is normalised (rounding in whatever wrote the file).
 inline constexpr double kQuaternionNormTolerance = 1e-6;
 
+// ---------------------------------------------------------------- value rules
+// One implementation of the per-value rules of docs/trajectory-format.md,
+// shared by every pose input: trajectory files, pose line streams and pose
+// datagrams (docs/pose-wire-format.md).
+
+// What one column accepts: its header name, the phrase used in messages and
+// the inclusive range of valid values (every value must also be finite).
+struct ColumnRule {
+  std::string_view name;
+  std::string_view expected;
+  double min = 0.0;
+  double max = 0.0;
+};
+
+// Rule of position component `component` (0..2) of a record of that kind.
+const ColumnRule& position_column_rule(PositionKind kind, int component) noexcept;
+// Rule of attitude component `component` (0..2 for heading-pitch-roll, 0..3
+// for the quaternions) of a record of that kind.
+const ColumnRule& attitude_column_rule(AttitudeKind kind, int component) noexcept;
+// 3 for heading-pitch-roll (the 4th record component is 0), 4 for quaternions.
+int attitude_component_count(AttitudeKind kind) noexcept;
+// False for the one combination without meaning: an ECEF attitude
+// (quaternion_ecef) with a local NED position.
+bool kinds_compatible(PositionKind position, AttitudeKind attitude) noexcept;
+// The unit-quaternion rule: sets `norm` to |q|; if it is within
+// kQuaternionNormTolerance of 1, divides q by it and returns true, otherwise
+// leaves q alone and returns false (also for an overflowing norm).
+bool normalise_unit_quaternion(Eigen::Vector4d& q, double& norm) noexcept;
+
 struct TrajectoryReadOptions {
   // Ignore columns the format does not know (their fields are not even
   // parsed, but each row must still have one field per header column).
@@ -116,11 +146,73 @@ Trajectory read_trajectory_csv(const std::string& path, const TrajectoryReadOpti
 Trajectory parse_trajectory_csv(std::string_view text, const std::string& source_name,
                                 const TrajectoryReadOptions& options = {});
 
+// The reader one line at a time, for pose line streams (docs/pose-wire-format.md):
+// the header line, then record lines. parse_trajectory_csv is built on it, so
+// files and streams share one implementation of the header and record rules.
+// Unlike the file reader it does not require increasing times: the order of a
+// live stream is judged by the pose source (io/pose_source.hpp).
+class TrajectoryLineParser {
+ public:
+  explicit TrajectoryLineParser(std::string source_name, TrajectoryReadOptions options = {});
+  ~TrajectoryLineParser();
+  TrajectoryLineParser(TrajectoryLineParser&&) noexcept;
+  TrajectoryLineParser& operator=(TrajectoryLineParser&&) noexcept;
+
+  enum class LineKind {
+    skipped,  // blank or comment line
+    header,   // the header line, accepted
+    record,   // a data line: the record was written to `out`
+  };
+
+  // Feeds the next physical line (without its '\n'; a trailing '\r' is
+  // trimmed); every call counts one line for the line numbers in messages.
+  // A UTF-8 byte order mark is skipped on the first line. Throws
+  // TrajectoryFormatError: for a refused header the parser still waits for
+  // a header (the next non-comment line is tried as one); for a refused
+  // record the next line is parsed normally.
+  LineKind feed(std::string_view line, TrajectoryRecord& out);
+
+  // The record before, for the file reader's strictly-increasing-time rule.
+  struct Predecessor {
+    TimeNs t_ns = 0;
+    std::string_view time_text;  // as written, for the message
+    std::size_t line = 0;
+  };
+  // The two steps of feed() on fields already split by detail::CsvLineReader,
+  // at the given line number. parse_record needs has_header(); with a
+  // predecessor it also refuses a time that is not after it.
+  void parse_header(const std::vector<std::string_view>& fields, std::size_t line);
+  void parse_record(const std::vector<std::string_view>& fields, std::size_t line, TrajectoryRecord& out,
+                    const Predecessor* predecessor = nullptr) const;
+
+  bool has_header() const noexcept { return layout_ != nullptr; }
+  // The following need has_header().
+  std::size_t header_line() const noexcept;
+  PositionKind position_kind() const noexcept;
+  AttitudeKind attitude_kind() const noexcept;
+  std::size_t time_column() const noexcept;  // 0-based index of time_s
+  std::size_t line_number() const noexcept { return line_number_; }  // lines fed so far
+  const std::string& source_name() const noexcept { return source_name_; }
+
+ private:
+  struct Layout;
+  std::string source_name_;
+  TrajectoryReadOptions options_;
+  std::unique_ptr<Layout> layout_;
+  std::size_t line_number_ = 0;
+  std::vector<std::string_view> fields_;  // reused by feed()
+};
+
 namespace detail {
+
+// Splits one line (without '\n') on ',' into `fields`, trimming spaces, tabs
+// and a trailing '\r' around each. Returns false (fields untouched) for a
+// blank line or one whose first non-blank character is '#'.
+bool split_csv_line(std::string_view line, std::vector<std::string_view>& fields);
 
 // Line and field splitter shared by the CSV readers: skips a UTF-8 byte order
 // mark, blank lines and lines whose first non-blank character is '#'; splits
-// the others on ',' and trims spaces, tabs and a trailing '\r' around fields.
+// the others with split_csv_line.
 class CsvLineReader {
  public:
   explicit CsvLineReader(std::string_view text) noexcept;

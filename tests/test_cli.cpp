@@ -9,6 +9,7 @@
 #include <fstream>
 #include <sstream>
 #include <string>
+#include <vector>
 
 namespace fs = std::filesystem;
 
@@ -143,4 +144,60 @@ TEST_F(Cli, DemoRunsAndWritesItsFiles) {
   EXPECT_TRUE(fs::exists(path("demo/imu.csv")));
   EXPECT_TRUE(fs::exists(path("demo/smoothed.csv")));
   EXPECT_NE(r.output.find("# max: position"), std::string::npos) << r.output;
+}
+
+namespace {
+// Numeric rows of an IMU CSV (first 7 columns), skipping '#' comments and the header.
+std::vector<std::vector<double>> imu_rows(const std::string& file, std::vector<std::string>* status = nullptr) {
+  std::ifstream in(file);
+  std::string line;
+  std::vector<std::vector<double>> rows;
+  bool header = true;
+  while (std::getline(in, line)) {
+    if (line.empty() || line[0] == '#') continue;
+    if (header) {
+      header = false;
+      continue;
+    }
+    std::stringstream ss(line);
+    std::string field;
+    std::vector<double> row;
+    for (int k = 0; k < 7 && std::getline(ss, field, ','); ++k) row.push_back(std::stod(field));
+    if (status != nullptr && std::getline(ss, field, ',')) status->push_back(field);
+    rows.push_back(row);
+  }
+  return rows;
+}
+}  // namespace
+
+// `imuemu stream` replays a file through the streaming engine and the live
+// emitter: paced on the monotonic clock (x20) and as fast as possible, and
+// from stdin, the samples are exactly `imuemu generate`'s (the same engine),
+// all flagged exact (no pose is late in a replay; the paced runs keep 1 s of
+// trajectory time, 50 ms of wall time, as margin for a loaded machine).
+TEST_F(Cli, StreamReplayEqualsGenerate) {
+  ASSERT_EQ(run("sample-trajectory --kind circle --duration-s 20 --period-s 0.1 --out " + path("c.csv")).exit_code, 0);
+  const CliRun g = run("generate --in " + path("c.csv") + " --out " + path("g.csv") + " --rate 200 --scene flat --delta 20 --quiet");
+  ASSERT_EQ(g.exit_code, 0) << g.output;
+  const auto reference = imu_rows(path("g.csv"));
+  ASSERT_EQ(reference.size(), 4001u);
+  for (const std::string& how : {std::string("--source file:") + path("c.csv") + " --speed 20",
+                                 std::string("--source file:") + path("c.csv") + " --speed max",
+                                 std::string("--source stdin --speed 20 < ") + path("c.csv")}) {
+    const CliRun s = run("stream " + how + " --rate 200 --scene flat --knot-interval-s 0.1 --out " + path("s.csv"));
+    ASSERT_EQ(s.exit_code, 0) << how << "\n" << s.output;
+    std::vector<std::string> status;
+    const auto rows = imu_rows(path("s.csv"), &status);
+    ASSERT_EQ(rows.size(), reference.size()) << how << "\n" << s.output;
+    std::size_t differing = 0, not_exact = 0;
+    for (std::size_t i = 0; i < rows.size(); ++i) {
+      if (rows[i] != reference[i]) ++differing;
+      if (status[i] != "exact") ++not_exact;
+    }
+    EXPECT_EQ(differing, 0u) << how;
+    EXPECT_EQ(not_exact, 0u) << how << "\n" << s.output;
+  }
+  const CliRun bad = run("stream --source carrier-pigeon --out " + path("x.csv"));
+  EXPECT_EQ(bad.exit_code, 2);
+  EXPECT_NE(bad.output.find("expected file:PATH"), std::string::npos) << bad.output;
 }

@@ -70,6 +70,8 @@ Streamed stream_all(const std::vector<Pose>& knots, const PipelineOptions& o) {
   return s;
 }
 
+TimeNs t0_of(const std::vector<Pose>& knots) { return knots.front().t_ns; }
+
 PipelineOptions flight_options(Physics physics, std::int64_t rate_hz) {
   PipelineOptions o;
   o.scene.physics = physics;
@@ -230,24 +232,44 @@ TEST(Stream, RefusedKnotsChangeNothing) {
 }
 
 // GapPolicy::split in the stream: each side is its own run with its own end
-// windows and grid; the samples come out in time order with the gap kept.
-TEST(Stream, GapSplitStartsANewRunOnTheNewKnotsGrid) {
+// windows, and both stay on one output grid (the first knot's), so a live
+// emitter's ticks keep meeting exact samples after a gap.
+TEST(Stream, GapSplitRunsStayOnTheFirstKnotsGrid) {
   const reference::Circle circle(50.0, 20.0);
   std::vector<Pose> knots = reference::sample_knots(circle, kNsPerSecond / 2);
   knots.resize(80);
   // Remove 12 s worth of knots (a gap of 12.5 s) and shift the later ones by
-  // 0.3 ms so their grid is not the first run's grid.
+  // 0.3 ms so their knot times are off the first run's grid.
   knots.erase(knots.begin() + 30, knots.begin() + 54);
   for (std::size_t k = 30; k < knots.size(); ++k) knots[k].t_ns += 300'000;
   PipelineOptions o = flight_options(Physics::flat, 100);
   o.kernel.delta = 50;
   o.gap_policy = GapPolicy::split;
   const Streamed s = stream_all(knots, o);
-  const BatchResult first = run_batch({knots.begin(), knots.begin() + 30}, o);
-  const BatchResult second = run_batch({knots.begin() + 30, knots.end()}, o);
-  ASSERT_EQ(s.samples.size(), first.imu.size() + second.imu.size());
-  EXPECT_EQ(s.samples[first.imu.size()].kinematics.t_ns, knots[30].t_ns);
+  const std::vector<Pose> before(knots.begin(), knots.begin() + 30);
+  const BatchResult first = run_batch(before, o);
+  // The first run is exactly the first half on its own.
+  std::vector<StreamSample> head(s.samples.begin(), s.samples.begin() + static_cast<std::ptrdiff_t>(first.imu.size()));
+  const Difference d = compare(head, first);
+  EXPECT_EQ(d.relative, 0.0);
+  // The second run covers [its first knot, its last knot] on the same grid.
+  const TimeNs period = kNsPerSecond / o.rate_hz;
+  const TimeNs t30 = knots[30].t_ns, t_end = knots.back().t_ns;
+  const auto expected_second = static_cast<std::size_t>((t_end - t0_of(knots)) / period - (t30 - t0_of(knots) + period - 1) / period + 1);
+  ASSERT_EQ(s.samples.size(), first.imu.size() + expected_second);
+  for (const StreamSample& x : s.samples) EXPECT_EQ((x.imu.t_ns - knots.front().t_ns) % period, 0);
+  EXPECT_GE(s.samples[first.imu.size()].imu.t_ns, t30);
+  EXPECT_LT(s.samples[first.imu.size()].imu.t_ns, t30 + period);
   for (std::size_t i = 1; i < s.samples.size(); ++i) EXPECT_LT(s.samples[i - 1].imu.t_ns, s.samples[i].imu.t_ns);
+  // And it is right: the circle's truth on the second run (away from its ends).
+  double worst_gyro = 0.0;
+  for (std::size_t i = first.imu.size(); i < s.samples.size(); ++i) {
+    const TimeNs t = s.samples[i].imu.t_ns;
+    if (t < t30 + 2 * kNsPerSecond || t > t_end - 2 * kNsPerSecond) continue;
+    worst_gyro = std::max(worst_gyro, (s.samples[i].imu.gyro_rad_s - Vec3(0, 0, 20.0 / 50.0)).norm());
+  }
+  std::cout << "second run after the gap: worst gyro error " << worst_gyro << " rad/s\n";
+  EXPECT_LT(worst_gyro, 1e-6);
   o.gap_policy = GapPolicy::error;
   EXPECT_THROW(stream_all(knots, o), GapError);
 }

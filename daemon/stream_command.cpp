@@ -1,0 +1,219 @@
+// `imuemu stream`: live poses in (file replay, UDP, TCP, stdin), IMU samples
+// out in real time on the monotonic clock, through the streaming engine and
+// the live emitter (docs/streaming.md). The daemon (imuemud) drives devices;
+// this command writes CSV lines, for trying a scene, piping into other tools
+// and the tests.
+#include <signal.h>
+#include <time.h>
+
+#include <atomic>
+#include <algorithm>
+#include <cerrno>
+#include <cstring>
+#include <charconv>
+#include <cstdio>
+#include <iostream>
+#include <memory>
+#include <stdexcept>
+#include <string>
+
+#include "core/live_emitter.hpp"
+#include "core/stream.hpp"
+#include "core/time_mapping.hpp"
+#include "daemon/commands.hpp"
+#include "io/pose_source.hpp"
+
+namespace imuemu::cli {
+namespace {
+
+std::atomic<bool> g_stop{false};
+extern "C" void on_signal(int) { g_stop = true; }
+
+void sleep_until_monotonic(TimeNs due_ns) {
+  timespec ts{static_cast<time_t>(due_ns / kNsPerSecond), static_cast<long>(due_ns % kNsPerSecond)};
+  while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR && !g_stop) {
+  }
+}
+
+// "udp:127.0.0.1:5005" -> address, port.
+io::NetEndpoint endpoint_of(const std::string& spec, const std::string& scheme) {
+  const std::string rest = spec.substr(scheme.size() + 1);
+  const auto colon = rest.rfind(':');
+  if (colon == std::string::npos) throw std::invalid_argument("--source " + spec + ": expected " + scheme + ":ADDRESS:PORT");
+  io::NetEndpoint ep;
+  ep.address = rest.substr(0, colon);
+  unsigned port = 0;
+  const std::string p = rest.substr(colon + 1);
+  const auto [end, ec] = std::from_chars(p.data(), p.data() + p.size(), port);
+  if (ec != std::errc() || end != p.data() + p.size() || port > 65535)
+    throw std::invalid_argument("--source " + spec + ": port '" + p + "' is not 0..65535");
+  ep.port = static_cast<std::uint16_t>(port);
+  ep.receive_buffer_bytes = 1 << 20;
+  return ep;
+}
+
+struct Output {
+  std::FILE* file = nullptr;
+  bool owned = false;
+  ~Output() {
+    if (owned && file != nullptr) std::fclose(file);
+  }
+};
+
+void write_row(std::FILE* f, const live::Emission& e) {
+  const ImuSample& s = e.imu;
+  std::fprintf(f, "%lld,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%s\n", static_cast<long long>(s.t_ns), s.gyro_rad_s.x(),
+               s.gyro_rad_s.y(), s.gyro_rad_s.z(), s.accel_m_s2.x(), s.accel_m_s2.y(), s.accel_m_s2.z(),
+               to_string(e.status).c_str());
+}
+
+}  // namespace
+
+int stream(const StreamArgs& args) {
+  PipelineOptions po;
+  po.scene.physics = args.scene == "flat" ? Physics::flat : Physics::ecef;
+  po.scene.flat_gravity_m_s2 = Vec3(0.0, 0.0, args.gravity_m_s2);
+  po.rate_hz = args.rate_hz;
+  po.kernel.delta = args.delta > 0 ? args.delta
+                                   : static_cast<int>(std::max<double>(1.0, args.knot_interval_s * static_cast<double>(args.rate_hz)));
+  po.gap_policy = GapPolicy::split;
+  po.max_gap_s = args.max_gap_s;
+  const bool as_fast_as_possible = args.speed == "max";
+  live::SpeedFactor speed;
+  std::unique_ptr<io::PoseSource> source;
+  io::PoseSourceOptions so;
+  so.physics = po.scene.physics;
+  so.log = [](std::string_view line) { std::cerr << line << "\n"; };
+  try {
+    if (!as_fast_as_possible) speed = live::parse_speed_factor(args.speed);
+    if (args.source.rfind("file:", 0) == 0) {
+      io::FileReplayOptions fr;
+      fr.as_fast_as_possible = as_fast_as_possible;
+      fr.speed = as_fast_as_possible ? 1.0
+                                     : static_cast<double>(speed.numerator) / static_cast<double>(speed.denominator);
+      source = io::make_file_replay_source(args.source.substr(5), fr, so);
+    } else if (args.source.rfind("udp:", 0) == 0) {
+      source = io::make_udp_pose_source(endpoint_of(args.source, "udp"), so);
+    } else if (args.source.rfind("tcp:", 0) == 0) {
+      source = io::make_tcp_pose_source(endpoint_of(args.source, "tcp"), so);
+    } else if (args.source == "stdin") {
+      source = io::make_fd_pose_source(0, so);
+    } else {
+      throw std::invalid_argument("--source '" + args.source + "': expected file:PATH, udp:ADDR:PORT, tcp:ADDR:PORT or stdin");
+    }
+    if (as_fast_as_possible && args.source.rfind("file:", 0) != 0)
+      throw std::invalid_argument("--speed max applies to file replay only");
+  } catch (const std::exception& e) {
+    std::cerr << "imuemu stream: " << e.what() << "\n";
+    return kUsageError;
+  }
+
+  Output out;
+  if (args.out_path == "-") {
+    out.file = stdout;
+  } else {
+    out.file = std::fopen(args.out_path.c_str(), "w");
+    out.owned = true;
+    if (out.file == nullptr) {
+      std::cerr << "imuemu stream: cannot write '" << args.out_path << "': " << std::strerror(errno) << "\n";
+      return kOutputError;
+    }
+  }
+  std::fprintf(out.file, "time_ns,gyro_x_rad_s,gyro_y_rad_s,gyro_z_rad_s,accel_x_m_s2,accel_y_m_s2,accel_z_m_s2,status\n");
+
+  struct sigaction sa {};
+  sa.sa_handler = on_signal;
+  sigaction(SIGINT, &sa, nullptr);
+  sigaction(SIGTERM, &sa, nullptr);
+
+  StreamPipeline engine(po);
+  live::StreamSampleSource samples(engine);
+  live::LiveEmitterOptions lo;
+  lo.scene = po.scene;
+  lo.underrun = args.underrun == "pause" ? live::UnderrunPolicy::pause : live::UnderrunPolicy::extrapolate;
+  lo.blend_ns = static_cast<TimeNs>(args.blend_s * 1e9);
+  live::LiveEmitter emitter(lo);
+  const TimeNs delay_ns = StreamPipeline::lookahead_ns(po, static_cast<TimeNs>(args.knot_interval_s * 1e9)) +
+                          static_cast<TimeNs>(args.margin_s * 1e9);
+  std::cerr << "imuemu stream: " << source->name() << " -> " << args.rate_hz << " Hz, Delta " << po.kernel.delta
+            << ", emitting " << static_cast<double>(delay_ns) * 1e-9 << " s behind the poses\n";
+  source->start();
+
+  std::vector<io::SourcedPose> batch;
+  std::size_t refused = 0;
+  bool input_done = false, finished = false;
+  auto take_input = [&] {
+    batch.clear();
+    source->queue().drain(batch);
+    for (const io::SourcedPose& p : batch) {
+      try {
+        engine.push(p.pose);
+      } catch (const std::exception& e) {  // a pose the method cannot take: counted, never fatal
+        ++refused;
+        std::cerr << "imuemu stream: pose at line " << p.line << " refused: " << e.what() << "\n";
+      }
+    }
+    if (!finished && source->finished() && source->queue().size() == 0) input_done = true;
+  };
+
+  int code = kOk;
+  try {
+    if (as_fast_as_possible) {
+      // Replay at the speed of the computation: no clock, no underruns.
+      StreamSample s;
+      while (!g_stop) {
+        take_input();
+        while (engine.pop(s)) write_row(out.file, {live::EmissionStatus::exact, s.kinematics, s.imu});
+        if (input_done) break;
+        sleep_until_monotonic(io::monotonic_now_ns() + 1'000'000);
+      }
+      if (engine.knots_pushed() >= 2) {
+        engine.finish();
+        while (engine.pop(s)) write_row(out.file, {live::EmissionStatus::exact, s.kinematics, s.imu});
+      }
+    } else {
+      // Wait for the first pose: it fixes the output grid and the clock.
+      while (!g_stop && engine.knots_pushed() == 0) {
+        take_input();
+        if (input_done) break;
+        if (engine.knots_pushed() == 0) sleep_until_monotonic(io::monotonic_now_ns() + 1'000'000);
+      }
+      if (engine.knots_pushed() > 0) {
+        const TimeNs t0 = engine.first_knot_ns();
+        // The first pose's time is "now" on the sender's clock; each tick goes
+        // out the engine's look-ahead (plus margin) after its own time.
+        const live::TimeMapping clock = live::TimeMapping::start_now(t0, io::monotonic_now_ns(), speed);
+        const TimeNs end_ns = args.duration_s > 0 ? t0 + static_cast<TimeNs>(args.duration_s * 1e9) : INT64_MAX;
+        for (std::int64_t k = 0; !g_stop; ++k) {
+          const TimeNs tick = t0 + (k / po.rate_hz) * kNsPerSecond + (k % po.rate_hz) * kNsPerSecond / po.rate_hz;
+          if (tick > end_ns) break;
+          sleep_until_monotonic(clock.monotonic_at(tick + delay_ns));
+          take_input();
+          if (input_done && !finished) {
+            if (engine.knots_pushed() >= 2) engine.finish();
+            finished = true;
+          }
+          if (finished && engine.ready() == 0 && tick > engine.last_knot_ns()) break;  // past the end of the input
+          const live::Emission e = emitter.emit(tick, samples);
+          if (e.has_sample()) write_row(out.file, e);
+          if (k % 64 == 0) std::fflush(out.file);
+        }
+      }
+    }
+  } catch (const std::exception& e) {
+    std::cerr << "imuemu stream: " << e.what() << "\n";
+    code = kCannotProcess;
+  }
+  source->stop();
+  std::fflush(out.file);
+  const io::PoseSourceCounters c = source->counters();
+  const live::LiveCounters& lc = emitter.counters();
+  std::cerr << "imuemu stream: poses " << c.accepted << " accepted, " << c.rejected() << " rejected (" << c.duplicate
+            << " duplicate, " << c.out_of_order << " out of order), " << c.lost() << " lost, " << refused
+            << " refused by the method; samples " << lc.exact << " exact, " << lc.extrapolated << " extrapolated, "
+            << lc.blending << " blending, " << lc.paused << " paused, " << lc.waiting << " waiting (" << lc.underrun_events << " underruns, " << lc.stale_discarded << " stale)\n";
+  if (std::ferror(out.file)) return kOutputError;
+  return code;
+}
+
+}  // namespace imuemu::cli

@@ -1,0 +1,190 @@
+// The checks and counters every pose source shares (io/pose_source.hpp):
+// ordering, scene conversion, attitude step, datagram sequence statistics,
+// rate-limited logging and line framing. Pure logic without threads or
+// sockets, so tests and fuzzers drive it directly.
+#pragma once
+
+#include <array>
+#include <atomic>
+#include <bitset>
+#include <cstddef>
+#include <cstdint>
+#include <map>
+#include <optional>
+#include <span>
+#include <string>
+#include <string_view>
+
+#include "io/pose_source.hpp"
+#include "io/scene_poses.hpp"
+
+namespace imuemu::io {
+
+// Loss statistics of a datagram stream from the sequence numbers of intact
+// datagrams (docs/pose-wire-format.md §3.2).
+class SequenceTracker {
+ public:
+  enum class Arrival {
+    first,    // the first datagram (or the first after a restart)
+    next,     // highest + 1
+    jump,     // above highest + 1: the numbers in between counted as gaps
+    late,     // a gap member arriving afterwards, within kSequenceWindow
+    repeat,   // already seen (a network duplicate), or below the start
+    stale,    // more than kSequenceWindow below the highest: unknown whether seen
+    restart,  // not above the highest but with a later time: the sender restarted
+  };
+  Arrival observe(std::uint64_t sequence, TimeNs t_ns) noexcept;
+
+  std::uint64_t gaps() const noexcept { return gaps_; }
+  std::uint64_t late() const noexcept { return late_; }
+  std::uint64_t stale() const noexcept { return stale_; }
+  std::uint64_t restarts() const noexcept { return restarts_; }
+  std::uint64_t highest() const noexcept { return highest_; }
+
+ private:
+  void begin(std::uint64_t sequence, TimeNs t_ns) noexcept;
+
+  bool started_ = false;
+  std::uint64_t highest_ = 0;
+  TimeNs highest_t_ns_ = 0;
+  std::bitset<kSequenceWindow> seen_;  // bit s % window: s in (highest - window, highest] arrived
+  std::uint64_t gaps_ = 0, late_ = 0, stale_ = 0, restarts_ = 0;
+};
+
+// At most one line per key per interval; the next line of a key reports how
+// many of its lines were suppressed in between.
+class RateLimitedLog {
+ public:
+  RateLimitedLog(std::function<void(std::string_view)> sink, TimeNs interval_ns);
+  void log(std::string_view key, std::string_view message, TimeNs now_ns);
+  void flush();  // one line per key with suppressed lines left
+ private:
+  struct KeyState {
+    TimeNs last_ns = 0;
+    std::uint64_t suppressed = 0;
+  };
+  void emit(std::string_view line);
+  std::function<void(std::string_view)> sink_;
+  TimeNs interval_ns_;
+  std::map<std::string, KeyState, std::less<>> keys_;
+};
+
+// Splits a byte stream into lines of at most kMaxPoseLineBytes. Pull-based,
+// so a source under backpressure can stop taking lines and resume later.
+class LineFramer {
+ public:
+  void append(const char* data, std::size_t size);
+  enum class Next { none, line, too_long };
+  // line: `line` is the next complete line (without '\n'), valid until the
+  // next append(). too_long: a line exceeded kMaxPoseLineBytes; its bytes are
+  // discarded up to its '\n' (reported once, when the limit is crossed).
+  Next next(std::string_view& line);
+  // The stream ended: true if bytes of an unterminated line were left (they
+  // are dropped). Resets the framer.
+  bool finish();
+  void reset();
+
+ private:
+  std::string buffer_;
+  std::size_t pos_ = 0;     // start of the unread part
+  bool discarding_ = false;  // inside a too-long line
+};
+
+// The shared admission rules and the counters of one source.
+class PoseAdmission {
+ public:
+  explicit PoseAdmission(const PoseSourceOptions& options);
+
+  // Every unit that arrives is counted received, then ends in exactly one of
+  // ignored(), admit() (accepted or rejected) or a reject_*().
+  void received() noexcept { add(kReceived); }
+  void ignored() noexcept { add(kIgnored); }
+  void reject_line(LineError reason, std::string_view message);
+  void reject_datagram(DatagramError reason, std::string_view message);
+
+  // Ordering (duplicate, out_of_order), scene conversion (scene_refused) and
+  // attitude step rules against the last accepted pose. True: `out` holds
+  // the pose to queue and it counted as accepted.
+  bool admit(const TrajectoryRecord& record, std::optional<std::uint64_t> sequence, TimeNs receive_ns,
+             SourcedPose& out);
+
+  // Loss statistics of an intact datagram (call before admit()).
+  void observe_sequence(std::uint64_t sequence, TimeNs t_ns);
+
+  // One datagram through all of the above: counted received, decoded
+  // (docs/pose-wire-format.md §2), its sequence observed, admitted. True:
+  // `out` holds the pose to queue. `from` names the sender in log lines.
+  bool receive_datagram(std::span<const std::uint8_t> bytes, TimeNs receive_ns, std::string_view from,
+                        SourcedPose& out);
+
+  void overflow_dropped() noexcept { add(kOverflowDropped); }
+  void backpressure_event() noexcept { add(kBackpressureEvents); }
+  void connection() noexcept { add(kConnections); }
+  void connection_refused() noexcept { add(kConnectionsRefused); }
+
+  void log(std::string_view key, std::string_view message);  // rate limited, prefixed with the source name
+  void flush_log() { log_.flush(); }
+
+  PoseSourceCounters counters() const noexcept;
+  const std::string& name() const noexcept { return name_; }
+  void set_name(std::string name) { name_ = std::move(name); }
+
+ private:
+  enum Slot : std::size_t {
+    kReceived,
+    kIgnored,
+    kAccepted,
+    kSceneRefused,
+    kDuplicate,
+    kOutOfOrder,
+    kAttitudeStep,
+    kOverflowDropped,
+    kBackpressureEvents,
+    kSequenceGaps,
+    kLate,
+    kStale,
+    kSequenceRestarts,
+    kConnections,
+    kConnectionsRefused,
+    kLineErrorsFirst,
+    kDatagramErrorsFirst = kLineErrorsFirst + kLineErrorCount,
+    kSlotCount = kDatagramErrorsFirst + kDatagramErrorCount,
+  };
+  void add(std::size_t slot, std::uint64_t n = 1) noexcept {
+    counters_[slot].fetch_add(n, std::memory_order_relaxed);
+  }
+  void reject(Slot slot, std::string_view key, const std::string& message);
+
+  std::string name_;
+  double max_attitude_step_rad_;
+  ScenePoseConverter converter_;
+  SequenceTracker sequence_;
+  RateLimitedLog log_;
+  std::optional<Pose> last_accepted_;
+  std::array<std::atomic<std::uint64_t>, kSlotCount> counters_{};
+};
+
+// One line stream (a TCP connection, stdin) through framer, decoder and
+// admission: bytes in, poses ready to queue out.
+class PoseLineStream {
+ public:
+  // stream_name: used in messages with line numbers ("tcp ... connection 2:17: ...").
+  PoseLineStream(PoseAdmission& admission, std::string stream_name);
+  // Bytes read at receive_ns (CLOCK_MONOTONIC). Call only once next() has
+  // returned false: the lines of earlier bytes are then all taken.
+  void append(const char* data, std::size_t size, TimeNs receive_ns);
+  // The next accepted pose of the buffered lines (counting and logging every
+  // line on the way); false when no complete line is left.
+  bool next(SourcedPose& out);
+  // End of the stream: counts an unterminated last line (unterminated_line).
+  void finish();
+
+ private:
+  PoseAdmission& admission_;
+  std::string stream_name_;
+  PoseLineDecoder decoder_;
+  LineFramer framer_;
+  TimeNs receive_ns_ = 0;
+};
+
+}  // namespace imuemu::io

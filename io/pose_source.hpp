@@ -1,0 +1,206 @@
+// Live pose sources (GitHub issue "Streaming engine", pose-source part):
+// file replay, UDP datagrams, a TCP line stream and stdin, behind one
+// interface. Each runs on its own thread, validates what arrives
+// (docs/pose-wire-format.md), converts it to a scene-frame Pose and hands it
+// to a bounded PoseQueue that the consumer (the streaming engine's thread)
+// drains without ever waiting for data.
+//
+// Every unit that arrives (a datagram, a line, a file record) is counted as
+// received and ends in exactly one of: ignored (blank/comment/version/header
+// line), accepted, or one rejection counter:
+//   received == ignored + accepted + rejected()
+// Rejected units are dropped and logged (rate limited); the stream goes on.
+#pragma once
+
+#include <array>
+#include <atomic>
+#include <chrono>
+#include <condition_variable>
+#include <cstddef>
+#include <cstdint>
+#include <functional>
+#include <memory>
+#include <mutex>
+#include <numbers>
+#include <optional>
+#include <string>
+#include <string_view>
+#include <thread>
+#include <vector>
+
+#include "core/interpolation.hpp"
+#include "core/trajectory.hpp"
+#include "io/pose_wire.hpp"
+
+namespace imuemu::io {
+
+// CLOCK_MONOTONIC in int64 nanoseconds: the receive time of every pose.
+TimeNs monotonic_now_ns() noexcept;
+
+// What a source delivers: a validated pose, already in the scene frame.
+struct SourcedPose {
+  Pose pose;                              // scene frame (io/scene_poses.hpp)
+  std::optional<std::uint64_t> sequence;  // the datagram's sequence number (datagrams only)
+  TimeNs receive_ns = 0;                  // CLOCK_MONOTONIC when its bytes were read (file replay: released)
+  std::size_t line = 0;                   // line in the file or stream (per TCP connection); 0 for datagrams
+};
+
+// Bounded single-producer single-consumer hand-off. A mutex guards a
+// preallocated ring; it is held only to copy one item, so the consumer never
+// waits for data (try_pop/drain return at once) and never allocates
+// (drain appends to the caller's vector).
+class PoseQueue {
+ public:
+  explicit PoseQueue(std::size_t capacity);  // capacity >= 1
+
+  // Producer side.
+  bool try_push(const SourcedPose& item);                 // false (nothing queued) when full
+  bool push_or_drop_oldest(const SourcedPose& item);      // always queues; true if the oldest was dropped
+  bool wait_for_space(std::chrono::nanoseconds timeout);  // true once not full
+
+  // Consumer side.
+  bool try_pop(SourcedPose& out);
+  std::size_t drain(std::vector<SourcedPose>& out, std::size_t max_items = SIZE_MAX);
+
+  std::size_t size() const;
+  std::size_t capacity() const noexcept { return ring_.size(); }
+  std::uint64_t popped() const noexcept { return popped_.load(std::memory_order_relaxed); }
+
+ private:
+  mutable std::mutex mutex_;
+  std::condition_variable space_;
+  std::vector<SourcedPose> ring_;
+  std::size_t head_ = 0;   // oldest item
+  std::size_t count_ = 0;
+  std::atomic<std::uint64_t> popped_{0};
+};
+
+// A snapshot of a source's counters (definitions in docs/pose-wire-format.md §3).
+struct PoseSourceCounters {
+  std::uint64_t received = 0;  // datagrams / lines (incl. blank, comment, header) / file records
+  std::uint64_t ignored = 0;   // blank, comment, version and header lines
+  std::uint64_t accepted = 0;  // passed every check and handed to the queue
+  std::array<std::uint64_t, kLineErrorCount> line_errors{};          // by LineError
+  std::array<std::uint64_t, kDatagramErrorCount> datagram_errors{};  // by DatagramError
+  std::uint64_t scene_refused = 0;   // valid record without a finite pose in the scene (ScenePoseConverter)
+  std::uint64_t duplicate = 0;       // time equal to the last accepted pose's
+  std::uint64_t out_of_order = 0;    // time before the last accepted pose's
+  std::uint64_t attitude_step = 0;   // rotation from the last accepted pose >= max_attitude_step_rad
+
+  std::uint64_t overflow_dropped = 0;     // accepted, then dropped as the oldest queued (UDP burst)
+  std::uint64_t backpressure_events = 0;  // times reading stopped because the queue was full (TCP, stdin, file)
+
+  // Datagram arrival statistics over intact datagrams (checksum ok):
+  std::uint64_t sequence_gaps = 0;      // sequence numbers skipped by forward jumps
+  std::uint64_t late = 0;               // skipped numbers that arrived afterwards (within kSequenceWindow)
+  std::uint64_t stale = 0;              // arrived more than kSequenceWindow below the highest seen
+  std::uint64_t sequence_restarts = 0;  // sender restarts: number not above the highest, time after its time
+
+  std::uint64_t connections = 0;          // TCP clients served
+  std::uint64_t connections_refused = 0;  // TCP clients closed at once because one was connected
+
+  std::uint64_t rejected() const noexcept;  // every rejection counter above (wire + admission)
+  // Datagrams that never arrived intact (exact when reordering stays within kSequenceWindow).
+  std::uint64_t lost() const noexcept { return sequence_gaps - late; }
+};
+
+inline constexpr std::uint64_t kSequenceWindow = 1024;
+
+struct PoseSourceOptions {
+  std::string name;  // in messages and log lines; empty: a default like "udp 127.0.0.1:5005"
+  Physics physics = Physics::flat;
+  std::size_t queue_capacity = 1024;
+  // Relative rotation between consecutive accepted poses at or above which a
+  // pose is rejected (attitude_step): the interpolation's own limit, where
+  // the geodesic between two knots stops being unique (core/interpolation.hpp).
+  double max_attitude_step_rad = std::numbers::pi - interp::kAntipodalMarginRad;
+  // Receives each log line (without '\n'); empty: written to stderr.
+  std::function<void(std::string_view)> log;
+  // At most one log line per rejection reason per interval; the next line
+  // says how many were suppressed.
+  TimeNs log_interval_ns = kNsPerSecond;
+};
+
+class PoseAdmission;
+
+// One live pose source. start() launches its thread; stop() (also in the
+// destructor) ends it. Counters and the queue may be used from any thread.
+class PoseSource {
+ public:
+  virtual ~PoseSource();
+  PoseSource(const PoseSource&) = delete;
+  PoseSource& operator=(const PoseSource&) = delete;
+
+  void start();  // once
+  void stop();   // idempotent; joins the thread, then logs suppressed counts
+
+  PoseQueue& queue() noexcept { return queue_; }
+  PoseSourceCounters counters() const;
+  const std::string& name() const noexcept { return name_; }
+  // The input ended (file, stdin: end of input or a read error) and every
+  // accepted pose is in the queue; nothing more will come.
+  bool finished() const noexcept { return finished_.load(std::memory_order_acquire); }
+  // The bound port (UDP, TCP; useful with port 0), 0 for the others.
+  virtual std::uint16_t local_port() const noexcept { return 0; }
+
+ protected:
+  explicit PoseSource(PoseSourceOptions options);
+
+  virtual void run() = 0;   // the source's thread body; returns when stopping or at end of input
+  virtual void wake() = 0;  // makes run() notice stop_requested() promptly
+
+  bool stop_requested() const noexcept { return stop_requested_.load(std::memory_order_acquire); }
+  void mark_finished() noexcept { finished_.store(true, std::memory_order_release); }
+  // Blocking push for sources that apply backpressure from their own thread
+  // (file, stdin): counts one backpressure event per stall. False if stopping.
+  bool push_with_backpressure(const SourcedPose& item);
+  // Sleeps until CLOCK_MONOTONIC reaches due_ns; false if stopping.
+  bool sleep_until(TimeNs due_ns);
+  void notify_sleepers();
+  void set_name(std::string name);  // before start()
+
+  std::string name_;
+  PoseQueue queue_;
+  std::unique_ptr<PoseAdmission> admission_;
+
+ private:
+  std::thread thread_;
+  std::atomic<bool> stop_requested_{false};
+  std::atomic<bool> finished_{false};
+  std::mutex sleep_mutex_;
+  std::condition_variable sleep_cv_;
+};
+
+// Replays a trajectory CSV file (docs/trajectory-format.md). The whole file is
+// read and validated first: a bad file throws TrajectoryFormatError from the
+// factory, as does a file whose records have no meaning in the scene.
+struct FileReplayOptions {
+  // Records are released at first_release + (t - t_first) / speed (CLOCK_MONOTONIC);
+  // a finite speed > 0. A release that falls behind (backpressure) is not
+  // caught up by bursting: the next records keep their own due times.
+  double speed = 1.0;
+  bool as_fast_as_possible = false;  // ignore speed; only backpressure paces
+};
+std::unique_ptr<PoseSource> make_file_replay_source(const std::string& path, const FileReplayOptions& replay,
+                                                    PoseSourceOptions options);
+
+struct NetEndpoint {
+  std::string address = "0.0.0.0";  // IPv4 or IPv6 literal to bind
+  std::uint16_t port = 0;           // 0: an ephemeral port (see local_port())
+  int receive_buffer_bytes = 0;     // SO_RCVBUF for UDP; 0 keeps the system default
+};
+// Pose datagrams v1 (docs/pose-wire-format.md §2) on a bound UDP socket. A
+// burst beyond the queue drops the oldest queued pose (overflow_dropped):
+// the freshest poses matter most to a live stream. Throws std::runtime_error
+// if the address cannot be bound.
+std::unique_ptr<PoseSource> make_udp_pose_source(const NetEndpoint& endpoint, PoseSourceOptions options);
+// Pose lines (docs/pose-wire-format.md §1) from one TCP client at a time;
+// other clients are closed at once while one is connected. While the queue is
+// full the source stops reading, so TCP flow control slows the sender.
+std::unique_ptr<PoseSource> make_tcp_pose_source(const NetEndpoint& endpoint, PoseSourceOptions options);
+// Pose lines from a file descriptor (stdin: 0; a pipe, a tty or a regular
+// file), not owned. Backpressure as for TCP. finished() at end of input
+// (or a read error, which is logged).
+std::unique_ptr<PoseSource> make_fd_pose_source(int fd, PoseSourceOptions options);
+
+}  // namespace imuemu::io

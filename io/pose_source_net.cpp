@@ -1,0 +1,246 @@
+// UDP datagram and TCP line pose sources on Boost.Asio, each with its own
+// io_context run by the source's thread.
+#include <boost/asio/io_context.hpp>
+#include <boost/asio/ip/address.hpp>
+#include <boost/asio/ip/tcp.hpp>
+#include <boost/asio/ip/udp.hpp>
+#include <boost/asio/steady_timer.hpp>
+#include <optional>
+#include <stdexcept>
+#include <utility>
+#include <vector>
+
+#include "io/pose_admission.hpp"
+#include "io/pose_source.hpp"
+
+namespace imuemu::io {
+namespace {
+
+namespace asio = boost::asio;
+using boost::system::error_code;
+
+asio::ip::address parse_address(const NetEndpoint& endpoint, std::string_view what) {
+  error_code ec;
+  const asio::ip::address address = asio::ip::make_address(endpoint.address, ec);
+  if (ec) {
+    throw std::runtime_error(std::string(what) + " pose source: '" + endpoint.address +
+                             "' is not an IPv4 or IPv6 address: " + ec.message());
+  }
+  return address;
+}
+
+// "udp 127.0.0.1:5005", with the port actually bound.
+std::string endpoint_name(std::string_view protocol, const std::string& address, std::uint16_t port) {
+  return std::string(protocol) + " " + address + ":" + std::to_string(port);
+}
+
+[[noreturn]] void bind_failed(const std::string& name, const error_code& ec) {
+  throw std::runtime_error(name + ": cannot bind: " + ec.message());
+}
+
+// ---------------------------------------------------------------- UDP
+
+class UdpPoseSource final : public PoseSource {
+ public:
+  UdpPoseSource(const NetEndpoint& endpoint, PoseSourceOptions options)
+      : PoseSource(std::move(options)), socket_(io_), buffer_(kMaxDatagramBytes) {
+    const asio::ip::udp::endpoint local(parse_address(endpoint, "udp"), endpoint.port);
+    error_code ec;
+    socket_.open(local.protocol(), ec);
+    if (!ec && endpoint.receive_buffer_bytes > 0)
+      socket_.set_option(asio::socket_base::receive_buffer_size(endpoint.receive_buffer_bytes), ec);
+    if (!ec) socket_.bind(local, ec);
+    if (ec) bind_failed(endpoint_name("udp", endpoint.address, endpoint.port), ec);
+    port_ = socket_.local_endpoint().port();
+    if (name_.empty()) set_name(endpoint_name("udp", endpoint.address, port_));
+  }
+  ~UdpPoseSource() override { stop(); }
+  std::uint16_t local_port() const noexcept override { return port_; }
+
+ private:
+  // Larger than any UDP payload: an oversized datagram is seen whole and
+  // refused for its length instead of being truncated into a valid size.
+  static constexpr std::size_t kMaxDatagramBytes = 65536;
+
+  void run() override {
+    receive_next();
+    io_.run();
+  }
+  void wake() override { io_.stop(); }
+
+  void receive_next() {
+    socket_.async_receive_from(asio::buffer(buffer_), sender_, [this](const error_code& ec, std::size_t size) {
+      if (ec == asio::error::operation_aborted) return;
+      if (ec) {
+        // ICMP errors and the like are transient; a datagram stream goes on.
+        admission_->log("receive_error", "receive failed: " + ec.message());
+      } else {
+        handle(size, monotonic_now_ns());
+      }
+      receive_next();
+    });
+  }
+
+  void handle(std::size_t size, TimeNs receive_ns) {
+    SourcedPose pose;
+    if (sender_ != named_sender_) {  // the sender's name only for log lines: no allocation per datagram
+      named_sender_ = sender_;
+      sender_name_ = sender_.address().to_string() + ":" + std::to_string(sender_.port());
+    }
+    if (!admission_->receive_datagram(std::span(buffer_.data(), size), receive_ns, sender_name_, pose)) return;
+    // A burst beyond the queue: the freshest poses matter most.
+    if (queue_.push_or_drop_oldest(pose)) admission_->overflow_dropped();
+  }
+
+  asio::io_context io_;
+  asio::ip::udp::socket socket_;
+  asio::ip::udp::endpoint sender_;
+  asio::ip::udp::endpoint named_sender_;
+  std::string sender_name_;
+  std::vector<std::uint8_t> buffer_;
+  std::uint16_t port_ = 0;
+};
+
+// ---------------------------------------------------------------- TCP
+
+class TcpPoseSource final : public PoseSource {
+ public:
+  TcpPoseSource(const NetEndpoint& endpoint, PoseSourceOptions options)
+      : PoseSource(std::move(options)),
+        acceptor_(io_),
+        retry_timer_(io_),
+        accept_retry_timer_(io_),
+        read_buffer_(kReadBytes) {
+    const asio::ip::tcp::endpoint local(parse_address(endpoint, "tcp"), endpoint.port);
+    error_code ec;
+    acceptor_.open(local.protocol(), ec);
+    if (!ec) acceptor_.set_option(asio::socket_base::reuse_address(true), ec);
+    if (!ec) acceptor_.bind(local, ec);
+    if (!ec) acceptor_.listen(asio::socket_base::max_listen_connections, ec);
+    if (ec) bind_failed(endpoint_name("tcp", endpoint.address, endpoint.port), ec);
+    port_ = acceptor_.local_endpoint().port();
+    if (name_.empty()) set_name(endpoint_name("tcp", endpoint.address, port_));
+  }
+  ~TcpPoseSource() override { stop(); }
+  std::uint16_t local_port() const noexcept override { return port_; }
+
+ private:
+  static constexpr std::size_t kReadBytes = 16384;
+  // While the queue is full the source polls it at this period (the
+  // consumer drains at its own pace; Asio has no wake-up from the queue).
+  static constexpr auto kBackpressureRetry = std::chrono::milliseconds(1);
+
+  void run() override {
+    accept_next();
+    io_.run();
+  }
+  void wake() override { io_.stop(); }
+
+  void accept_next() {
+    acceptor_.async_accept([this](const error_code& ec, asio::ip::tcp::socket socket) {
+      if (ec == asio::error::operation_aborted) return;
+      if (ec) {
+        // E.g. out of file descriptors: try again a little later rather
+        // than spin on an error that repeats at once.
+        admission_->log("accept_error", "accept failed: " + ec.message());
+        accept_retry_timer_.expires_after(std::chrono::milliseconds(100));
+        accept_retry_timer_.async_wait([this](const error_code& timer_ec) {
+          if (timer_ec != asio::error::operation_aborted) accept_next();
+        });
+        return;
+      }
+      if (client_) {
+        // One client at a time: a second stream would interleave with the
+        // first's poses. Closing tells the client at once.
+        admission_->connection_refused();
+        error_code ignored;
+        const auto peer = socket.remote_endpoint(ignored);
+        admission_->log("connection_refused", "refused client " + peer.address().to_string() + ":" +
+                                                  std::to_string(peer.port()) + ": another client is connected");
+        socket.close(ignored);
+      } else {
+        admission_->connection();
+        ++connection_number_;
+        error_code ignored;
+        const auto peer = socket.remote_endpoint(ignored);
+        // The admission's log lines start with the source's name; messages
+        // add the connection and its line numbers.
+        client_name_ = "connection " + std::to_string(connection_number_) + " (" + peer.address().to_string() + ":" +
+                       std::to_string(peer.port()) + ")";
+        admission_->log("connection", "client connected: " + client_name_);
+        client_.emplace(std::move(socket));
+        stream_.emplace(*admission_, client_name_);
+        read_next();
+      }
+      accept_next();
+    });
+  }
+
+  void read_next() {
+    client_->async_read_some(asio::buffer(read_buffer_), [this](const error_code& ec, std::size_t size) {
+      if (ec == asio::error::operation_aborted) return;
+      if (ec) {
+        stream_->finish();
+        admission_->log("connection", "client disconnected: " + client_name_ +
+                                          (ec == asio::error::eof ? std::string() : " (" + ec.message() + ")"));
+        error_code ignored;
+        client_->close(ignored);
+        client_.reset();
+        stream_.reset();
+        return;
+      }
+      stream_->append(read_buffer_.data(), size, monotonic_now_ns());
+      process();
+    });
+  }
+
+  // Queues the buffered lines' poses; reads on only when all are queued.
+  void process() {
+    for (;;) {
+      if (pending_) {
+        if (!queue_.try_push(*pending_)) {
+          if (!stalled_) {
+            stalled_ = true;
+            admission_->backpressure_event();
+          }
+          retry_timer_.expires_after(kBackpressureRetry);
+          retry_timer_.async_wait([this](const error_code& ec) {
+            if (ec != asio::error::operation_aborted) process();
+          });
+          return;
+        }
+        pending_.reset();
+        stalled_ = false;
+      }
+      SourcedPose pose;
+      if (!stream_->next(pose)) break;
+      pending_ = pose;
+    }
+    read_next();
+  }
+
+  asio::io_context io_;
+  asio::ip::tcp::acceptor acceptor_;
+  asio::steady_timer retry_timer_;
+  asio::steady_timer accept_retry_timer_;
+  std::optional<asio::ip::tcp::socket> client_;
+  std::optional<PoseLineStream> stream_;
+  std::optional<SourcedPose> pending_;
+  bool stalled_ = false;
+  std::vector<char> read_buffer_;
+  std::uint64_t connection_number_ = 0;
+  std::string client_name_;
+  std::uint16_t port_ = 0;
+};
+
+}  // namespace
+
+std::unique_ptr<PoseSource> make_udp_pose_source(const NetEndpoint& endpoint, PoseSourceOptions options) {
+  return std::make_unique<UdpPoseSource>(endpoint, std::move(options));
+}
+
+std::unique_ptr<PoseSource> make_tcp_pose_source(const NetEndpoint& endpoint, PoseSourceOptions options) {
+  return std::make_unique<TcpPoseSource>(endpoint, std::move(options));
+}
+
+}  // namespace imuemu::io
