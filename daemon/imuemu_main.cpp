@@ -2,6 +2,7 @@
 #include <CLI/CLI.hpp>
 
 #include "daemon/commands.hpp"
+#include "daemon/ports_command.hpp"
 
 int main(int argc, char** argv) {
   using namespace imuemu::cli;
@@ -82,6 +83,8 @@ int main(int argc, char** argv) {
   d->add_option("--out-dir", demo_dir, "Directory for the demo's files")->capture_default_str();
   d->add_option("--rate", demo_rate, "Output rate in Hz")->capture_default_str()->check(CLI::Range(1, 100000));
 
+  auto* ports_command = app.add_subcommand("ports", "List the serial ports libserialport finds (name, USB VID:PID, serial number, manufacturer)");
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -93,5 +96,6 @@ int main(int argc, char** argv) {
   if (*s) return sample_trajectory(smp);
   if (*d) return demo(demo_dir, demo_rate);
   if (*st) return stream(str);
+  if (*ports_command) return ports();
   return kUsageError;
 }

@@ -1,40 +1,78 @@
-// The one narrow interface every transport plug-in implements (UART, pty,
-// CAN, ...). Encoders produce frames; a transport only moves bytes/frames.
+// The one narrow interface every byte-stream transport plug-in implements
+// (pty, UART, ...). Encoders produce frames; a transport only moves bytes.
+// CAN has its own frame type (drivers/can_transport.hpp) and GPIO sync pulses
+// are not frames (drivers/gpio_sync.hpp); both report the same counters.
 #pragma once
 
+#include <chrono>
 #include <cstddef>
 #include <cstdint>
 #include <span>
+#include <stdexcept>
 #include <string>
 
 namespace imuemu::drivers {
 
+// A transport could not be opened or its options are wrong. The message
+// names the device (port, interface, chip/line) and what was expected.
+class TransportError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+// Every frame offered to a transport ends in exactly one bucket, or is
+// still queued:
+//   frames == frames_sent + dropped_queue_full + dropped_link_down + write_errors + queued
+// (exact whenever the writer is idle; a snapshot taken while it works may be
+// one frame behind).
 struct TransportCounters {
-  std::uint64_t frames = 0;
-  std::uint64_t bytes = 0;
-  std::uint64_t write_errors = 0;
+  std::uint64_t frames = 0;              // frames offered to write_frame
+  std::uint64_t bytes = 0;               // their bytes
+  std::uint64_t frames_sent = 0;         // handed to the kernel completely
+  std::uint64_t bytes_sent = 0;
+  std::uint64_t dropped_queue_full = 0;  // refused: the bounded queue was full (reader or link slower than the schedule)
+  std::uint64_t dropped_link_down = 0;   // refused or discarded while the link was down (device removed,
+                                         // interface down or bus-off, no process reading the pty)
+  std::uint64_t write_errors = 0;        // invalid frame (empty, too large, bad CAN id/length) or refused by the kernel
+  std::uint64_t queued = 0;              // accepted, not yet handed to the kernel
+  std::uint64_t link_down_events = 0;    // up -> down transitions
+  std::uint64_t link_restored = 0;       // down -> up transitions
+  std::uint64_t retries = 0;             // back-off retries of a frame the kernel had no room for (CAN ENOBUFS)
+  std::uint64_t input_bytes_discarded = 0;  // bytes the peer sent us (commands to the emulated device), read and dropped
 };
 
 class Transport {
  public:
   virtual ~Transport() = default;
   // Queues one encoded frame; never blocks the emission thread. Returns false
-  // (and counts a write error) when the frame could not be accepted.
+  // when the frame was not accepted (counted in one of the dropped/error
+  // counters). Called from one thread at a time (the emission thread).
   virtual bool write_frame(std::span<const std::byte> frame) = 0;
   virtual std::string describe() const = 0;
-  virtual const TransportCounters& counters() const = 0;
+  // A snapshot: a transport's writer thread updates the counters concurrently.
+  virtual TransportCounters counters() const = 0;
+  // False while frames are being dropped because the device or reader is gone.
+  virtual bool link_up() const { return true; }
+  // Waits until every accepted frame has been handed to the kernel (or
+  // dropped); false on timeout. For an orderly shutdown, not the emission path.
+  virtual bool flush(std::chrono::milliseconds timeout) {
+    (void)timeout;
+    return true;
+  }
 };
 
-// Discards frames, counting them: for timing benchmarks and dry runs.
+// Discards frames, counting them as sent: for timing benchmarks and dry runs.
 class NullTransport final : public Transport {
  public:
   bool write_frame(std::span<const std::byte> frame) override {
     ++counters_.frames;
     counters_.bytes += frame.size();
+    ++counters_.frames_sent;
+    counters_.bytes_sent += frame.size();
     return true;
   }
   std::string describe() const override { return "null"; }
-  const TransportCounters& counters() const override { return counters_; }
+  TransportCounters counters() const override { return counters_; }
 
  private:
   TransportCounters counters_;

@@ -1,0 +1,274 @@
+// MAVLink 2 encoder/decoder for HIL_SENSOR (#107), HIGHRES_IMU (#105) and
+// HEARTBEAT (#0).
+//
+// Sources (read, nothing copied):
+//  [G] MAVLink developer guide, "Packet Serialization"
+//      (mavlink.io/en/guide/serialization.html): packet format, little-endian
+//      fields, field reordering by type size with extensions last, CRC_EXTRA,
+//      empty-byte payload truncation, CRC-16/MCRF4XX over everything but the
+//      magic byte plus CRC_EXTRA.
+//  [X] message_definitions/v1.0/common.xml: HIL_SENSOR, HIGHRES_IMU,
+//      HIL_SENSOR_UPDATED_FLAGS, MAV_COMPONENT; minimal.xml: HEARTBEAT,
+//      MAV_TYPE, MAV_AUTOPILOT, MAV_STATE.
+//  [H] MAVLink heartbeat microservice (mavlink.io/en/services/heartbeat.html):
+//      components send HEARTBEAT at 1 Hz.
+//
+// Units and axes: HIL_SENSOR/HIGHRES_IMU x/y/zacc are specific force in
+// m/s^2 and x/y/zgyro angular rate in rad/s, "in NED body frame" [X], i.e.
+// the MAVLink body frame x forward, y right, z down - the same axes as the
+// emulator's body FRD, so the axis conversion is the identity (done
+// explicitly in frd_to_mavlink_body()); units are already SI. At rest, level,
+// zacc = -9.81 (specific force, as PX4's own IMU drivers report it).
+#include "drivers/protocols/mavlink2.hpp"
+
+#include <algorithm>
+#include <array>
+#include <boost/crc.hpp>
+#include <cmath>
+#include <limits>
+
+#include "drivers/protocols/wire_bytes.hpp"
+
+namespace imuemu::drivers::mavlink2 {
+
+namespace {
+
+using X25Engine = boost::crc_optimal<16, 0x1021, 0xFFFF, 0, true, true>;
+
+// [X] minimal.xml values for a component that is not a flight controller.
+constexpr std::uint8_t kMavTypeGeneric = 0;
+constexpr std::uint8_t kMavAutopilotInvalid = 8;
+constexpr std::uint8_t kMavStateActive = 4;
+constexpr std::uint8_t kMavlinkVersion = 3;  // the dialect <version>; "gets added by protocol"
+
+constexpr TimeNs kHeartbeatPeriodNs = kNsPerSecond;  // [H]
+
+// Payload offsets after [G] field reordering of [X]: time_usec (8 bytes)
+// first, then the 13 floats in XML order, then fields_updated, then the
+// extension field `id` (extensions keep XML order, after the base fields).
+constexpr std::size_t kOffTimeUsec = 0;
+constexpr std::size_t kOffAcc = 8;     // xacc, yacc, zacc
+constexpr std::size_t kOffGyro = 20;   // xgyro, ygyro, zgyro
+constexpr std::size_t kOffTemperature = 56;
+constexpr std::size_t kOffFieldsUpdated = 60;
+constexpr std::size_t kOffHilSensorId = 64;   // after u32 fields_updated
+constexpr std::size_t kOffHighresId = 62;     // after u16 fields_updated
+
+Vec3 frd_to_mavlink_body(const Vec3& v_frd) { return v_frd; }
+Vec3 mavlink_body_to_frd(const Vec3& v_body) { return v_body; }
+
+std::uint16_t packet_checksum(std::span<const std::uint8_t> after_magic, std::uint8_t crc_extra) {
+  X25Engine crc;
+  crc.process_bytes(after_magic.data(), after_magic.size());
+  crc.process_byte(crc_extra);
+  return crc.checksum();
+}
+
+// time_usec [X] is unsigned microseconds; sample time is int64 ns. Floor to
+// the microsecond; times before 0 cannot be represented and are sent as 0.
+std::uint64_t time_usec_from_ns(TimeNs t_ns) {
+  return t_ns <= 0 ? 0 : static_cast<std::uint64_t>(t_ns / 1000);
+}
+
+// Writes one float vector at `at`; returns the fields_updated bits of the
+// axes that carry a real value (a NaN axis is sent as 0 with its bit clear:
+// the receiver is told that axis did not update). Beyond the float range is
+// clamped to +-FLT_MAX (HIL_SENSOR has no saturation flag).
+std::uint32_t put_vec3_f32(std::uint8_t* at, const Vec3& v, unsigned first_bit) {
+  std::uint32_t updated = 0;
+  for (int i = 0; i < 3; ++i) {
+    const wire::WireValue w = wire::to_wire_float<float>(v[i]);
+    wire::put_le<float>(at + 4 * i, static_cast<float>(w.value));
+    if (!w.was_nan) updated |= 1u << (first_bit + static_cast<unsigned>(i));
+  }
+  return updated;
+}
+
+Vec3 get_vec3_f32(const std::uint8_t* at) {
+  return {wire::get_le<float>(at), wire::get_le<float>(at + 4), wire::get_le<float>(at + 8)};
+}
+
+// The IMU payload shared by HIL_SENSOR and HIGHRES_IMU up to fields_updated;
+// returns fields_updated.
+std::uint32_t fill_imu_payload(std::uint8_t* p, const ImuFrameInput& sample,
+                               const StreamEncoderOptions& options) {
+  wire::put_le<std::uint64_t>(p + kOffTimeUsec, time_usec_from_ns(sample.t_ns));
+  std::uint32_t updated = put_vec3_f32(p + kOffAcc, frd_to_mavlink_body(sample.accel_m_s2), 0);
+  updated |= put_vec3_f32(p + kOffGyro, frd_to_mavlink_body(sample.gyro_rad_s), 3);
+  // A faulted sensor sends no update: PX4's simulator interface publishes
+  // accel/gyro only for the fields_updated bits that are set.
+  if ((sample.status & kStatusFault) != 0) updated &= ~kUpdatedAccelGyro;
+  if (options.mavlink_temperature_degC) {
+    const wire::WireValue w = wire::to_wire_float<float>(*options.mavlink_temperature_degC);
+    wire::put_le<float>(p + kOffTemperature, static_cast<float>(w.value));
+    if (!w.was_nan) updated |= kUpdatedTemperature;
+  }
+  return updated;
+}
+
+}  // namespace
+
+std::uint16_t crc16_mcrf4xx(std::span<const std::uint8_t> bytes) {
+  X25Engine crc;
+  crc.process_bytes(bytes.data(), bytes.size());
+  return crc.checksum();
+}
+
+void Encoder::append_packet(const MessageSpec& message, std::span<const std::uint8_t> payload,
+                            std::vector<std::uint8_t>& out) {
+  // [G] "Empty-Byte Payload Truncation": trailing zero bytes are not sent,
+  // but the first payload byte always is.
+  std::size_t len = payload.size();
+  while (len > 1 && payload[len - 1] == 0) --len;
+
+  std::array<std::uint8_t, kHeaderBytes + 255 + kChecksumBytes> packet{};
+  packet[0] = kMagic;
+  packet[1] = static_cast<std::uint8_t>(len);
+  packet[2] = 0;  // incompat_flags: unsigned
+  packet[3] = 0;  // compat_flags
+  packet[4] = sequence_++;
+  packet[5] = options_.mavlink_system_id;
+  packet[6] = options_.mavlink_component_id;
+  packet[7] = static_cast<std::uint8_t>(message.id);
+  packet[8] = static_cast<std::uint8_t>(message.id >> 8);
+  packet[9] = static_cast<std::uint8_t>(message.id >> 16);
+  std::copy_n(payload.begin(), len, packet.begin() + kHeaderBytes);
+  const std::uint16_t crc = packet_checksum(
+      std::span<const std::uint8_t>(packet.data() + 1, kHeaderBytes - 1 + len), message.crc_extra);
+  wire::put_le<std::uint16_t>(packet.data() + kHeaderBytes + len, crc);
+  out.insert(out.end(), packet.begin(), packet.begin() + static_cast<std::ptrdiff_t>(kHeaderBytes + len + kChecksumBytes));
+}
+
+void Encoder::encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out) {
+  if (options_.mavlink_hil_sensor) {
+    std::array<std::uint8_t, kHilSensor.payload_bytes> p{};
+    const std::uint32_t updated = fill_imu_payload(p.data(), sample, options_);
+    wire::put_le<std::uint32_t>(p.data() + kOffFieldsUpdated, updated);
+    p[kOffHilSensorId] = options_.mavlink_sensor_id;
+    append_packet(kHilSensor, p, out);
+  }
+  if (options_.mavlink_highres_imu) {
+    std::array<std::uint8_t, kHighresImu.payload_bytes> p{};
+    const std::uint32_t updated = fill_imu_payload(p.data(), sample, options_);
+    wire::put_le<std::uint16_t>(p.data() + kOffFieldsUpdated, static_cast<std::uint16_t>(updated));
+    p[kOffHighresId] = options_.mavlink_sensor_id;
+    append_packet(kHighresImu, p, out);
+  }
+}
+
+void Encoder::periodic(TimeNs now_ns, std::vector<std::uint8_t>& out) {
+  if (!options_.mavlink_heartbeat) return;
+  // Due now if never sent, if the period has elapsed, or if the clock went
+  // back by more than a period (a restarted timeline must not go silent).
+  const bool due = !next_heartbeat_ns_ || now_ns >= *next_heartbeat_ns_ ||
+                   now_ns < *next_heartbeat_ns_ - kHeartbeatPeriodNs;
+  if (!due) return;
+  // Keep a 1 Hz grid while on schedule; after a stall restart from now
+  // instead of bursting the missed ones.
+  next_heartbeat_ns_ = (next_heartbeat_ns_ && now_ns >= *next_heartbeat_ns_ &&
+                        now_ns - *next_heartbeat_ns_ < kHeartbeatPeriodNs)
+                           ? *next_heartbeat_ns_ + kHeartbeatPeriodNs
+                           : now_ns + kHeartbeatPeriodNs;
+
+  // [X] HEARTBEAT wire order: custom_mode (u32) then the u8 fields in XML
+  // order: type, autopilot, base_mode, system_status, mavlink_version.
+  std::array<std::uint8_t, kHeartbeat.payload_bytes> p{};
+  wire::put_le<std::uint32_t>(p.data(), 0);  // custom_mode
+  p[4] = kMavTypeGeneric;
+  p[5] = kMavAutopilotInvalid;
+  p[6] = 0;  // base_mode
+  p[7] = kMavStateActive;
+  p[8] = kMavlinkVersion;
+  append_packet(kHeartbeat, p, out);
+}
+
+std::size_t Encoder::max_bytes_per_sample() const {
+  constexpr std::size_t kOverhead = kHeaderBytes + kChecksumBytes;
+  std::size_t bytes = 0;
+  if (options_.mavlink_hil_sensor) bytes += kOverhead + kHilSensor.payload_bytes;
+  if (options_.mavlink_highres_imu) bytes += kOverhead + kHighresImu.payload_bytes;
+  if (options_.mavlink_heartbeat) {
+    const std::size_t heartbeat = kOverhead + kHeartbeat.payload_bytes;
+    // One heartbeat per second spread over the samples of that second; at
+    // or below 1 Hz (or unknown) at most one per periodic() call, i.e. one
+    // per sample.
+    const double rate = options_.nominal_sample_rate_hz;
+    bytes += rate > 1.0 ? static_cast<std::size_t>(std::ceil(static_cast<double>(heartbeat) / rate)) : heartbeat;
+  }
+  return bytes;
+}
+
+void Decoder::feed(std::span<const std::uint8_t> bytes, const SampleCallback& on_sample) {
+  buffer_.insert(buffer_.end(), bytes.begin(), bytes.end());
+  static constexpr std::array<std::uint8_t, 1> kSync{kMagic};
+
+  wire::scan_frames(buffer_, kSync, counters_, [&](std::span<const std::uint8_t> c) {
+    using wire::Candidate;
+    if (c.size() < kHeaderBytes) return wire::CandidateResult{Candidate::kNeedMore};
+    // [G] "Incompatibility Flags": a packet with a flag we do not understand
+    // must be discarded. Signed packets are accepted (signature not checked:
+    // no key here), their 13 signature bytes skipped.
+    const std::uint8_t incompat = c[2];
+    if ((incompat & ~kIncompatSigned) != 0) return wire::CandidateResult{Candidate::kMalformed};
+    const std::uint32_t msgid = std::uint32_t{c[7]} | std::uint32_t{c[8]} << 8 | std::uint32_t{c[9]} << 16;
+    const MessageSpec* spec = nullptr;
+    for (const MessageSpec* m : {&kHeartbeat, &kHighresImu, &kHilSensor}) {
+      if (m->id == msgid) spec = m;
+    }
+    // Without its CRC_EXTRA a message cannot be checked: not accepted.
+    if (spec == nullptr) return wire::CandidateResult{Candidate::kMalformed};
+
+    const std::size_t len = c[1];
+    const std::size_t total = kHeaderBytes + len + kChecksumBytes +
+                              ((incompat & kIncompatSigned) != 0 ? kSignatureBytes : 0);
+    if (c.size() < total) return wire::CandidateResult{Candidate::kNeedMore};
+    const std::uint16_t sent = wire::get_le<std::uint16_t>(c.data() + kHeaderBytes + len);
+    if (packet_checksum(c.subspan(1, kHeaderBytes - 1 + len), spec->crc_extra) != sent) {
+      return wire::CandidateResult{Candidate::kBadChecksum};
+    }
+    ++counters_.frames;
+
+    // [G] seq: "Components increment value for each message sent" - one
+    // 8-bit counter per (system, component); a step of k means k-1 lost.
+    const std::uint8_t seq = c[4];
+    const auto key = static_cast<std::uint16_t>(std::uint16_t{c[5]} << 8 | c[6]);
+    auto [it, fresh] = sequences_.try_emplace(key, SequenceState{seq, seq});
+    if (!fresh) {
+      const auto step = static_cast<std::uint8_t>(seq - it->second.last);
+      if (step != 0) counters_.sequence_gaps += step - 1u;
+      it->second.widened += step;
+      it->second.last = seq;
+    }
+
+    if (msgid != sample_message_id_) return wire::CandidateResult{Candidate::kAccepted, total};
+
+    // [G] truncation: zero-extend to the full length. Longer than we know
+    // means newer extension fields: ignored.
+    std::array<std::uint8_t, 255> p{};
+    std::copy_n(c.begin() + kHeaderBytes, len, p.begin());
+    const std::uint32_t updated = msgid == kHilSensor.id
+                                      ? wire::get_le<std::uint32_t>(p.data() + kOffFieldsUpdated)
+                                      : wire::get_le<std::uint16_t>(p.data() + kOffFieldsUpdated);
+    DecodedSample s;
+    s.sequence = it->second.widened;
+    s.has_sequence = true;
+    const std::uint64_t time_usec = wire::get_le<std::uint64_t>(p.data() + kOffTimeUsec);
+    if (time_usec <= static_cast<std::uint64_t>(std::numeric_limits<TimeNs>::max() / 1000)) {
+      s.t_ns = static_cast<TimeNs>(time_usec) * 1000;
+      s.has_time = true;
+    }
+    s.accel_m_s2 = mavlink_body_to_frd(get_vec3_f32(p.data() + kOffAcc));
+    s.gyro_rad_s = mavlink_body_to_frd(get_vec3_f32(p.data() + kOffGyro));
+    if ((updated & kUpdatedAccelGyro) != kUpdatedAccelGyro) s.status |= kStatusFault;
+
+    if (!s.accel_m_s2.allFinite() || !s.gyro_rad_s.allFinite()) {
+      ++counters_.other_errors;  // never pass NaN/inf on
+    } else {
+      ++counters_.samples;
+      if (on_sample) on_sample(s);
+    }
+    return wire::CandidateResult{Candidate::kAccepted, total};
+  });
+}
+
+}  // namespace imuemu::drivers::mavlink2

@@ -1,0 +1,232 @@
+// MicroStrain MIP encoder/decoder for the IMU data set (0x80).
+//
+// Sources (read, nothing copied):
+//  [P] 3DM-GX5-35 DCP manual, 6 "MIP Packet Reference": packet = 0x75 0x65,
+//      descriptor set, payload length (sum of the field lengths), fields
+//      (length incl. itself and the descriptor, descriptor, data), 2-byte
+//      Fletcher checksum over every preceding byte of the packet (6.3, 6.4).
+//  [D] 3DM-CV7 online DCP manual, data fields of set 0x80: Scaled
+//      Accelerometer 0x04 (vector3f, g), Scaled Gyro 0x05 (vector3f, rad/s),
+//      Delta Theta 0x07 (vector3f, rad), Delta Velocity 0x08 (vector3f,
+//      g*s), GPS Timestamp 0x12 (double tow [s], u16 week number since 1980,
+//      u16 valid flags: pps 0, refresh 1, initialized 2, tow 3, week 4);
+//      Overrange Status 0x18 (u16: accel x/y/z 0x1/0x2/0x4, gyro x/y/z
+//      0x10/0x20/0x40). Values are IEEE-754 big-endian; 1 g = 9.80665 m/s^2.
+//  [F] 3DM-GX5-10 / 3DM-CV7 user manuals, "Sensor Frame": x along the long
+//      side toward the connector, y 90 deg to the right of x, z through the
+//      bottom - NED-aligned when the connector points north, upright, level.
+//      IMU quantities are reported in the vehicle frame, which is the sensor
+//      frame unless a sensor-to-vehicle transform is set (default none).
+//
+// Units and axes: the emulated device is mounted connector forward, upright,
+// with no sensor-to-vehicle transform, so its sensor frame is body FRD and
+// the axis conversion is the identity (frd_to_mip_sensor()). Units are
+// converted explicitly: specific force m/s^2 -> g and delta-v m/s -> g*s by
+// dividing by 9.80665, angular rate and delta theta stay rad/s and rad.
+// Accelerometers report specific force: level at rest z = -1 g
+// (LORD-MicroStrain/microstrain_inertial issue #97: "-9.81 does make sense").
+#include "drivers/protocols/mip.hpp"
+
+#include <array>
+#include <cmath>
+#include <limits>
+
+#include "drivers/protocols/wire_bytes.hpp"
+
+namespace imuemu::drivers::mip {
+
+namespace {
+
+constexpr std::size_t kVectorFieldBytes = 2 + 12;
+constexpr std::size_t kGpsFieldBytes = 2 + 8 + 2 + 2;
+constexpr std::size_t kOverrangeFieldBytes = 2 + 2;
+
+Vec3 frd_to_mip_sensor(const Vec3& v_frd) { return v_frd; }
+Vec3 mip_sensor_to_frd(const Vec3& v_sensor) { return v_sensor; }
+
+// Appends one vector3f field; returns the overrange bits (first_bit, +1, +2)
+// of the axes that had to be clamped (beyond the float range) or were NaN.
+std::uint16_t put_vector_field(std::vector<std::uint8_t>& out, std::uint8_t descriptor, const Vec3& v,
+                               std::uint16_t first_bit) {
+  std::uint16_t overrange = 0;
+  std::array<std::uint8_t, kVectorFieldBytes> f{};
+  f[0] = static_cast<std::uint8_t>(kVectorFieldBytes);
+  f[1] = descriptor;
+  for (int i = 0; i < 3; ++i) {
+    const wire::WireValue w = wire::to_wire_float<float>(v[i]);
+    if (w.clamped || w.was_nan) overrange |= static_cast<std::uint16_t>(first_bit << i);
+    wire::put_be<float>(f.data() + 2 + 4 * i, static_cast<float>(w.value));
+  }
+  out.insert(out.end(), f.begin(), f.end());
+  return overrange;
+}
+
+Vec3 get_vector(const std::uint8_t* at) {
+  return {wire::get_be<float>(at), wire::get_be<float>(at + 4), wire::get_be<float>(at + 8)};
+}
+
+}  // namespace
+
+std::uint16_t fletcher_checksum(std::span<const std::uint8_t> bytes) {
+  std::uint8_t sum1 = 0;
+  std::uint8_t sum2 = 0;
+  for (const std::uint8_t b : bytes) {
+    sum1 = static_cast<std::uint8_t>(sum1 + b);
+    sum2 = static_cast<std::uint8_t>(sum2 + sum1);
+  }
+  return static_cast<std::uint16_t>(sum1 << 8 | sum2);
+}
+
+void Encoder::encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out) {
+  // Built in place at the end of `out`; length and checksum patched last.
+  const std::size_t start = out.size();
+  out.insert(out.end(), {kSync1, kSync2, kSensorDataSet, 0});
+
+  std::uint16_t overrange = 0;
+  overrange |= put_vector_field(out, kScaledAccel, frd_to_mip_sensor(sample.accel_m_s2) / kStandardGravity_m_s2,
+                                kOverrangeAccelX);
+  overrange |= put_vector_field(out, kScaledGyro, frd_to_mip_sensor(sample.gyro_rad_s), kOverrangeGyroX);
+  if (options_.include_deltas) {
+    overrange |= put_vector_field(out, kDeltaTheta, frd_to_mip_sensor(sample.delta_theta_rad), kOverrangeGyroX);
+    overrange |= put_vector_field(out, kDeltaVelocity,
+                                  frd_to_mip_sensor(sample.delta_velocity_m_s) / kStandardGravity_m_s2,
+                                  kOverrangeAccelX);
+  }
+
+  // GPS timestamp: gps = offset + t as week / time of week. The time of week
+  // is a double on the wire [D]; below 604800 s a double resolves 0.12 ns, so
+  // integer ns survive the round trip exactly. Times the field cannot carry
+  // (before the GPS epoch, beyond int64 ns, week beyond u16) go out as zero
+  // with the valid bits clear.
+  std::int64_t gps_ns = 0;
+  double tow_s = 0.0;
+  std::uint16_t week = 0;
+  std::uint16_t valid = 0;
+  if (!__builtin_add_overflow(options_.mip_gps_time_at_t0_ns, sample.t_ns, &gps_ns) && gps_ns >= 0 &&
+      gps_ns / kNsPerGpsWeek <= std::numeric_limits<std::uint16_t>::max()) {
+    week = static_cast<std::uint16_t>(gps_ns / kNsPerGpsWeek);
+    tow_s = static_cast<double>(gps_ns % kNsPerGpsWeek) / 1e9;
+    valid = kTimeInitialized | kTowValid | kWeekNumberValid;
+  }
+  std::array<std::uint8_t, kGpsFieldBytes> g{};
+  g[0] = static_cast<std::uint8_t>(kGpsFieldBytes);
+  g[1] = kGpsTimestamp;
+  wire::put_be<double>(g.data() + 2, tow_s);
+  wire::put_be<std::uint16_t>(g.data() + 10, week);
+  wire::put_be<std::uint16_t>(g.data() + 12, valid);
+  out.insert(out.end(), g.begin(), g.end());
+
+  // The sensor model's saturated bit does not say which axis: every accel
+  // and gyro axis is flagged; axes clamped here add their own bit anyway.
+  if ((sample.status & kStatusSaturated) != 0) overrange |= kOverrangeAccelGyroAll;
+  if (options_.mip_overrange_status) {
+    std::array<std::uint8_t, kOverrangeFieldBytes> f{static_cast<std::uint8_t>(kOverrangeFieldBytes),
+                                                     kOverrangeStatus};
+    wire::put_be<std::uint16_t>(f.data() + 2, overrange);
+    out.insert(out.end(), f.begin(), f.end());
+  }
+
+  out[start + 3] = static_cast<std::uint8_t>(out.size() - start - kHeaderBytes);
+  const std::uint16_t checksum =
+      fletcher_checksum(std::span<const std::uint8_t>(out.data() + start, out.size() - start));
+  out.push_back(static_cast<std::uint8_t>(checksum >> 8));
+  out.push_back(static_cast<std::uint8_t>(checksum));
+}
+
+std::size_t Encoder::max_bytes_per_sample() const {
+  std::size_t payload = 2 * kVectorFieldBytes + kGpsFieldBytes;
+  if (options_.include_deltas) payload += 2 * kVectorFieldBytes;
+  if (options_.mip_overrange_status) payload += kOverrangeFieldBytes;
+  return kHeaderBytes + payload + kChecksumBytes;
+}
+
+void Decoder::feed(std::span<const std::uint8_t> bytes, const SampleCallback& on_sample) {
+  buffer_.insert(buffer_.end(), bytes.begin(), bytes.end());
+  static constexpr std::array<std::uint8_t, 2> kSync{kSync1, kSync2};
+
+  wire::scan_frames(buffer_, kSync, counters_, [&](std::span<const std::uint8_t> c) {
+    using wire::Candidate;
+    if (c.size() < kHeaderBytes) return wire::CandidateResult{Candidate::kNeedMore};
+    const std::size_t payload_bytes = c[3];
+    const std::size_t total = kHeaderBytes + payload_bytes + kChecksumBytes;
+    if (c.size() < total) return wire::CandidateResult{Candidate::kNeedMore};
+    const std::uint16_t sent = wire::get_be<std::uint16_t>(c.data() + kHeaderBytes + payload_bytes);
+    if (fletcher_checksum(c.first(kHeaderBytes + payload_bytes)) != sent) {
+      return wire::CandidateResult{Candidate::kBadChecksum};
+    }
+    ++counters_.frames;
+    const wire::CandidateResult accepted{Candidate::kAccepted, total};
+    // Other descriptor sets (command replies, filter data) are valid MIP
+    // packets that carry no IMU sample.
+    if (c[2] != kSensorDataSet) return accepted;
+
+    DecodedSample s;
+    bool has_imu_field = false;
+    bool bad = false;
+    std::size_t at = kHeaderBytes;
+    const std::size_t end = kHeaderBytes + payload_bytes;
+    while (at < end && !bad) {
+      const std::size_t field_bytes = c[at];
+      if (field_bytes < 2 || at + field_bytes > end) {
+        bad = true;
+        break;
+      }
+      const std::uint8_t descriptor = c[at + 1];
+      const std::uint8_t* data = c.data() + at + 2;
+      const std::size_t data_bytes = field_bytes - 2;
+      auto vector_field = [&](Vec3& into, double scale) {
+        if (data_bytes != 12) {
+          bad = true;
+          return;
+        }
+        into = mip_sensor_to_frd(get_vector(data)) * scale;
+        has_imu_field = true;
+      };
+      switch (descriptor) {
+        case kScaledAccel: vector_field(s.accel_m_s2, kStandardGravity_m_s2); break;
+        case kScaledGyro: vector_field(s.gyro_rad_s, 1.0); break;
+        case kDeltaTheta: vector_field(s.delta_theta_rad, 1.0); break;
+        case kDeltaVelocity: vector_field(s.delta_velocity_m_s, kStandardGravity_m_s2); break;
+        case kGpsTimestamp: {
+          if (data_bytes != 12) {
+            bad = true;
+            break;
+          }
+          const double tow_s = wire::get_be<double>(data);
+          const auto week = wire::get_be<std::uint16_t>(data + 8);
+          const auto valid = wire::get_be<std::uint16_t>(data + 10);
+          const std::uint16_t needed = kTowValid | kWeekNumberValid;
+          std::int64_t t_ns = 0;
+          if ((valid & needed) == needed && std::isfinite(tow_s) && tow_s >= 0.0 && tow_s < 604800.0) {
+            const std::int64_t gps_ns = std::int64_t{week} * kNsPerGpsWeek + std::llround(tow_s * 1e9);
+            if (!__builtin_sub_overflow(gps_ns, gps_time_at_t0_ns_, &t_ns)) {
+              s.t_ns = t_ns;
+              s.has_time = true;
+            }
+          }
+          break;
+        }
+        case kOverrangeStatus:
+          if (data_bytes != 2) {
+            bad = true;
+            break;
+          }
+          if ((wire::get_be<std::uint16_t>(data) & kOverrangeAccelGyroAll) != 0) s.status |= kStatusSaturated;
+          break;
+        default: break;  // fields this decoder does not use
+      }
+      at += field_bytes;
+    }
+
+    if (bad || !s.accel_m_s2.allFinite() || !s.gyro_rad_s.allFinite() || !s.delta_theta_rad.allFinite() ||
+        !s.delta_velocity_m_s.allFinite()) {
+      ++counters_.other_errors;  // malformed field list or NaN/inf values
+    } else if (has_imu_field) {
+      ++counters_.samples;
+      if (on_sample) on_sample(s);
+    }
+    return accepted;
+  });
+}
+
+}  // namespace imuemu::drivers::mip

@@ -1,0 +1,71 @@
+// MicroStrain (HBK) MIP packets over a byte stream: the IMU data set 0x80
+// with scaled accelerometer, scaled gyro, delta theta, delta velocity, GPS
+// timestamp and overrange status fields. Written from the 3DM-GX5/3DM-CV7 DCP
+// manuals; no MIP SDK code.
+#pragma once
+
+#include <cstddef>
+#include <cstdint>
+#include <span>
+
+#include "drivers/protocol.hpp"
+#include "drivers/protocols/stream_protocols.hpp"
+
+namespace imuemu::drivers::mip {
+
+inline constexpr std::uint8_t kSync1 = 0x75;  // 'u'
+inline constexpr std::uint8_t kSync2 = 0x65;  // 'e'
+inline constexpr std::size_t kHeaderBytes = 4;   // sync1 sync2 descriptor-set payload-length
+inline constexpr std::size_t kChecksumBytes = 2;
+
+inline constexpr std::uint8_t kSensorDataSet = 0x80;
+inline constexpr std::uint8_t kScaledAccel = 0x04;    // float x3, g
+inline constexpr std::uint8_t kScaledGyro = 0x05;     // float x3, rad/s
+inline constexpr std::uint8_t kDeltaTheta = 0x07;     // float x3, rad
+inline constexpr std::uint8_t kDeltaVelocity = 0x08;  // float x3, g*s
+inline constexpr std::uint8_t kGpsTimestamp = 0x12;   // double tow s, u16 week, u16 flags
+inline constexpr std::uint8_t kOverrangeStatus = 0x18;  // u16 per-axis bits
+
+// GPS timestamp valid flags (0x80,0x12).
+inline constexpr std::uint16_t kTimeInitialized = 0x0004;
+inline constexpr std::uint16_t kTowValid = 0x0008;
+inline constexpr std::uint16_t kWeekNumberValid = 0x0010;
+// Overrange status bits (0x80,0x18).
+inline constexpr std::uint16_t kOverrangeAccelX = 0x0001;  // Y 0x0002, Z 0x0004
+inline constexpr std::uint16_t kOverrangeGyroX = 0x0010;   // Y 0x0020, Z 0x0040
+inline constexpr std::uint16_t kOverrangeAccelGyroAll = 0x0077;
+
+// 1 g as the MIP manuals define it (m/s^2).
+inline constexpr double kStandardGravity_m_s2 = 9.80665;
+inline constexpr std::int64_t kNsPerGpsWeek = 604'800LL * 1'000'000'000LL;
+
+// 16-bit Fletcher checksum of the MIP manuals (3DM-GX5 DCP manual 6.4): two
+// running 8-bit sums over every byte from sync1 to the end of the payload,
+// sum1 in the high byte (sent first).
+std::uint16_t fletcher_checksum(std::span<const std::uint8_t> bytes);
+
+class Encoder final : public StreamEncoder {
+ public:
+  explicit Encoder(const StreamEncoderOptions& options) : options_(options) {}
+  std::string name() const override { return "mip"; }
+  void encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out) override;
+  std::size_t max_bytes_per_sample() const override;
+
+ private:
+  StreamEncoderOptions options_;
+};
+
+class Decoder final : public StreamDecoder {
+ public:
+  explicit Decoder(const StreamEncoderOptions& options)
+      : gps_time_at_t0_ns_(options.mip_gps_time_at_t0_ns) {}
+  void feed(std::span<const std::uint8_t> bytes, const SampleCallback& on_sample) override;
+  const DecoderCounters& counters() const override { return counters_; }
+
+ private:
+  std::int64_t gps_time_at_t0_ns_;
+  std::vector<std::uint8_t> buffer_;
+  DecoderCounters counters_;
+};
+
+}  // namespace imuemu::drivers::mip

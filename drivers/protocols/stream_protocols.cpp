@@ -1,0 +1,66 @@
+#include "drivers/protocols/stream_protocols.hpp"
+
+#include <cmath>
+#include <stdexcept>
+
+#include "drivers/protocols/mavlink2.hpp"
+#include "drivers/protocols/mip.hpp"
+#include "drivers/protocols/native.hpp"
+
+namespace imuemu::drivers {
+
+namespace {
+
+std::string joined_names() {
+  std::string s;
+  for (const std::string& n : stream_protocol_names()) s += (s.empty() ? "" : ", ") + n;
+  return s;
+}
+
+void check_options(const std::string& protocol, const StreamEncoderOptions& o) {
+  if (!std::isfinite(o.nominal_sample_rate_hz) || o.nominal_sample_rate_hz < 0.0) {
+    throw std::invalid_argument("stream protocol '" + protocol +
+                                "': nominal_sample_rate_hz must be finite and >= 0 (0 = unknown)");
+  }
+  if (protocol == "mavlink2") {
+    // MAVLink guide, packet format: 0 is the broadcast address, never a
+    // valid source system or component.
+    if (o.mavlink_system_id == 0) {
+      throw std::invalid_argument("stream protocol 'mavlink2': system id must be 1..255 (0 is broadcast)");
+    }
+    if (o.mavlink_component_id == 0) {
+      throw std::invalid_argument(
+          "stream protocol 'mavlink2': component id must be 1..255 (0 is MAV_COMP_ID_ALL)");
+    }
+    if (!o.mavlink_hil_sensor && !o.mavlink_highres_imu) {
+      throw std::invalid_argument(
+          "stream protocol 'mavlink2': enable HIL_SENSOR or HIGHRES_IMU (or both); neither sends no samples");
+    }
+  }
+}
+
+}  // namespace
+
+std::vector<std::string> stream_protocol_names() { return {"native", "mavlink2", "mip"}; }
+
+std::unique_ptr<StreamEncoder> make_stream_encoder(const std::string& protocol,
+                                                   const StreamEncoderOptions& options) {
+  check_options(protocol, options);
+  if (protocol == "native") return std::make_unique<native::Encoder>(options.include_deltas);
+  if (protocol == "mavlink2") return std::make_unique<mavlink2::Encoder>(options);
+  if (protocol == "mip") return std::make_unique<mip::Encoder>(options);
+  throw std::invalid_argument("unknown stream protocol '" + protocol + "' (expected one of: " + joined_names() +
+                              ")");
+}
+
+std::unique_ptr<StreamDecoder> make_stream_decoder(const std::string& protocol,
+                                                   const StreamEncoderOptions& options) {
+  check_options(protocol, options);
+  if (protocol == "native") return std::make_unique<native::Decoder>();
+  if (protocol == "mavlink2") return std::make_unique<mavlink2::Decoder>(options);
+  if (protocol == "mip") return std::make_unique<mip::Decoder>(options);
+  throw std::invalid_argument("unknown stream protocol '" + protocol + "' (expected one of: " + joined_names() +
+                              ")");
+}
+
+}  // namespace imuemu::drivers
