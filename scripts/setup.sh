@@ -17,6 +17,12 @@ packages=(
   libgtest-dev libgmock-dev libbenchmark-dev clang libclang-rt-14-dev
   # plots (run under Debian's /usr/bin/python3)
   python3 python3-numpy python3-matplotlib
+  # hardware-in-the-loop fixtures (tests/hil): user-mode Linux with vcan; QEMU
+  # booting Debian's kernel (fetched by apt-get download) with a busybox
+  # initramfs, the UART, vcan and the gpio_recorder module built against the
+  # headers; the CAN and GPIO tools run inside both
+  user-mode-linux kmod iproute2 qemu-system-x86 busybox-static cpio xz-utils
+  linux-headers-amd64 can-utils gpiod python3-can
 )
 
 missing=()
