@@ -12,7 +12,7 @@ packages=(
   # transports
   libserialport-dev libgpiod-dev linux-libc-dev libboost-dev libsystemd-dev
   # configuration and command line
-  libtomlplusplus-dev libcli11-dev
+  libtomlplusplus-dev libcli11-dev nlohmann-json3-dev
   # tests, benchmarks, and libFuzzer (clang's runtime) for the parsers
   libgtest-dev libgmock-dev libbenchmark-dev clang libclang-rt-14-dev
   # plots (run under Debian's /usr/bin/python3)
