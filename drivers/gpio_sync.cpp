@@ -81,13 +81,15 @@ void GpioSyncOutput::raise(Output& output, std::atomic<std::uint64_t>& started) 
     skipped_.fetch_add(1, std::memory_order_relaxed);
     return;
   }
-  const TimeNs now = monotonic_ns();
   if (!output.write(true)) {
     set_errors_.fetch_add(1, std::memory_order_relaxed);
     output.active.store(0, std::memory_order_release);
     return;
   }
-  const TimeNs due = now + output.width_ns;
+  // The width counts from when the leading edge is on the line, not from before
+  // the write: a write that is slow (a preempted ioctl, a slow guest) would
+  // otherwise eat into the pulse and make it shorter than configured.
+  const TimeNs due = monotonic_ns() + output.width_ns;
   output.trailing_due_ns.store(due, std::memory_order_relaxed);
   itimerspec when{};
   when.it_value.tv_sec = static_cast<time_t>(due / kNsPerSecond);
