@@ -3,6 +3,11 @@
 
 #include "daemon/commands.hpp"
 #include "daemon/ports_command.hpp"
+#include "daemon/listen_command.hpp"
+#include "daemon/budget_command.hpp"
+#include "daemon/emit_command.hpp"
+#include "daemon/bench_timing_command.hpp"
+#include "daemon/status_command.hpp"
 
 int main(int argc, char** argv) {
   using namespace imuemu::cli;
@@ -85,6 +90,13 @@ int main(int argc, char** argv) {
 
   auto* ports_command = app.add_subcommand("ports", "List the serial ports libserialport finds (name, USB VID:PID, serial number, manufacturer)");
 
+  int exit_code = kUsageError;  // set by the callbacks of the add_*_command subcommands
+  add_listen_command(app, exit_code);
+  add_budget_command(app, exit_code);
+  add_emit_command(app, exit_code);
+  add_bench_timing_command(app, exit_code);
+  add_status_command(app, exit_code);
+
   try {
     app.parse(argc, argv);
   } catch (const CLI::ParseError& e) {
@@ -97,5 +109,5 @@ int main(int argc, char** argv) {
   if (*d) return demo(demo_dir, demo_rate);
   if (*st) return stream(str);
   if (*ports_command) return ports();
-  return kUsageError;
+  return exit_code;
 }

@@ -1,0 +1,86 @@
+// imuemud's control socket: a Unix stream socket served from Boost.Asio on
+// the daemon's service io_context (never the emission thread). A client
+// connects, sends ONE line (a command name, "\n"-terminated, at most
+// kMaxCommandBytes), and receives ONE JSON document followed by "\n", then
+// the daemon closes the connection. Protocol documented in docs/daemon.md.
+//
+// Commands are registered by the daemon (status, stats-reset, test hooks);
+// an unknown command gets {"error": "...", "commands": [...]}, a handler
+// that throws gets {"error": "<command>: <what>"}. A client that sends
+// nothing, too much or no newline within the client timeout is dropped; it
+// never blocks other clients (every connection is asynchronous).
+//
+// The socket file is created with mode 0660 (owner and group only) and, when
+// a group is named, chowned to that group before listen(), so no one can
+// connect before the permissions are final. A stale socket file (nothing
+// listening on it) is removed at start; a live one is an error (another
+// daemon serves that path). The file is removed when the server closes.
+#pragma once
+
+#include <chrono>
+#include <cstddef>
+#include <functional>
+#include <map>
+#include <memory>
+#include <stdexcept>
+#include <string>
+
+#include <boost/asio/io_context.hpp>
+#include <boost/asio/local/stream_protocol.hpp>
+#include <nlohmann/json.hpp>
+
+namespace imuemu::service {
+
+inline constexpr std::size_t kMaxCommandBytes = 256;
+
+// Where imuemud of scene `scene_name` listens unless told otherwise (same
+// rule as the scene file's [daemon] control_socket default):
+// /run/imuemu/<scene_name>.sock (RuntimeDirectory=imuemu of imuemud@.service).
+std::string default_control_socket_path(const std::string& scene_name);
+
+// Setting up the socket failed; the message names the path or the group.
+class ControlSocketError : public std::runtime_error {
+ public:
+  using std::runtime_error::runtime_error;
+};
+
+struct ControlSocketOptions {
+  std::string path;
+  std::string group;  // empty: the daemon's own group
+  std::chrono::milliseconds client_timeout{2000};  // to send the command line and take the reply
+};
+
+// Runs on the io_context's thread; must not block (read atomics, copy a
+// snapshot under a short lock).
+using ControlCommandHandler = std::function<nlohmann::json()>;
+
+class ControlServer {
+ public:
+  // Creates, secures and listens on the socket, and starts accepting; throws
+  // ControlSocketError. Connections are served while `io` runs.
+  ControlServer(boost::asio::io_context& io, ControlSocketOptions options);
+  // Closes and removes the socket file. Call on the io_context's thread or
+  // after it stopped (the usual order: io.stop(), join, destroy).
+  ~ControlServer();
+  ControlServer(const ControlServer&) = delete;
+  ControlServer& operator=(const ControlServer&) = delete;
+
+  // Registers (or replaces) a command. `help` is listed in "help"'s reply.
+  // Register before clients may call it, or from the io_context's thread.
+  void add_command(const std::string& name, const std::string& help, ControlCommandHandler handler);
+
+  const std::string& path() const { return options_.path; }
+  void close();  // stop accepting, remove the socket file; idempotent
+
+  struct Shared;  // state the connections share (outlives `this` if they do)
+
+ private:
+  void accept_next();
+
+  ControlSocketOptions options_;
+  boost::asio::local::stream_protocol::acceptor acceptor_;
+  std::shared_ptr<Shared> shared_;
+  bool open_ = false;
+};
+
+}  // namespace imuemu::service

@@ -1,0 +1,818 @@
+// The emission engine (daemon/emission.hpp): producer thread, lock-free rings,
+// one real-time emission thread.
+#include "daemon/emission.hpp"
+
+#include <pthread.h>
+#include <sched.h>
+#include <sys/mman.h>
+#include <time.h>
+
+#include <algorithm>
+#include <atomic>
+#include <cerrno>
+#include <condition_variable>
+#include <cstring>
+#include <future>
+#include <limits>
+#include <mutex>
+#include <span>
+#include <stdexcept>
+#include <thread>
+
+#include <boost/lockfree/spsc_queue.hpp>
+#include <nlohmann/json.hpp>
+
+#include "core/stream.hpp"
+#include "drivers/socketcan.hpp"
+#include "io/pose_source.hpp"
+
+namespace imuemu::emission {
+
+TimeNs monotonic_now_ns() noexcept {
+  timespec ts{};
+  clock_gettime(CLOCK_MONOTONIC, &ts);
+  return static_cast<TimeNs>(ts.tv_sec) * kNsPerSecond + ts.tv_nsec;
+}
+
+TimeNs realtime_now_ns() noexcept {
+  timespec ts{};
+  clock_gettime(CLOCK_REALTIME, &ts);
+  return static_cast<TimeNs>(ts.tv_sec) * kNsPerSecond + ts.tv_nsec;
+}
+
+namespace {
+
+__extension__ typedef __int128 Int128;  // exact products of int64 times (GCC/Clang)
+
+constexpr TimeNs kMaxSleepChunkNs = 50'000'000;  // a stop request is seen within this
+constexpr TimeNs kProducerPollNs = 1'000'000;
+
+TimeNs thread_cpu_ns() noexcept {
+  timespec ts{};
+  clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
+  return static_cast<TimeNs>(ts.tv_sec) * kNsPerSecond + ts.tv_nsec;
+}
+
+void sleep_until_monotonic(TimeNs due_ns) noexcept {
+  timespec ts{static_cast<time_t>(due_ns / kNsPerSecond), static_cast<long>(due_ns % kNsPerSecond)};
+  while (clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &ts, nullptr) == EINTR) {
+  }
+}
+
+// Grid time k of a stream starting at t0: t0 + floor(k * 1e9 / rate), split
+// so that no product overflows (core/pipeline.hpp output_grid).
+TimeNs grid_ns(TimeNs t0_ns, std::uint64_t k, std::int64_t rate_hz) noexcept {
+  const auto r = static_cast<std::uint64_t>(rate_hz);
+  return t0_ns + static_cast<TimeNs>((k / r) * static_cast<std::uint64_t>(kNsPerSecond) +
+                                     (k % r) * static_cast<std::uint64_t>(kNsPerSecond) / r);
+}
+
+// Number of grid ticks with t_k <= t0 + span_ns: the k with k * 1e9 < (span + 1) * rate.
+std::uint64_t ticks_within(TimeNs span_ns, std::int64_t rate_hz) {
+  const Int128 bound = static_cast<Int128>(span_ns + 1) * rate_hz;
+  return static_cast<std::uint64_t>((bound + kNsPerSecond - 1) / kNsPerSecond);
+}
+
+class CanTransportOutput final : public CanOutput {
+ public:
+  explicit CanTransportOutput(std::unique_ptr<drivers::CanTransport> t) : transport_(std::move(t)) {}
+  bool send(const drivers::CanFrame& frame) override { return transport_->send(frame); }
+  std::string describe() const override { return transport_->describe(); }
+  drivers::TransportCounters counters() const override { return transport_->counters(); }
+  bool flush(std::chrono::milliseconds timeout) override { return transport_->flush(timeout); }
+
+ private:
+  std::unique_ptr<drivers::CanTransport> transport_;
+};
+
+// What the producer hands the emission thread for one tick.
+struct Slot {
+  std::uint64_t tick = 0;
+  bool send = false;  // false: the emitter had nothing to send (waiting, paused)
+  live::EmissionStatus status = live::EmissionStatus::waiting;
+  drivers::ImuFrameInput frame;
+};
+
+// Trajectory input: the stream engine is fed knots only as far as the next
+// sample needs, so its memory stays O(window) however long the trajectory.
+class OnDemandSource final : public live::ExactSampleSource {
+ public:
+  OnDemandSource(StreamPipeline& engine, const std::vector<Pose>& knots) : engine_(engine), knots_(knots) {}
+  std::optional<live::ExactSample> next_sample() override {
+    StreamSample s;
+    while (!engine_.pop(s)) {
+      if (next_knot_ < knots_.size()) {
+        try {
+          engine_.push(knots_[next_knot_]);
+        } catch (const std::exception&) {
+          ++refused_;  // a knot the method cannot take: counted, the others go on
+        }
+        ++next_knot_;
+      } else if (!finished_) {
+        finished_ = true;
+        if (engine_.knots_pushed() >= 2) {
+          try {
+            engine_.finish();
+          } catch (const std::exception&) {
+            ++refused_;
+          }
+        }
+      } else {
+        return std::nullopt;
+      }
+    }
+    return s;
+  }
+  std::uint64_t refused() const { return refused_; }
+  std::size_t pushed() const { return next_knot_; }
+
+ private:
+  StreamPipeline& engine_;
+  const std::vector<Pose>& knots_;
+  std::size_t next_knot_ = 0;
+  bool finished_ = false;
+  std::uint64_t refused_ = 0;
+};
+
+}  // namespace
+
+std::unique_ptr<CanOutput> can_transport_output(std::unique_ptr<drivers::CanTransport> transport) {
+  return std::make_unique<CanTransportOutput>(std::move(transport));
+}
+
+struct Device {
+  DeviceOptions options;
+  TimeNs nominal_period_ns = 0;
+  std::unique_ptr<StreamPipeline> engine;
+  std::unique_ptr<live::LiveEmitter> emitter;
+  std::unique_ptr<live::ExactSampleSource> samples;
+  OnDemandSource* on_demand = nullptr;  // trajectory input: == samples
+  boost::lockfree::spsc_queue<Slot> ring;
+
+  // Producer thread only.
+  std::uint64_t next_produce_tick = 0;
+  std::optional<std::pair<std::uint64_t, ImuSample>> previous_imu;  // for the period integrals
+
+  // Emission thread only.
+  std::uint64_t next_emit_tick = 0;
+  TimeNs next_deadline_ns = 0;
+  bool done = false;
+  std::vector<std::uint8_t> bytes;
+  std::vector<drivers::CanFrame> can_frames;
+
+  // Shared (relaxed atomics; snapshot by stats()).
+  std::atomic<std::uint64_t> end_tick{std::numeric_limits<std::uint64_t>::max()};  // no tick at or after
+  std::atomic<std::uint64_t> ticks{0}, emitted{0}, exact{0}, extrapolated{0}, blending{0}, not_sent{0},
+      producer_late{0}, deadline_misses{0}, dropped_late{0}, write_errors{0}, last_counter{0};
+  std::atomic<TimeNs> engine_lag_ns{0};
+  LatenessHistogram lateness;
+  mutable std::mutex live_mutex;  // producer <-> stats(), never the emission thread
+  live::LiveCounters live_counters;
+  std::optional<drivers::GpioSyncCounters> gpio_final;  // after the lines were released
+
+  Device(DeviceOptions o, std::size_t capacity) : options(std::move(o)), ring(capacity) {}
+};
+
+struct EmissionEngine::Impl {
+  EngineOptions options;
+  std::vector<std::unique_ptr<Device>> devices;
+
+  std::optional<live::TimeMapping> mapping_value;  // written once before mapping_ready is released
+  std::atomic<bool> mapping_ready{false};
+  TimeNs t0_ns = 0;
+
+  std::atomic<bool> stop_requested{false};
+  std::atomic<bool> emission_stall{false};
+  std::atomic<bool> producer_stall{false};
+  std::atomic<TimeNs> heartbeat_ns{0};
+  std::atomic<bool> running{false};
+  std::atomic<bool> finished{false};
+  std::atomic<bool> input_without_poses{false};
+  std::vector<io::SourcedPose> pose_batch;  // producer only
+  std::atomic<std::uint64_t> poses_pushed{0}, poses_refused{0};
+  LatenessHistogram lateness;
+  std::atomic<std::uint64_t> deadline_misses{0};
+  std::atomic<TimeNs> emission_cpu_ns{0}, producer_cpu_ns{0}, emission_wall_ns{0};
+  bool realtime_priority = false, memory_locked = false;
+  std::string realtime_note;
+  bool live_input_finished = false;  // producer only
+  bool started = false, stopped = false;
+
+  std::thread producer, emitter;
+  std::mutex done_mutex;
+  std::condition_variable done_cv;
+  bool emitter_exited = false;
+
+  TimeNs deadline_ns(const Device& d, std::uint64_t k) const {
+    return mapping_value->monotonic_at(grid_ns(t0_ns, k, d.options.rate_hz) + options.emit_delay_ns);
+  }
+  bool live_input() const { return options.source != nullptr; }
+
+  void produce(Device& d, bool time_gated);
+  void take_live_input();
+  void run_producer();
+  void run_emission(std::promise<std::string>* setup);
+  void emit_tick(Device& d, std::uint64_t k, bool drop);
+  void finish_emission();
+};
+
+EmissionEngine::EmissionEngine(EngineOptions options, std::vector<DeviceOptions> devices)
+    : impl_(std::make_unique<Impl>()) {
+  impl_->options = std::move(options);
+  EngineOptions& o = impl_->options;
+  if (devices.empty()) throw std::invalid_argument("emission: no device configured");
+  if (o.source == nullptr && o.trajectory.size() < 2)
+    throw std::invalid_argument("emission: the trajectory has " + std::to_string(o.trajectory.size()) +
+                                " poses; at least two are needed");
+  if (o.source != nullptr && !o.trajectory.empty())
+    throw std::invalid_argument("emission: give either a trajectory or a pose source, not both");
+  if (o.emit_delay_ns < 0 || o.producer_lead_ns <= 0 || o.start_lead_ns < 0)
+    throw std::invalid_argument("emission: emit_delay_ns and start_lead_ns must be >= 0, producer_lead_ns > 0");
+  if (o.source == nullptr) o.emit_delay_ns = 0;  // all poses are there: no look-ahead to wait for
+  if (o.realtime.priority < 0 || o.realtime.priority > 99)
+    throw std::invalid_argument("emission: SCHED_FIFO priority " + std::to_string(o.realtime.priority) +
+                                " is not in 1..99 (0: normal scheduling)");
+  for (DeviceOptions& dev : devices) {
+    const std::string where = "emission device '" + dev.name + "': ";
+    if (dev.rate_hz < 1 || dev.rate_hz > 1'000'000)
+      throw std::invalid_argument(where + "rate " + std::to_string(dev.rate_hz) + " Hz is not in 1..1000000");
+    const bool stream = dev.stream_encoder && dev.transport;
+    const bool can = dev.can_encoder && dev.can_output;
+    if (stream == can || (stream && (dev.can_encoder || dev.can_output)) ||
+        (can && (dev.stream_encoder || dev.transport)))
+      throw std::invalid_argument(where + "expected exactly one output: a stream encoder with a transport, or a CAN encoder with a CAN output");
+    if (dev.blend_ns < 0) throw std::invalid_argument(where + "blend_ns < 0");
+    dev.pipeline.rate_hz = dev.rate_hz;
+    const TimeNs ring_span_ns = std::max<TimeNs>(o.producer_lead_ns, 250'000'000);
+    const std::size_t capacity =
+        o.ring_capacity > 0 ? o.ring_capacity
+                            : static_cast<std::size_t>(std::max<Int128>(
+                                  16, static_cast<Int128>(ring_span_ns) * dev.rate_hz / kNsPerSecond + 2));
+    auto d = std::make_unique<Device>(std::move(dev), capacity);
+    d->nominal_period_ns = kNsPerSecond / d->options.rate_hz;
+    d->engine = std::make_unique<StreamPipeline>(d->options.pipeline);
+    live::LiveEmitterOptions lo;
+    lo.scene = d->options.pipeline.scene;
+    lo.underrun = d->options.underrun;
+    lo.blend_ns = d->options.blend_ns;
+    d->emitter = std::make_unique<live::LiveEmitter>(lo);
+    if (o.source == nullptr) {
+      auto s = std::make_unique<OnDemandSource>(*d->engine, o.trajectory);
+      d->on_demand = s.get();
+      d->samples = std::move(s);
+      const std::uint64_t n = ticks_within(o.trajectory.back().t_ns - o.trajectory.front().t_ns, d->options.rate_hz);
+      d->end_tick = o.max_ticks_per_device ? std::min(n, *o.max_ticks_per_device) : n;
+    } else {
+      d->samples = std::make_unique<live::StreamSampleSource>(*d->engine);
+      if (o.max_ticks_per_device) d->end_tick = *o.max_ticks_per_device;
+    }
+    // Reserved now so that encoding on the emission thread never allocates.
+    d->bytes.reserve(o.reserve_bytes);
+    d->can_frames.reserve(o.reserve_can_frames);
+    impl_->devices.push_back(std::move(d));
+  }
+}
+
+EmissionEngine::~EmissionEngine() {
+  try {
+    stop(std::chrono::milliseconds(200));
+  } catch (...) {
+  }
+}
+
+// Computes the slots of the ticks that are due for computing. time_gated
+// (live input): tick k is computed no earlier than producer_lead before its
+// deadline, so the LiveEmitter's exact/extrapolated decision is taken as late
+// as the lead allows. Trajectory input is not gated: every sample is
+// computable, so the ring is simply kept full.
+void EmissionEngine::Impl::produce(Device& d, bool time_gated) {
+  const bool have_mapping = mapping_ready.load(std::memory_order_acquire);
+  const TimeNs now = monotonic_now_ns();
+  while (d.next_produce_tick < d.end_tick.load(std::memory_order_relaxed) && d.ring.write_available() > 0 &&
+         !stop_requested.load(std::memory_order_relaxed)) {
+    const std::uint64_t k = d.next_produce_tick;
+    const TimeNs tick_ns = grid_ns(t0_ns, k, d.options.rate_hz);
+    if (have_mapping) {
+      const TimeNs due = deadline_ns(d, k);
+      if (time_gated && now < due - options.producer_lead_ns) break;
+      if (now > due) {  // already too late to send: the emission thread counts it; skip the work
+        ++d.next_produce_tick;
+        d.previous_imu.reset();
+        continue;
+      }
+    }
+    if (live_input() && live_input_finished && d.engine->ready() == 0 && tick_ns > d.engine->last_knot_ns()) {
+      d.end_tick.store(k, std::memory_order_relaxed);  // past the end of the input
+      break;
+    }
+    const live::Emission e = d.emitter->emit(tick_ns, *d.samples);
+    Slot slot;
+    slot.tick = k;
+    slot.status = e.status;
+    slot.send = e.has_sample();
+    if (slot.send) {
+      drivers::ImuFrameInput& f = slot.frame;
+      f.sample_counter = k;
+      f.t_ns = tick_ns;
+      f.gyro_rad_s = e.imu.gyro_rad_s;
+      f.accel_m_s2 = e.imu.accel_m_s2;
+      f.period_ns = k > 0 ? tick_ns - grid_ns(t0_ns, k - 1, d.options.rate_hz)
+                          : grid_ns(t0_ns, 1, d.options.rate_hz) - tick_ns;
+      // Integrals over the period ending at t_k: trapezoid between the
+      // previous tick's sample and this one (second order; no coning or
+      // sculling terms, as the ideal IMU has no sensor model yet). Without a
+      // previous sample (first tick, after a gap): rectangle.
+      const double dt_s = static_cast<double>(f.period_ns) * 1e-9;
+      if (d.previous_imu && d.previous_imu->first + 1 == k) {
+        f.delta_theta_rad = 0.5 * (d.previous_imu->second.gyro_rad_s + e.imu.gyro_rad_s) * dt_s;
+        f.delta_velocity_m_s = 0.5 * (d.previous_imu->second.accel_m_s2 + e.imu.accel_m_s2) * dt_s;
+      } else {
+        f.delta_theta_rad = e.imu.gyro_rad_s * dt_s;
+        f.delta_velocity_m_s = e.imu.accel_m_s2 * dt_s;
+      }
+      if (!e.exact()) f.status |= drivers::kStatusExtrapolated;
+      d.previous_imu.emplace(k, e.imu);
+    } else {
+      d.previous_imu.reset();
+    }
+    d.ring.push(slot);
+    ++d.next_produce_tick;
+  }
+  d.engine_lag_ns.store(d.engine->current_lag_ns(), std::memory_order_relaxed);
+  std::lock_guard lock(d.live_mutex);
+  d.live_counters = d.emitter->counters();
+}
+
+void EmissionEngine::Impl::take_live_input() {
+  std::vector<io::SourcedPose>& batch = pose_batch;
+  batch.clear();
+  options.source->queue().drain(batch);
+  for (const io::SourcedPose& p : batch) {
+    bool refused = false;
+    for (auto& d : devices) {
+      try {
+        d->engine->push(p.pose);
+      } catch (const std::exception&) {
+        refused = true;  // counted, never fatal (as `imuemu stream`)
+      }
+    }
+    if (refused) poses_refused.fetch_add(1, std::memory_order_relaxed);
+    else poses_pushed.fetch_add(1, std::memory_order_relaxed);
+    if (!mapping_ready.load(std::memory_order_relaxed) && devices.front()->engine->knots_pushed() > 0) {
+      // The first pose fixes the grid and the clock: its time is "now" on the
+      // sender's clock; ticks go out emit_delay_ns after their own time.
+      t0_ns = devices.front()->engine->first_knot_ns();
+      const TimeNs now = monotonic_now_ns();
+      mapping_value = options.start == StartAlignment::now
+                          ? live::TimeMapping::start_now(t0_ns, now, options.speed)
+                          : live::TimeMapping::start_at_next_realtime_second(t0_ns, now, realtime_now_ns(), 0,
+                                                                             options.speed);
+      mapping_ready.store(true, std::memory_order_release);
+    }
+  }
+  if (!live_input_finished && options.source->finished() && options.source->queue().size() == 0) {
+    live_input_finished = true;
+    for (auto& d : devices) {
+      if (d->engine->knots_pushed() < 2) {
+        d->end_tick.store(0, std::memory_order_relaxed);
+        continue;
+      }
+      try {
+        d->engine->finish();
+      } catch (const std::exception&) {
+        poses_refused.fetch_add(1, std::memory_order_relaxed);
+      }
+      // The grid ends at the last pose: known now, so the emission thread
+      // stops there even if the producer runs late.
+      const std::uint64_t n = ticks_within(d->engine->last_knot_ns() - t0_ns, d->options.rate_hz);
+      if (n < d->end_tick.load(std::memory_order_relaxed)) d->end_tick.store(n, std::memory_order_relaxed);
+    }
+  }
+}
+
+void EmissionEngine::Impl::run_producer() {
+  while (!stop_requested.load(std::memory_order_acquire)) {
+    if (producer_stall.load(std::memory_order_relaxed)) {
+      sleep_until_monotonic(monotonic_now_ns() + kProducerPollNs);
+      continue;
+    }
+    if (live_input()) {
+      take_live_input();
+      if (!mapping_ready.load(std::memory_order_acquire)) {
+        if (live_input_finished) {  // the input ended before any pose: nothing to emit
+          input_without_poses.store(true, std::memory_order_release);
+          break;
+        }
+        sleep_until_monotonic(monotonic_now_ns() + kProducerPollNs);
+        continue;
+      }
+    }
+    bool all_done = true;
+    for (auto& d : devices) {
+      produce(*d, live_input());
+      if (d->next_produce_tick < d->end_tick.load(std::memory_order_relaxed)) all_done = false;
+    }
+    if (!live_input()) {
+      std::uint64_t pushed = 0, refused = 0;
+      for (auto& d : devices) {
+        pushed = std::max<std::uint64_t>(pushed, d->on_demand->pushed());
+        refused = std::max(refused, d->on_demand->refused());
+      }
+      poses_pushed.store(pushed, std::memory_order_relaxed);
+      poses_refused.store(refused, std::memory_order_relaxed);
+    }
+    producer_cpu_ns.store(thread_cpu_ns(), std::memory_order_relaxed);
+    if (all_done) break;
+    sleep_until_monotonic(monotonic_now_ns() + kProducerPollNs);
+  }
+}
+
+// On the emission thread: no allocation, no logging, no blocking call.
+void EmissionEngine::Impl::emit_tick(Device& d, std::uint64_t k, bool drop) {
+  d.ticks.fetch_add(1, std::memory_order_relaxed);
+  Slot* slot = nullptr;
+  while (d.ring.read_available() > 0) {
+    Slot& front = d.ring.front();
+    if (front.tick < k) {  // computed after its deadline had passed: already counted late
+      d.ring.pop();
+      continue;
+    }
+    if (front.tick == k) slot = &front;
+    break;
+  }
+  if (slot == nullptr) {
+    d.producer_late.fetch_add(1, std::memory_order_relaxed);
+    return;
+  }
+  if (drop) {
+    d.dropped_late.fetch_add(1, std::memory_order_relaxed);
+    d.ring.pop();
+    return;
+  }
+  if (!slot->send) {
+    d.not_sent.fetch_add(1, std::memory_order_relaxed);
+    d.ring.pop();
+    return;
+  }
+  const drivers::ImuFrameInput& frame = slot->frame;
+  try {
+  if (d.options.stream_encoder) {
+    d.bytes.clear();
+    d.options.stream_encoder->encode(frame, d.bytes);
+    d.options.stream_encoder->periodic(frame.t_ns, d.bytes);
+    if (!d.options.transport->write_frame(std::as_bytes(std::span<const std::uint8_t>(d.bytes))))
+      d.write_errors.fetch_add(1, std::memory_order_relaxed);
+  } else {
+    d.can_frames.clear();
+    d.options.can_encoder->encode(frame, d.can_frames);
+    d.options.can_encoder->periodic(frame.t_ns, d.can_frames);
+    for (const drivers::CanFrame& f : d.can_frames)
+      if (!d.options.can_output->send(f)) d.write_errors.fetch_add(1, std::memory_order_relaxed);
+  }
+  } catch (const std::exception&) {  // an encoder refusing a sample: counted, the schedule goes on
+    d.write_errors.fetch_add(1, std::memory_order_relaxed);
+  }
+  if (d.options.gpio) d.options.gpio->pulse(frame.sample_counter, frame.t_ns);
+  switch (slot->status) {
+    case live::EmissionStatus::exact: d.exact.fetch_add(1, std::memory_order_relaxed); break;
+    case live::EmissionStatus::extrapolated: d.extrapolated.fetch_add(1, std::memory_order_relaxed); break;
+    default: d.blending.fetch_add(1, std::memory_order_relaxed); break;
+  }
+  d.last_counter.store(frame.sample_counter, std::memory_order_relaxed);
+  d.emitted.fetch_add(1, std::memory_order_release);
+  d.ring.pop();
+}
+
+// One thread for all devices: the devices share one timeline (one mapping,
+// one t0), so their deadlines merge into one ordered sequence and the thread
+// always sleeps to the earliest; per-sample work is a ring pop, an encode of
+// ~100 bytes and a queue write (microseconds), far below any period, so one
+// core-bound thread serves many devices, and with SCHED_FIFO there is one
+// real-time thread to configure and watch instead of one per device.
+void EmissionEngine::Impl::run_emission(std::promise<std::string>* setup) {
+  std::string note;
+  if (options.realtime.priority > 0) {
+    sched_param sp{};
+    sp.sched_priority = options.realtime.priority;
+    const int rc = pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp);
+    if (rc != 0)
+      note = "SCHED_FIFO priority " + std::to_string(options.realtime.priority) + " refused: " + std::strerror(rc);
+    else
+      realtime_priority = true;
+  }
+  {
+    // Pre-fault the stack the loop will use, so the first deadlines do not
+    // page-fault (with mlockall the pages then stay).
+    volatile unsigned char stack_touch[128 * 1024];
+    for (std::size_t i = 0; i < sizeof(stack_touch); i += 4096) stack_touch[i] = 0;
+  }
+  const bool give_up = !note.empty() && options.realtime.require_realtime;
+  setup->set_value(note);
+  if (give_up) return;
+
+  heartbeat_ns.store(monotonic_now_ns(), std::memory_order_relaxed);
+  // Live input: the clock is fixed by the first pose.
+  while (!mapping_ready.load(std::memory_order_acquire)) {
+    if (stop_requested.load(std::memory_order_acquire)) return finish_emission();
+    if (input_without_poses.load(std::memory_order_acquire)) {
+      finished.store(true, std::memory_order_release);
+      return finish_emission();
+    }
+    const TimeNs now = monotonic_now_ns();
+    if (!emission_stall.load(std::memory_order_relaxed)) heartbeat_ns.store(now, std::memory_order_relaxed);
+    sleep_until_monotonic(now + kProducerPollNs);
+  }
+  TimeNs first_deadline_ns = std::numeric_limits<TimeNs>::max();
+  for (auto& d : devices) {
+    d->next_emit_tick = 0;
+    d->next_deadline_ns = deadline_ns(*d, 0);
+    first_deadline_ns = std::min(first_deadline_ns, d->next_deadline_ns);
+  }
+  const TimeNs cpu_at_start_ns = thread_cpu_ns();
+  std::uint64_t iterations = 0;
+  while (!stop_requested.load(std::memory_order_acquire)) {
+    const TimeNs loop_now = monotonic_now_ns();
+    if (emission_stall.load(std::memory_order_relaxed)) {  // test hook: no progress, no heartbeat
+      sleep_until_monotonic(loop_now + kProducerPollNs);
+      continue;
+    }
+    heartbeat_ns.store(loop_now, std::memory_order_relaxed);
+    Device* next = nullptr;
+    for (auto& d : devices) {
+      if (d->done) continue;
+      if (d->next_emit_tick >= d->end_tick.load(std::memory_order_relaxed)) {
+        d->done = true;
+        continue;
+      }
+      if (next == nullptr || d->next_deadline_ns < next->next_deadline_ns) next = d.get();
+    }
+    if (next == nullptr) {
+      finished.store(true, std::memory_order_release);
+      break;
+    }
+    if (next->next_deadline_ns - loop_now > kMaxSleepChunkNs) {  // long wait: look at stop/stall meanwhile
+      sleep_until_monotonic(loop_now + kMaxSleepChunkNs);
+      continue;
+    }
+    // Devices sharing an instant (400 and 1000 Hz every 5 ms): the later ones
+    // are due already, no system call needed.
+    const TimeNs woke = next->next_deadline_ns > loop_now ? (sleep_until_monotonic(next->next_deadline_ns), monotonic_now_ns())
+                                                          : loop_now;
+    const TimeNs lateness_ns = woke - next->next_deadline_ns;
+    next->lateness.record(lateness_ns);
+    lateness.record(lateness_ns);
+    const bool missed = lateness_ns > next->nominal_period_ns;
+    if (missed) {
+      next->deadline_misses.fetch_add(1, std::memory_order_relaxed);
+      deadline_misses.fetch_add(1, std::memory_order_relaxed);
+    }
+    emit_tick(*next, next->next_emit_tick, missed && options.drop_late_ticks);
+    ++next->next_emit_tick;
+    next->next_deadline_ns = deadline_ns(*next, next->next_emit_tick);
+    heartbeat_ns.store(woke, std::memory_order_relaxed);
+    if (++iterations % 256 == 0) {  // CPU time is a system call: not on every tick
+      emission_cpu_ns.store(thread_cpu_ns() - cpu_at_start_ns, std::memory_order_relaxed);
+      emission_wall_ns.store(woke - first_deadline_ns, std::memory_order_relaxed);
+    }
+  }
+  emission_cpu_ns.store(thread_cpu_ns() - cpu_at_start_ns, std::memory_order_relaxed);
+  emission_wall_ns.store(std::max<TimeNs>(0, monotonic_now_ns() - first_deadline_ns), std::memory_order_relaxed);
+  finish_emission();
+}
+
+void EmissionEngine::Impl::finish_emission() {
+  std::lock_guard lock(done_mutex);
+  emitter_exited = true;
+  done_cv.notify_all();
+}
+
+void EmissionEngine::start() {
+  Impl& m = *impl_;
+  if (m.started) throw std::logic_error("emission: start() called twice");
+  m.started = true;
+  if (m.options.realtime.lock_memory) {
+    if (mlockall(MCL_CURRENT | MCL_FUTURE) != 0) {
+      m.realtime_note = std::string("mlockall refused: ") + std::strerror(errno);
+      if (m.options.realtime.require_realtime) throw std::runtime_error("emission: " + m.realtime_note);
+    } else {
+      m.memory_locked = true;
+    }
+  }
+  if (!m.live_input()) {
+    // Every pose is here: fill the rings before the clock starts, so the
+    // first tick can be due right away (start_lead_ns).
+    m.t0_ns = m.options.trajectory.front().t_ns;
+    for (auto& d : m.devices) m.produce(*d, false);
+    const TimeNs now = monotonic_now_ns();
+    m.mapping_value = m.options.start == StartAlignment::now
+                          ? live::TimeMapping::start_now(m.t0_ns, now + m.options.start_lead_ns, m.options.speed)
+                          : live::TimeMapping::start_at_next_realtime_second(m.t0_ns, now, realtime_now_ns(),
+                                                                             m.options.start_lead_ns, m.options.speed);
+    m.mapping_ready.store(true, std::memory_order_release);
+  } else {
+    m.options.source->start();
+  }
+  std::promise<std::string> setup;
+  auto setup_result = setup.get_future();
+  m.running = true;
+  m.emitter = std::thread([&m, &setup] { m.run_emission(&setup); });
+  std::string note = setup_result.get();
+  if (!note.empty()) {
+    m.realtime_note += (m.realtime_note.empty() ? "" : "; ") + note;
+    if (m.options.realtime.require_realtime) {
+      m.emitter.join();
+      m.running = false;
+      if (m.live_input()) m.options.source->stop();
+      throw std::runtime_error("emission: " + note);
+    }
+  }
+  m.producer = std::thread([&m] { m.run_producer(); });
+}
+
+void EmissionEngine::request_stop() noexcept { impl_->stop_requested.store(true, std::memory_order_release); }
+
+bool EmissionEngine::wait(std::chrono::milliseconds timeout) {
+  Impl& m = *impl_;
+  std::unique_lock lock(m.done_mutex);
+  if (timeout.count() < 0) m.done_cv.wait(lock, [&] { return m.emitter_exited || !m.running; });
+  else m.done_cv.wait_for(lock, timeout, [&] { return m.emitter_exited || !m.running; });
+  return m.finished.load(std::memory_order_acquire);
+}
+
+void EmissionEngine::stop(std::chrono::milliseconds flush_timeout) {
+  Impl& m = *impl_;
+  if (!m.started || m.stopped) return;
+  m.stopped = true;
+  request_stop();
+  if (m.emitter.joinable()) m.emitter.join();
+  if (m.producer.joinable()) m.producer.join();
+  if (m.live_input()) m.options.source->stop();
+  for (auto& d : m.devices) {
+    if (d->options.transport) d->options.transport->flush(flush_timeout);
+    if (d->options.can_output) d->options.can_output->flush(flush_timeout);
+    if (d->options.gpio) {
+      d->gpio_final = d->options.gpio->counters();
+      d->options.gpio.reset();  // releases the lines (inactive)
+    }
+  }
+  m.running = false;
+  std::lock_guard lock(m.done_mutex);
+  m.done_cv.notify_all();
+}
+
+EngineStats EmissionEngine::stats() const {
+  const Impl& m = *impl_;
+  EngineStats s;
+  for (const auto& dp : m.devices) {
+    const Device& d = *dp;
+    DeviceStats ds;
+    ds.name = d.options.name;
+    ds.rate_hz = d.options.rate_hz;
+    if (d.options.stream_encoder) {
+      ds.output = d.options.stream_encoder->name() + " -> " + d.options.transport->describe();
+      ds.transport = d.options.transport->counters();
+    } else {
+      ds.output = d.options.can_encoder->name() + " -> " + d.options.can_output->describe();
+      ds.transport = d.options.can_output->counters();
+    }
+    ds.emitted = d.emitted.load(std::memory_order_acquire);
+    ds.ticks = d.ticks.load(std::memory_order_relaxed);
+    ds.exact = d.exact.load(std::memory_order_relaxed);
+    ds.extrapolated = d.extrapolated.load(std::memory_order_relaxed);
+    ds.blending = d.blending.load(std::memory_order_relaxed);
+    ds.not_sent = d.not_sent.load(std::memory_order_relaxed);
+    ds.producer_late = d.producer_late.load(std::memory_order_relaxed);
+    ds.deadline_misses = d.deadline_misses.load(std::memory_order_relaxed);
+    ds.dropped_late = d.dropped_late.load(std::memory_order_relaxed);
+    ds.write_errors = d.write_errors.load(std::memory_order_relaxed);
+    ds.packets = ds.transport.frames_sent;
+    ds.bytes = ds.transport.bytes_sent;
+    ds.queue_overflows = ds.transport.dropped_queue_full;
+    if (d.options.gpio) ds.gpio = d.options.gpio->counters();
+    else ds.gpio = d.gpio_final;
+    {
+      std::lock_guard lock(d.live_mutex);
+      ds.live = d.live_counters;
+    }
+    ds.lateness = d.lateness.summary();
+    ds.engine_lag_ns = d.engine_lag_ns.load(std::memory_order_relaxed);
+    ds.last_sample_counter = d.last_counter.load(std::memory_order_relaxed);
+    s.emitted += ds.emitted;
+    s.devices.push_back(std::move(ds));
+  }
+  s.lateness = m.lateness.summary();
+  s.deadline_misses = m.deadline_misses.load(std::memory_order_relaxed);
+  s.emit_delay_ns = m.options.emit_delay_ns;
+  s.poses_pushed = m.poses_pushed.load(std::memory_order_relaxed);
+  s.poses_refused = m.poses_refused.load(std::memory_order_relaxed);
+  if (m.live_input()) {
+    const io::PoseSourceCounters c = m.options.source->counters();
+    s.pose_source = PoseSourceStats{m.options.source->name(), c.received,     c.accepted,         c.rejected(),
+                                    c.duplicate,              c.out_of_order, c.overflow_dropped, c.lost()};
+  }
+  s.realtime_priority = m.realtime_priority;
+  s.memory_locked = m.memory_locked;
+  s.realtime_note = m.realtime_note;
+  s.running = m.running.load() && !m.stopped;
+  s.finished = m.finished.load(std::memory_order_acquire);
+  s.emission_cpu_ns = m.emission_cpu_ns.load(std::memory_order_relaxed);
+  s.producer_cpu_ns = m.producer_cpu_ns.load(std::memory_order_relaxed);
+  s.emission_wall_ns = m.emission_wall_ns.load(std::memory_order_relaxed);
+  return s;
+}
+
+TimeNs EmissionEngine::last_progress_ns() const noexcept { return impl_->heartbeat_ns.load(std::memory_order_relaxed); }
+
+bool EmissionEngine::healthy(TimeNs now_monotonic_ns, TimeNs max_silence_ns) const noexcept {
+  const TimeNs last = last_progress_ns();
+  return last != 0 && now_monotonic_ns - last <= max_silence_ns;
+}
+
+void EmissionEngine::set_emission_stall_for_test(bool stalled) noexcept { impl_->emission_stall.store(stalled); }
+void EmissionEngine::set_producer_stall_for_test(bool stalled) noexcept { impl_->producer_stall.store(stalled); }
+
+std::optional<live::TimeMapping> EmissionEngine::mapping() const {
+  if (!impl_->mapping_ready.load(std::memory_order_acquire)) return std::nullopt;
+  return impl_->mapping_value;
+}
+
+namespace {
+nlohmann::json lateness_json(const LatenessSummary& l) {
+  return {{"count", l.count},     {"p50_ns", l.p50_ns}, {"p99_ns", l.p99_ns},
+          {"p99_9_ns", l.p999_ns}, {"max_ns", l.max_ns}, {"mean_ns", l.mean_ns}};
+}
+}  // namespace
+
+nlohmann::json to_json(const EngineStats& s) {
+  nlohmann::json devices = nlohmann::json::array();
+  for (const DeviceStats& d : s.devices) {
+    nlohmann::json j{{"name", d.name},
+                     {"output", d.output},
+                     {"rate_hz", d.rate_hz},
+                     {"ticks", d.ticks},
+                     {"emitted", d.emitted},
+                     {"samples", {{"exact", d.exact}, {"extrapolated", d.extrapolated}, {"blending", d.blending}}},
+                     {"not_sent", d.not_sent},
+                     {"underruns", d.producer_late},
+                     {"deadline_misses", d.deadline_misses},
+                     {"dropped_late", d.dropped_late},
+                     {"write_errors", d.write_errors},
+                     {"packets", d.packets},
+                     {"bytes", d.bytes},
+                     {"queue_overflows", d.queue_overflows},
+                     {"transport",
+                      {{"frames", d.transport.frames},
+                       {"frames_sent", d.transport.frames_sent},
+                       {"dropped_queue_full", d.transport.dropped_queue_full},
+                       {"dropped_link_down", d.transport.dropped_link_down},
+                       {"write_errors", d.transport.write_errors},
+                       {"queued", d.transport.queued},
+                       {"link_down_events", d.transport.link_down_events}}},
+                     {"live",
+                      {{"ticks", d.live.ticks},
+                       {"exact", d.live.exact},
+                       {"extrapolated", d.live.extrapolated},
+                       {"blending", d.live.blending},
+                       {"paused", d.live.paused},
+                       {"waiting", d.live.waiting},
+                       {"underrun_events", d.live.underrun_events},
+                       {"stale_discarded", d.live.stale_discarded}}},
+                     {"lateness", lateness_json(d.lateness)},
+                     {"engine_lag_ns", d.engine_lag_ns},
+                     {"last_sample_counter", d.last_sample_counter}};
+    if (d.gpio)
+      j["gpio"] = {{"pulses", d.gpio->pulses},
+                   {"pps_pulses", d.gpio->pps_pulses},
+                   {"skipped_pulses", d.gpio->skipped_pulses},
+                   {"set_errors", d.gpio->set_errors},
+                   {"max_trailing_edge_delay_ns", d.gpio->max_trailing_edge_delay_ns}};
+    devices.push_back(std::move(j));
+  }
+  nlohmann::json j{{"devices", std::move(devices)},
+                   {"emitted", s.emitted},
+                   {"deadline_misses", s.deadline_misses},
+                   {"lateness", lateness_json(s.lateness)},
+                   {"emit_delay_ns", s.emit_delay_ns},
+                   {"poses_pushed", s.poses_pushed},
+                   {"poses_refused", s.poses_refused},
+                   {"realtime_priority", s.realtime_priority},
+                   {"memory_locked", s.memory_locked},
+                   {"realtime_note", s.realtime_note},
+                   {"running", s.running},
+                   {"emission_cpu_ns", s.emission_cpu_ns},
+                   {"producer_cpu_ns", s.producer_cpu_ns},
+                   {"emission_wall_ns", s.emission_wall_ns},
+                   {"finished", s.finished}};
+  if (s.pose_source)
+    j["pose_source"] = {{"name", s.pose_source->name},
+                        {"received", s.pose_source->received},
+                        {"accepted", s.pose_source->accepted},
+                        {"rejected", s.pose_source->rejected},
+                        {"duplicate", s.pose_source->duplicate},
+                        {"out_of_order", s.pose_source->out_of_order},
+                        {"overflow_dropped", s.pose_source->overflow_dropped},
+                        {"lost", s.pose_source->lost}};
+  return j;
+}
+
+}  // namespace imuemu::emission

@@ -1,0 +1,341 @@
+// `imuemu emit`: see emit_command.hpp. One device on the emission engine.
+//
+// Grid and sample counter: sample k (sample_counter = k, from 0) is the
+// stream's output grid time t_k = t_first + floor(k * 1e9 / rate) ns with
+// t_first the first pose's time (core/pipeline.hpp output_grid): for a
+// trajectory file and the same scene, rate and window it is `imuemu generate`'s
+// k-th output line, bit for bit when exact (the stream is the batch's loop).
+#include "daemon/emit_command.hpp"
+
+#include <signal.h>
+#include <stdlib.h>
+#include <unistd.h>
+
+#include <CLI/CLI.hpp>
+#include <algorithm>
+#include <atomic>
+#include <charconv>
+#include <cmath>
+#include <filesystem>
+#include <fstream>
+#include <iostream>
+#include <memory>
+#include <nlohmann/json.hpp>
+#include <stdexcept>
+#include <string>
+#include <vector>
+
+#include "core/stream.hpp"
+#include "daemon/commands.hpp"
+#include "daemon/emission.hpp"
+#include "drivers/protocols/can_protocols.hpp"
+#include "drivers/protocols/stream_protocols.hpp"
+#include "drivers/pty_transport.hpp"
+#include "drivers/serial_transport.hpp"
+#include "drivers/socketcan.hpp"
+#include "io/pose_source.hpp"
+#include "io/scene_poses.hpp"
+#include "io/trajectory_csv.hpp"
+
+namespace imuemu::cli {
+namespace {
+
+std::atomic<bool> g_stop{false};
+extern "C" void on_emit_signal(int) { g_stop = true; }
+
+bool member(const std::vector<std::string>& names, const std::string& n) {
+  return std::find(names.begin(), names.end(), n) != names.end();
+}
+
+// Window half-length as `imuemu generate` picks it for hermite: one median
+// knot interval of output samples.
+int median_interval_delta(const std::vector<Pose>& knots, std::int64_t rate_hz) {
+  std::vector<TimeNs> steps;
+  for (std::size_t i = 1; i < knots.size(); ++i) steps.push_back(knots[i].t_ns - knots[i - 1].t_ns);
+  if (steps.empty()) return 1;
+  std::nth_element(steps.begin(), steps.begin() + static_cast<std::ptrdiff_t>(steps.size() / 2), steps.end());
+  const double median_s = static_cast<double>(steps[steps.size() / 2]) * 1e-9;
+  return std::max(1, static_cast<int>(std::lround(median_s * static_cast<double>(rate_hz))));
+}
+
+io::NetEndpoint endpoint_of(const std::string& spec, const std::string& scheme) {
+  const std::string rest = spec.substr(scheme.size() + 1);
+  const auto colon = rest.rfind(':');
+  if (colon == std::string::npos) throw std::invalid_argument("--source " + spec + ": expected " + scheme + ":ADDRESS:PORT");
+  io::NetEndpoint ep;
+  ep.address = rest.substr(0, colon);
+  unsigned port = 0;
+  const std::string p = rest.substr(colon + 1);
+  const auto [end, ec] = std::from_chars(p.data(), p.data() + p.size(), port);
+  if (ec != std::errc() || end != p.data() + p.size() || port > 65535)
+    throw std::invalid_argument("--source " + spec + ": port '" + p + "' is not 0..65535");
+  ep.port = static_cast<std::uint16_t>(port);
+  ep.receive_buffer_bytes = 1 << 20;
+  return ep;
+}
+
+// "serial:/dev/ttyUSB0,baud=921600" -> port and settings.
+drivers::SerialTransportOptions serial_options_of(const std::string& spec) {
+  drivers::SerialTransportOptions o;
+  std::string rest = spec.substr(7);
+  const auto comma = rest.find(',');
+  o.port = rest.substr(0, comma);
+  if (o.port.empty()) throw std::invalid_argument("--device " + spec + ": expected serial:PATH[,baud=N]");
+  while (comma != std::string::npos && !rest.empty()) {
+    rest = rest.substr(rest.find(',') + 1);
+    const std::string item = rest.substr(0, rest.find(','));
+    if (item.rfind("baud=", 0) != 0) throw std::invalid_argument("--device " + spec + ": unknown option '" + item + "' (expected baud=N)");
+    const std::string b = item.substr(5);
+    int baud = 0;
+    const auto [end, ec] = std::from_chars(b.data(), b.data() + b.size(), baud);
+    if (ec != std::errc() || end != b.data() + b.size() || baud <= 0)
+      throw std::invalid_argument("--device " + spec + ": baud '" + b + "' is not a positive integer");
+    o.settings.baud = baud;
+    if (rest.find(',') == std::string::npos) break;
+  }
+  return o;
+}
+
+// "gpiochip0:17" -> chip, line.
+std::pair<std::string, unsigned> gpio_of(const std::string& spec) {
+  const auto colon = spec.rfind(':');
+  unsigned line = 0;
+  const std::string l = colon == std::string::npos ? "" : spec.substr(colon + 1);
+  const auto [end, ec] = std::from_chars(l.data(), l.data() + l.size(), line);
+  if (colon == std::string::npos || colon == 0 || ec != std::errc() || end != l.data() + l.size())
+    throw std::invalid_argument("--gpio " + spec + ": expected CHIP:LINE, e.g. gpiochip0:17");
+  return {spec.substr(0, colon), line};
+}
+
+// Poses of a built-in sample, through the same CSV `imuemu sample-trajectory` writes.
+std::vector<Pose> sample_poses(const EmitArgs& a, Physics physics) {
+  char path[] = "/tmp/imuemu-emit-sample-XXXXXX";
+  const int fd = mkstemp(path);
+  if (fd < 0) throw std::runtime_error("cannot create a temporary file for the sample trajectory");
+  ::close(fd);
+  struct Remove {
+    const char* p;
+    ~Remove() { std::remove(p); }
+  } remove{path};
+  if (sample_trajectory({path, a.sample_kind, a.sample_duration_s, a.sample_period_s}) != kOk)
+    throw std::runtime_error("the built-in sample trajectory could not be written");
+  return io::poses_in_scene(io::read_trajectory_csv(path), physics);
+}
+
+void print_summary(const emission::EngineStats& s) {
+  for (const emission::DeviceStats& d : s.devices) {
+    std::cerr << "imuemu emit: " << d.name << " (" << d.output << ", " << d.rate_hz << " Hz): " << d.emitted
+              << " samples emitted (" << d.exact << " exact, " << d.extrapolated << " extrapolated, " << d.blending
+              << " blending), " << d.producer_late << " underruns, " << d.deadline_misses << " deadline misses (" << d.dropped_late
+              << " not sent), "
+              << d.write_errors << " write errors, " << d.packets << " packets / " << d.bytes << " bytes sent, "
+              << d.queue_overflows << " queue overflows; lateness p50 " << d.lateness.p50_ns / 1000 << " us, p99 "
+              << d.lateness.p99_ns / 1000 << " us, p99.9 " << d.lateness.p999_ns / 1000 << " us, max "
+              << d.lateness.max_ns / 1000 << " us\n";
+    if (d.gpio)
+      std::cerr << "imuemu emit: gpio " << d.gpio->pulses << " pulses, " << d.gpio->skipped_pulses << " skipped, "
+                << d.gpio->set_errors << " errors\n";
+  }
+}
+
+}  // namespace
+
+int emit(const EmitArgs& a) {
+  const int inputs = (a.trajectory_path.empty() ? 0 : 1) + (a.sample_kind.empty() ? 0 : 1) + (a.source.empty() ? 0 : 1);
+  if (inputs != 1) {
+    std::cerr << "imuemu emit: give exactly one of --trajectory, --sample, --source\n";
+    return kUsageError;
+  }
+  const bool can = member(drivers::can_protocol_names(), a.protocol);
+  emission::DeviceOptions dev;
+  emission::EngineOptions eo;
+  std::unique_ptr<io::PoseSource> source;
+  SceneModel scene;
+  scene.physics = a.scene == "flat" ? Physics::flat : Physics::ecef;
+  scene.flat_gravity_m_s2 = Vec3(0.0, 0.0, a.gravity_m_s2);
+  dev.name = "imu0";
+  dev.rate_hz = a.rate_hz;
+  dev.pipeline.scene = scene;
+  dev.pipeline.rate_hz = a.rate_hz;
+
+  // Input.
+  try {
+    if (!a.source.empty()) {
+      io::PoseSourceOptions so;
+      so.physics = scene.physics;
+      so.log = [](std::string_view line) { std::cerr << line << "\n"; };
+      if (a.source.rfind("udp:", 0) == 0) source = io::make_udp_pose_source(endpoint_of(a.source, "udp"), so);
+      else if (a.source.rfind("tcp:", 0) == 0) source = io::make_tcp_pose_source(endpoint_of(a.source, "tcp"), so);
+      else if (a.source == "stdin") source = io::make_fd_pose_source(0, so);
+      else throw std::invalid_argument("--source '" + a.source + "': expected udp:ADDR:PORT, tcp:ADDR:PORT or stdin");
+      dev.pipeline.gap_policy = GapPolicy::split;
+      dev.pipeline.kernel.delta = a.delta > 0 ? a.delta
+                                              : std::max(1, static_cast<int>(std::lround(a.knot_interval_s * static_cast<double>(a.rate_hz))));
+      eo.source = source.get();
+      eo.emit_delay_ns = StreamPipeline::lookahead_ns(dev.pipeline, static_cast<TimeNs>(std::llround(a.knot_interval_s * 1e9))) +
+                         static_cast<TimeNs>(std::llround(a.margin_s * 1e9));
+    } else {
+      eo.trajectory = a.trajectory_path.empty() ? sample_poses(a, scene.physics)
+                                                : io::poses_in_scene(io::read_trajectory_csv(a.trajectory_path), scene.physics);
+      dev.pipeline.kernel.delta = a.delta > 0 ? a.delta : median_interval_delta(eo.trajectory, a.rate_hz);
+    }
+  } catch (const io::CsvFormatError& e) {
+    std::cerr << "imuemu emit: " << e.what() << "\n";
+    return kBadInput;
+  } catch (const std::exception& e) {
+    std::cerr << "imuemu emit: " << e.what() << "\n";
+    return kUsageError;
+  }
+
+  // Encoder and device.
+  try {
+    if (can) {
+      if (a.device.rfind("can:", 0) != 0)
+        throw std::invalid_argument("--device " + a.device + ": protocol " + a.protocol + " needs can:IFACE");
+      dev.can_encoder = drivers::make_can_encoder(a.protocol);
+    } else {
+      if (!member(drivers::stream_protocol_names(), a.protocol))
+        throw std::invalid_argument("--protocol " + a.protocol + ": expected native, mavlink2, mip, dronecan or j1939");
+      drivers::StreamEncoderOptions so;
+      so.nominal_sample_rate_hz = static_cast<double>(a.rate_hz);
+      dev.stream_encoder = drivers::make_stream_encoder(a.protocol, so);
+      if (a.device.rfind("can:", 0) == 0)
+        throw std::invalid_argument("--device " + a.device + ": protocol " + a.protocol + " is a byte stream (pty: or serial:)");
+    }
+  } catch (const std::exception& e) {
+    std::cerr << "imuemu emit: " << e.what() << "\n";
+    return kUsageError;
+  }
+  try {
+    auto log = [](std::string_view line) { std::cerr << "imuemu emit: " << line << "\n"; };
+    if (a.device.rfind("pty:", 0) == 0) {
+      drivers::PtyTransportOptions po;
+      po.link_path = a.device.substr(4);
+      po.log = log;
+      dev.transport = std::make_unique<drivers::PtyTransport>(po);
+    } else if (a.device.rfind("serial:", 0) == 0) {
+      drivers::SerialTransportOptions so = serial_options_of(a.device);
+      so.log = log;
+      dev.transport = std::make_unique<drivers::SerialTransport>(so);
+    } else if (a.device.rfind("can:", 0) == 0) {
+      drivers::CanTransportOptions co;
+      co.interface = a.device.substr(4);
+      co.fd_frames = a.can_fd;
+      co.log = log;
+      dev.can_output = emission::can_transport_output(std::make_unique<drivers::CanTransport>(co));
+    } else {
+      throw std::invalid_argument("--device '" + a.device + "': expected pty:LINKPATH, serial:PATH[,baud=N] or can:IFACE");
+    }
+    if (!a.gpio.empty()) {
+      drivers::GpioSyncOptions go;
+      std::tie(go.chip, go.line) = gpio_of(a.gpio);
+      go.every_n_samples = a.sync_every;
+      go.pulse_width_ns = static_cast<TimeNs>(std::llround(a.sync_width_us * 1e3));
+      go.active_low = a.sync_active_low;
+      go.sample_period_ns = kNsPerSecond / a.rate_hz;
+      go.trailing_edge_priority = a.priority;
+      go.log = log;
+      dev.gpio = std::make_unique<drivers::GpioSyncOutput>(go);
+    }
+  } catch (const std::invalid_argument& e) {
+    std::cerr << "imuemu emit: " << e.what() << "\n";
+    return kUsageError;
+  } catch (const std::exception& e) {
+    std::cerr << "imuemu emit: " << e.what() << "\n";
+    return kOutputError;
+  }
+
+  if (a.seconds >= 0) eo.max_ticks_per_device = static_cast<std::uint64_t>(std::llround(a.seconds * static_cast<double>(a.rate_hz)));
+  eo.start = a.start == "next-second" ? emission::StartAlignment::next_realtime_second : emission::StartAlignment::now;
+  eo.realtime.priority = a.priority;
+  eo.realtime.lock_memory = a.lock_memory;
+  eo.realtime.require_realtime = a.require_realtime;
+
+  const int delta_used = dev.pipeline.kernel.delta;
+  std::vector<emission::DeviceOptions> devices;
+  devices.push_back(std::move(dev));
+  std::unique_ptr<emission::EmissionEngine> engine;
+  try {
+    engine = std::make_unique<emission::EmissionEngine>(std::move(eo), std::move(devices));
+  } catch (const std::exception& e) {
+    std::cerr << "imuemu emit: " << e.what() << "\n";
+    return kCannotProcess;
+  }
+  {
+    const emission::EngineStats s0 = engine->stats();
+    std::cerr << "imuemu emit: " << s0.devices.front().output << " at " << a.rate_hz << " Hz, window Delta "
+              << delta_used << ", from " << (a.source.empty() ? "the trajectory" : a.source);
+    if (!a.source.empty())
+      std::cerr << ", each tick " << static_cast<double>(s0.emit_delay_ns) * 1e-9
+                << " s after its pose time (the engine's look-ahead + margin)";
+    std::cerr << "\n";
+  }
+  struct sigaction sa {};
+  sa.sa_handler = on_emit_signal;
+  sigaction(SIGINT, &sa, nullptr);
+  sigaction(SIGTERM, &sa, nullptr);
+  try {
+    engine->start();
+  } catch (const std::exception& e) {
+    std::cerr << "imuemu emit: " << e.what() << "\n";
+    return kCannotProcess;
+  }
+  const emission::EngineStats started = engine->stats();
+  if (!started.realtime_note.empty()) std::cerr << "imuemu emit: " << started.realtime_note << " (running without it)\n";
+  while (!engine->wait(std::chrono::milliseconds(100))) {
+    if (g_stop) {
+      engine->request_stop();
+      break;
+    }
+    if (!engine->stats().running) break;
+  }
+  engine->stop();
+  const emission::EngineStats s = engine->stats();
+  print_summary(s);
+  if (!a.stats_json_path.empty()) {
+    std::ofstream out(a.stats_json_path);
+    out << emission::to_json(s).dump(2) << "\n";
+    if (!out) {
+      std::cerr << "imuemu emit: cannot write " << a.stats_json_path << "\n";
+      return kOutputError;
+    }
+  }
+  return kOk;
+}
+
+void add_emit_command(CLI::App& app, int& exit_code) {
+  auto args = std::make_shared<EmitArgs>();
+  EmitArgs& a = *args;
+  std::vector<std::string> protocols = drivers::stream_protocol_names();
+  for (const auto& n : drivers::can_protocol_names()) protocols.push_back(n);
+  auto* c = app.add_subcommand("emit", "Emulate one IMU in real time on a pty, serial port or CAN interface");
+  c->add_option("--trajectory", a.trajectory_path, "Trajectory CSV (docs/trajectory-format.md), all poses up front");
+  c->add_option("--sample", a.sample_kind, "Built-in trajectory instead: flight, circle or static")
+      ->check(CLI::IsMember({"flight", "circle", "static"}));
+  c->add_option("--duration-s", a.sample_duration_s, "--sample: trajectory duration")->capture_default_str()->check(CLI::PositiveNumber);
+  c->add_option("--sample-period-s", a.sample_period_s, "--sample: knot period")->capture_default_str()->check(CLI::PositiveNumber);
+  c->add_option("--source", a.source, "Live poses instead: udp:ADDR:PORT | tcp:ADDR:PORT | stdin (as imuemu stream)");
+  c->add_option("--knot-interval-s", a.knot_interval_s, "--source: expected pose spacing (window, look-ahead)")->capture_default_str()->check(CLI::PositiveNumber);
+  c->add_option("--margin-s", a.margin_s, "--source: extra delay beyond the engine's look-ahead")->capture_default_str()->check(CLI::NonNegativeNumber);
+  c->add_option("--scene", a.scene, "ecef or flat")->capture_default_str()->check(CLI::IsMember({"ecef", "flat"}));
+  c->add_option("--gravity", a.gravity_m_s2, "flat scene gravity (m/s^2)")->capture_default_str();
+  c->add_option("--rate", a.rate_hz, "Output rate in Hz (integer)")->capture_default_str()->check(CLI::Range(1, 1000000));
+  c->add_option("--delta", a.delta, "Window half-length Delta (samples); default one median knot interval")->check(CLI::Range(1, 1000000));
+  c->add_option("--protocol", a.protocol, "Wire protocol")->capture_default_str()->check(CLI::IsMember(protocols));
+  c->add_option("--device", a.device, "pty:LINKPATH | serial:PATH[,baud=N] | can:IFACE")->required();
+  c->add_flag("--can-fd", a.can_fd, "can: send CAN FD frames (the interface needs MTU 72)");
+  c->add_option("--seconds", a.seconds, "Stop after this many seconds of emission (default: end of the trajectory)")->check(CLI::NonNegativeNumber);
+  c->add_option("--gpio", a.gpio, "Sync pulse output CHIP:LINE (libgpiod), edge at the sample instant");
+  c->add_option("--sync-every", a.sync_every, "Pulse on every Nth sample")->capture_default_str()->check(CLI::PositiveNumber);
+  c->add_option("--sync-width-us", a.sync_width_us, "Pulse width (us)")->capture_default_str()->check(CLI::PositiveNumber);
+  c->add_flag("--sync-active-low", a.sync_active_low, "The pulse drives the line low");
+  c->add_option("--priority", a.priority, "SCHED_FIFO priority of the emission thread (1..99; 0: normal)")->capture_default_str()->check(CLI::Range(0, 99));
+  c->add_flag("--lock-memory", a.lock_memory, "mlockall(MCL_CURRENT|MCL_FUTURE)");
+  c->add_flag("--require-realtime", a.require_realtime, "Fail instead of running without the priority or the memory lock");
+  c->add_option("--stats-json", a.stats_json_path, "Write the final statistics (JSON) here");
+  c->add_option("--start", a.start, "now, or next-second (the next whole second of CLOCK_REALTIME)")->capture_default_str()
+      ->check(CLI::IsMember({"now", "next-second"}));
+  c->callback([args, &exit_code] { exit_code = emit(*args); });
+}
+
+}  // namespace imuemu::cli

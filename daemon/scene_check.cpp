@@ -1,0 +1,193 @@
+#include "daemon/scene_check.hpp"
+
+#include <algorithm>
+#include <cstdio>
+#include <map>
+#include <nlohmann/json.hpp>
+#include <sstream>
+
+#include "core/stream.hpp"
+
+namespace imuemu::scene {
+namespace {
+
+std::string describe_transport(const TransportConfig& t) {
+  switch (t.type) {
+    case TransportType::pty:
+      return "pty " + t.pty.link;
+    case TransportType::serial:
+      return "serial " + t.serial.port + " " + drivers::to_string(t.serial.settings);
+    case TransportType::can:
+      return "can " + t.can.interface + (t.can.fd ? " (CAN FD)" : "");
+    case TransportType::null:
+      return "null";
+  }
+  return "?";
+}
+
+drivers::CanBitRates bit_rates(const CanConfig& c) {
+  drivers::CanBitRates r;
+  r.nominal_bit_rate = static_cast<double>(c.bitrate);
+  r.data_bit_rate = static_cast<double>(c.data_bitrate > 0 ? c.data_bitrate : c.bitrate);
+  return r;
+}
+
+std::string fixed(double v, int digits) {
+  char buffer[64];
+  std::snprintf(buffer, sizeof buffer, "%.*f", digits, v);
+  return buffer;
+}
+
+std::string seconds_text(TimeNs ns) { return fixed(static_cast<double>(ns) * 1e-9, 3) + " s"; }
+
+}  // namespace
+
+SceneCheck check_scene(const SceneConfig& scene) {
+  SceneCheck check;
+  check.file = scene.file;
+  check.scene = scene.name;
+  check.physics = scene.physics.physics == Physics::flat ? "flat" : "ecef";
+  check.source = scene.trajectory.source;
+  check.knot_interval_s = scene.trajectory.knot_interval_s;
+  const auto knot_interval_ns = static_cast<TimeNs>(std::llround(scene.trajectory.knot_interval_s * 1e9));
+  const auto margin_ns = static_cast<TimeNs>(std::llround(scene.live.margin_s * 1e9));
+
+  // CAN traffic grouped by interface: the devices there share one bus.
+  std::map<std::string, std::vector<std::size_t>> can_devices;
+  std::vector<std::vector<drivers::CanTraffic>> can_traffic(scene.imus.size());
+
+  for (std::size_t i = 0; i < scene.imus.size(); ++i) {
+    const ImuConfig& imu = scene.imus[i];
+    ImuCheck c;
+    c.name = imu.name;
+    c.protocol = imu.protocol;
+    c.transport = describe_transport(imu.transport);
+    c.rate_hz = imu.rate_hz;
+    const PipelineOptions po = pipeline_options(scene, imu);
+    c.delta_samples = po.kernel.delta;
+    c.lookahead_ns = StreamPipeline::lookahead_ns(po, knot_interval_ns);
+    c.emission_delay_ns = c.lookahead_ns + margin_ns;
+    c.cpu_fraction = static_cast<double>(imu.rate_hz) * kCpuSecondsPerSample;
+    const auto rate = static_cast<double>(imu.rate_hz);
+    if (is_can_protocol(imu.protocol)) {
+      const auto encoder = drivers::make_can_encoder(imu.protocol, imu.can_options);
+      can_traffic[i] = drivers::measure_can_traffic(*encoder, rate,
+                                                    imu.transport.type == TransportType::can && imu.transport.can.bitrate_switch);
+      double frames = 0.0;
+      for (const drivers::CanTraffic& t : can_traffic[i]) frames += t.frames_per_second;
+      c.can_frames_per_second = frames;
+      if (imu.transport.type == TransportType::can) {
+        c.link = drivers::can_budget(can_traffic[i], bit_rates(imu.transport.can));
+        can_devices[imu.transport.can.interface].push_back(i);
+      }
+    } else {
+      const auto encoder = drivers::make_stream_encoder(imu.protocol, imu.stream_options);
+      c.bytes_per_second = static_cast<double>(encoder->max_bytes_per_sample()) * rate;
+      if (imu.transport.type == TransportType::serial)
+        c.link = drivers::uart_budget(*encoder, rate, imu.transport.serial.settings);
+    }
+    if (c.link) {
+      if (c.link->verdict == drivers::BudgetVerdict::refuse) check.refused = true;
+      if (c.link->verdict != drivers::BudgetVerdict::ok)
+        check.warnings.push_back(imu.name + ": link " + drivers::to_string(c.link->verdict) + ": " + c.link->message);
+    }
+    check.total_cpu_fraction += c.cpu_fraction;
+    check.max_emission_delay_ns = std::max(check.max_emission_delay_ns, c.emission_delay_ns);
+    check.imus.push_back(std::move(c));
+  }
+
+  for (const auto& [interface, devices] : can_devices) {
+    if (devices.size() < 2) continue;
+    std::vector<drivers::CanTraffic> all;
+    SceneCheck::SharedLink shared;
+    shared.link = "can " + interface;
+    for (std::size_t i : devices) {
+      all.insert(all.end(), can_traffic[i].begin(), can_traffic[i].end());
+      shared.devices.push_back(scene.imus[i].name);
+    }
+    // The parser makes devices on one interface agree on its bit rates.
+    shared.budget = drivers::can_budget(all, bit_rates(scene.imus[devices.front()].transport.can));
+    if (shared.budget.verdict == drivers::BudgetVerdict::refuse) check.refused = true;
+    if (shared.budget.verdict != drivers::BudgetVerdict::ok)
+      check.warnings.push_back(shared.link + " shared by " + std::to_string(devices.size()) + " devices: " +
+                               drivers::to_string(shared.budget.verdict) + ": " + shared.budget.message);
+    check.shared_links.push_back(std::move(shared));
+  }
+  if (check.total_cpu_fraction > 0.5)
+    check.warnings.push_back("estimated CPU " + fixed(100.0 * check.total_cpu_fraction, 1) +
+                             " % of one core: little headroom for the emission deadlines");
+  return check;
+}
+
+std::string to_text(const SceneCheck& c) {
+  std::ostringstream out;
+  out << "scene " << c.scene << " (" << c.file << "): " << c.physics << " physics, source " << c.source
+      << ", knots every " << fixed(c.knot_interval_s, 3) << " s\n";
+  for (const ImuCheck& d : c.imus) {
+    out << "  imu " << d.name << ": " << d.rate_hz << " Hz " << d.protocol << " over " << d.transport << "\n"
+        << "    window Delta " << d.delta_samples << " samples; look-ahead " << seconds_text(d.lookahead_ns)
+        << ", emitted " << seconds_text(d.emission_delay_ns) << " after the pose (look-ahead + margin)\n";
+    if (d.bytes_per_second) out << "    traffic " << fixed(*d.bytes_per_second, 0) << " B/s (worst case per sample x rate)\n";
+    if (d.can_frames_per_second) out << "    traffic " << fixed(*d.can_frames_per_second, 1) << " CAN frames/s\n";
+    if (d.link)
+      out << "    link " << fixed(100.0 * d.link->load_fraction, 1) << " % (" << drivers::to_string(d.link->verdict)
+          << "): " << d.link->message << "\n";
+    else
+      out << "    link: no line rate (" << d.transport.substr(0, d.transport.find(' ')) << ")\n";
+    out << "    cpu ~" << fixed(100.0 * d.cpu_fraction, 2) << " % of one core\n";
+  }
+  for (const SceneCheck::SharedLink& s : c.shared_links) {
+    out << "  " << s.link << " shared by";
+    for (const std::string& n : s.devices) out << " " << n;
+    out << ": " << fixed(100.0 * s.budget.load_fraction, 1) << " % (" << drivers::to_string(s.budget.verdict) << ")\n";
+  }
+  out << "  total: cpu ~" << fixed(100.0 * c.total_cpu_fraction, 2) << " % of one core (estimate: "
+      << kCpuSecondsPerSample * 1e6 << " us per sample per device, measured by bench/bench_stream); "
+      << "largest emission delay " << seconds_text(c.max_emission_delay_ns) << "\n";
+  for (const std::string& w : c.warnings) out << "  warning: " << w << "\n";
+  out << (c.refused ? "REFUSED: a link cannot carry its traffic\n" : "OK\n");
+  return out.str();
+}
+
+std::string to_json(const SceneCheck& c) {
+  using nlohmann::json;
+  auto budget_json = [](const drivers::LinkBudget& b) {
+    return json{{"load_fraction", b.load_fraction},
+                {"bits_per_second_used", b.bits_per_second_used},
+                {"capacity_bits_per_second", b.capacity_bits_per_second},
+                {"verdict", drivers::to_string(b.verdict)},
+                {"message", b.message}};
+  };
+  json j;
+  j["file"] = c.file;
+  j["scene"] = c.scene;
+  j["physics"] = c.physics;
+  j["source"] = c.source;
+  j["knot_interval_s"] = c.knot_interval_s;
+  j["imus"] = json::array();
+  for (const ImuCheck& d : c.imus) {
+    json e{{"name", d.name},
+           {"protocol", d.protocol},
+           {"transport", d.transport},
+           {"rate_hz", d.rate_hz},
+           {"delta_samples", d.delta_samples},
+           {"lookahead_ns", d.lookahead_ns},
+           {"emission_delay_ns", d.emission_delay_ns},
+           {"cpu_fraction", d.cpu_fraction}};
+    e["bytes_per_second"] = d.bytes_per_second ? json(*d.bytes_per_second) : json(nullptr);
+    e["can_frames_per_second"] = d.can_frames_per_second ? json(*d.can_frames_per_second) : json(nullptr);
+    e["link"] = d.link ? budget_json(*d.link) : json(nullptr);
+    j["imus"].push_back(std::move(e));
+  }
+  j["shared_links"] = json::array();
+  for (const SceneCheck::SharedLink& s : c.shared_links)
+    j["shared_links"].push_back(json{{"link", s.link}, {"devices", s.devices}, {"budget", budget_json(s.budget)}});
+  j["total_cpu_fraction"] = c.total_cpu_fraction;
+  j["cpu_basis"] = "rate_hz x " + std::to_string(kCpuSecondsPerSample) + " s per sample per device (bench/bench_stream)";
+  j["max_emission_delay_ns"] = c.max_emission_delay_ns;
+  j["refused"] = c.refused;
+  j["warnings"] = c.warnings;
+  return j.dump(2);
+}
+
+}  // namespace imuemu::scene

@@ -1,0 +1,139 @@
+#include "daemon/status_command.hpp"
+
+#include <sys/stat.h>
+#include <grp.h>
+
+#include <cerrno>
+#include <cmath>
+#include <iostream>
+
+#include <CLI/CLI.hpp>
+#include <boost/asio/buffers_iterator.hpp>
+#include <boost/asio/io_context.hpp>
+#include <boost/asio/local/stream_protocol.hpp>
+#include <boost/asio/read.hpp>
+#include <boost/asio/streambuf.hpp>
+#include <boost/asio/write.hpp>
+
+#include "daemon/commands.hpp"
+#include "daemon/control_socket.hpp"
+
+namespace imuemu::cli {
+
+namespace asio = boost::asio;
+using stream_protocol = asio::local::stream_protocol;
+
+namespace {
+
+constexpr std::size_t kMaxReplyBytes = 4u << 20;
+
+std::string group_name_of(const std::string& path) {
+  struct stat st {};
+  if (::stat(path.c_str(), &st) != 0) return {};
+  const struct group* g = ::getgrgid(st.st_gid);
+  return g ? std::string(g->gr_name) : std::to_string(st.st_gid);
+}
+
+[[noreturn]] void fail_connect(const std::string& path, const boost::system::error_code& ec) {
+  // connect(2) errors arrive in the system category: compare errno values.
+  const int err = ec.category() == boost::system::system_category() ? ec.value() : 0;
+  if (err == ENOENT) {
+    throw ControlClientError("no control socket at " + path +
+                             " (is imuemud running for this scene? `systemctl status imuemud@SCENE`)");
+  }
+  if (err == EACCES || err == EPERM) {
+    const std::string group = group_name_of(path);
+    throw ControlClientError("permission denied on control socket " + path +
+                             (group.empty() ? std::string() : " (ask to be added to its group '" + group + "')"));
+  }
+  if (err == ECONNREFUSED) {
+    throw ControlClientError("nothing is listening on control socket " + path +
+                             " (stale socket file: the daemon is not running)");
+  }
+  throw ControlClientError("cannot connect to control socket " + path + ": " + ec.message());
+}
+
+}  // namespace
+
+nlohmann::json query_control_socket(const std::string& socket_path, const std::string& command,
+                                    std::chrono::milliseconds timeout) {
+  if (command.empty() || command.size() >= service::kMaxCommandBytes || command.find('\n') != std::string::npos) {
+    throw ControlClientError("control command must be one line of 1.." +
+                             std::to_string(service::kMaxCommandBytes - 1) + " bytes");
+  }
+  asio::io_context io;
+  stream_protocol::socket socket(io);
+  // connect() on a Unix socket completes at once (or fails at once); only the
+  // reply can take long, and that is bounded by run_for below.
+  boost::system::error_code ec;
+  socket.connect(stream_protocol::endpoint(socket_path), ec);
+  if (ec) fail_connect(socket_path, ec);
+
+  const std::string line = command + "\n";
+  asio::streambuf reply(kMaxReplyBytes);
+  boost::system::error_code read_ec;
+  bool done = false;
+  asio::async_write(socket, asio::buffer(line), [&](const boost::system::error_code& write_ec, std::size_t) {
+    if (write_ec) {
+      read_ec = write_ec;
+      done = true;
+      return;
+    }
+    // The daemon closes after its one reply: read to the end.
+    asio::async_read(socket, reply, [&](const boost::system::error_code& e, std::size_t) {
+      read_ec = e;
+      done = true;
+    });
+  });
+  io.run_for(timeout);
+  if (!done) {
+    throw ControlClientError("imuemud did not respond on control socket " + socket_path + " within " +
+                             std::to_string(timeout.count()) + " ms (daemon hung or overloaded)");
+  }
+  if (read_ec && read_ec != asio::error::eof) {
+    throw ControlClientError("control socket " + socket_path + ": reading the reply failed: " + read_ec.message());
+  }
+  const std::string text{asio::buffers_begin(reply.data()), asio::buffers_end(reply.data())};
+  if (text.empty()) throw ControlClientError("control socket " + socket_path + ": the daemon closed without a reply");
+  try {
+    return nlohmann::json::parse(text);
+  } catch (const nlohmann::json::parse_error& e) {
+    throw ControlClientError("control socket " + socket_path + ": the reply is not JSON (" + e.what() + ")");
+  }
+}
+
+int run_status(const StatusArgs& args) {
+  if (!(args.timeout_s > 0.0) || !std::isfinite(args.timeout_s) || args.timeout_s > 3600.0) {
+    std::cerr << "imuemu status: --timeout-s must be in (0, 3600]\n";
+    return kUsageError;
+  }
+  const std::string path = args.socket_path.empty() ? service::default_control_socket_path(args.scene) : args.socket_path;
+  const auto timeout = std::chrono::milliseconds(static_cast<std::int64_t>(std::llround(args.timeout_s * 1000.0)));
+  try {
+    const nlohmann::json reply = query_control_socket(path, args.command, timeout);
+    std::cout << reply.dump(args.compact ? -1 : 2) << '\n';
+    if (reply.is_object() && reply.contains("error")) {
+      std::cerr << "imuemu status: the daemon at " << path << " answered with an error: "
+                << reply["error"].dump() << '\n';
+      return kCannotProcess;
+    }
+    return kOk;
+  } catch (const std::exception& e) {
+    std::cerr << "imuemu status: " << e.what() << '\n';
+    return kCannotProcess;
+  }
+}
+
+void add_status_command(CLI::App& app, int& exit_code) {
+  auto args = std::make_shared<StatusArgs>();
+  auto* cmd = app.add_subcommand("status", "Ask a running imuemud for its status (JSON) over its control socket");
+  auto* socket_option = cmd->add_option("--socket", args->socket_path, "Control socket path (default /run/imuemu/SCENE.sock)");
+  cmd->add_option("--scene", args->scene, "Scene name, for the default socket path")->capture_default_str()->excludes(socket_option);
+  cmd->add_option("--command", args->command,
+                  "Command to send: status, stats-reset, help (lists what the daemon offers)")->capture_default_str();
+  cmd->add_option("--timeout-s", args->timeout_s, "Give up when no reply comes within this")->capture_default_str();
+  cmd->add_flag("--compact", args->compact, "One-line JSON");
+  cmd->callback([args, &exit_code] { exit_code = run_status(*args); });
+}
+
+}  // namespace imuemu::cli

@@ -1,0 +1,40 @@
+#!/bin/sh
+# Guest side of the hil_gpio_sync_qemu test (run by tests/hil/qemu_run.sh,
+# driven from the host by tests/hil/uart_peer.py gpio):
+#
+#   gpio_sync_guest.sh IMUEMU TOKEN RATE_HZ EVERY WIDTH_US
+#
+# `imuemu emit` sends a static IMU at RATE_HZ as native frames (which carry
+# the sample counter) on /dev/ttyS1 for the host to decode, with a WIDTH_US
+# sync pulse every EVERY samples on the gpio_recorder chip ($HIL_GPIOCHIP),
+# which timestamps every level driven: first active high on line 0, then
+# active low on line 1.
+set -u
+usage="usage: gpio_sync_guest.sh IMUEMU TOKEN RATE_HZ EVERY WIDTH_US"
+imuemu=${1:?$usage} token=${2:?$usage} rate_hz=${3:?$usage} every=${4:?$usage} width_us=${5:?$usage}
+readonly SECONDS_EMITTED=3
+status=0
+[ -c "${HIL_GPIOCHIP:-}" ] || { echo "gpio_sync_guest: no gpio_recorder chip (HIL_GPIOCHIP='${HIL_GPIOCHIP:-}')"; exit 1; }
+
+marker() {
+  stty -F /dev/ttyS1 raw -echo 115200 || { echo "stty on /dev/ttyS1 failed"; exit 1; }
+  printf 'HILSEP:%s:%s;' "$token" "$1" >/dev/ttyS1
+}
+
+run() { # name line [--sync-active-low]
+  name=$1 line=$2
+  shift 2
+  marker "BEGIN:$name:native"
+  "$imuemu" emit --sample static --duration-s $((SECONDS_EMITTED + 2)) --seconds $SECONDS_EMITTED \
+    --rate "$rate_hz" --protocol native --device serial:/dev/ttyS1,baud=921600 \
+    --gpio "$HIL_GPIOCHIP:$line" --sync-every "$every" --sync-width-us "$width_us" "$@" \
+    --stats-json "$HIL_OUT/$name.emit.json"
+  rc=$?
+  echo "gpio_sync_guest: $name: imuemu emit exit status $rc"
+  [ $rc -eq 0 ] || status=1
+}
+
+run sync_high 0
+run sync_low 1 --sync-active-low
+marker END
+exit $status

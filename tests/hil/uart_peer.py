@@ -1,0 +1,577 @@
+#!/usr/bin/python3
+"""Host side of the QEMU UART tests: boots tests/hil/qemu_run.sh with the
+guest's /dev/ttyS1 (Debian's kernel, the real 8250 driver on an emulated
+16550A) on a unix socket, plays the far end of that UART, and decodes what
+the guest's `imuemu emit --device serial:/dev/ttyS1,...` sent with the
+host's own `imuemu listen`, fed live through a FIFO.
+
+  uart_peer.py uart --imuemu PATH [--results DIR]
+      hil_uart_mavlink_mip_qemu: guest tests/hil/uart_emit_guest.sh emits
+      mavlink2, then mip (static IMU, 200 Hz, 921600 baud). Per run:
+      listen's checksum errors, resync bytes, malformed frames, sequence gaps
+      (MAVLink's seq) all 0; listen's samples = the samples emit reports;
+      bytes listen read = bytes the host received between the run's markers =
+      bytes emit's transport reports sent; the decoded sample times on the
+      output grid (mavlink2's time_usec; mip's GPS time) and the static IMU's
+      specific force ~1 g. The bytes are also decoded here, from the protocol
+      documents (every byte in a packet, MAVLink X.25 CRCs with CRC_EXTRA and
+      consecutive packet sequence, MIP Fletcher checksums, IMU packets = emit's
+      samples, accelerometer ~1 g in m/s^2 resp. g).
+
+  uart_peer.py gpio --imuemu PATH [--results DIR]
+      hil_gpio_sync_qemu: guest tests/hil/gpio_sync_guest.sh emits native
+      samples on ttyS1 with a sync pulse every N samples on the gpio_recorder
+      chip, active high on line 0, then active low on line 1. From the
+      recorder's kernel-timestamped log: the idle level and polarity; one
+      pulse per sent sample whose native counter (decoded by listen; the
+      counters are the samples' tick indices) is a multiple of N, i.e.
+      ceil(samples / N) when emit skipped no tick, and the pulse count emit
+      reports; each width >= the configured width and below half the pulse
+      period; the k-th leading edge lines up with its sample's counter x
+      period (within the emission lateness); the mean spacing.
+
+The guest separates its runs on the UART with ASCII markers carrying a
+random token of this run ("HILSEP:<token>:BEGIN:<name>:<protocol>;" and
+"HILSEP:<token>:END;"), so one boot serves several runs; bytes outside a run
+fail the test. Standard library only. Exit 0 on success, 1 on a failed
+check, the fixture's 125 when the fixture itself failed (never skipped).
+"""
+import argparse
+import json
+import math
+import os
+import secrets
+import shutil
+import socket
+import struct
+import subprocess
+import sys
+import tempfile
+import time
+
+HERE = os.path.dirname(os.path.abspath(__file__))
+FIXTURE_FAILURE = 125
+
+
+def log(message):
+    print(f"uart_peer: {message}", flush=True)
+
+
+class Run:
+    """One emit run as the host saw it: its bytes go live into a FIFO that
+    `imuemu listen` reads."""
+
+    def __init__(self, name, protocol, imuemu, results):
+        self.name, self.protocol = name, protocol
+        self.bytes = 0
+        self.wire = bytearray()  # the run's bytes, for the independent decoding here
+        self.listen_path = os.path.join(results, f"{name}.listen.ndjson")
+        self.fifo = os.path.join(results, f"{name}.fifo")
+        if os.path.exists(self.fifo):
+            os.unlink(self.fifo)
+        os.mkfifo(self.fifo)
+        with open(self.listen_path, "w") as out, open(os.path.join(results, f"{name}.listen.err"), "w") as err:
+            self.listen = subprocess.Popen(
+                [imuemu, "listen", "--protocol", protocol, "--device", self.fifo, "--json"],
+                stdout=out, stderr=err)
+        self.fd = self._open_writer()
+        self.write_error = None
+
+    def _open_writer(self):
+        # listen opens the FIFO for reading (non-blocking); until it has, an
+        # O_NONBLOCK writer's open fails with ENXIO.
+        deadline = time.monotonic() + 30
+        while True:
+            try:
+                fd = os.open(self.fifo, os.O_WRONLY | os.O_NONBLOCK)
+                os.set_blocking(fd, True)
+                return fd
+            except OSError:
+                if self.listen.poll() is not None or time.monotonic() > deadline:
+                    self.listen.kill()
+                    raise RuntimeError(f"imuemu listen never opened {self.fifo} (status {self.listen.poll()})")
+                time.sleep(0.02)
+
+    def write(self, data):
+        self.bytes += len(data)
+        self.wire += data
+        if self.fd is None or not data:
+            return
+        try:
+            os.write(self.fd, data)  # blocking: a slow listen holds the UART back, nothing is lost
+        except OSError as e:
+            self.write_error = f"writing to imuemu listen: {e}"
+            os.close(self.fd)
+            self.fd = None
+
+    def finish(self):
+        with open(os.path.join(os.path.dirname(self.fifo), f"{self.name}.wire.bin"), "wb") as f:
+            f.write(self.wire)
+        if self.fd is not None:
+            os.close(self.fd)  # end of stream for listen
+            self.fd = None
+        try:
+            rc = self.listen.wait(timeout=30)
+        except subprocess.TimeoutExpired:
+            self.listen.kill()
+            rc = self.listen.wait()
+        os.unlink(self.fifo)
+        samples, summary = [], None
+        with open(self.listen_path) as f:
+            for line in f:
+                if not line.strip():
+                    continue
+                obj = json.loads(line)
+                if obj.get("type") == "sample":
+                    samples.append(obj)
+                elif obj.get("type") == "summary":
+                    summary = obj
+        self.listen_rc, self.samples, self.summary = rc, samples, summary or {}
+
+
+class Splitter:
+    """Cuts the UART byte stream at the guest's markers."""
+
+    def __init__(self, token, imuemu, results):
+        self.prefix = b"HILSEP:" + token.encode() + b":"
+        self.imuemu, self.results = imuemu, results
+        self.buffer = b""
+        self.current = None
+        self.runs = []
+        self.stray_bytes = 0
+        self.ended = False
+
+    def _data(self, data):
+        if self.current is not None:
+            self.current.write(data)
+        else:
+            self.stray_bytes += len(data)
+
+    def feed(self, chunk):
+        self.buffer += chunk
+        while True:
+            at = self.buffer.find(self.prefix)
+            if at < 0:
+                # Hold back what could be the start of a marker cut by the chunking.
+                keep = len(self.prefix) - 1
+                if len(self.buffer) > keep:
+                    self._data(self.buffer[:-keep])
+                    self.buffer = self.buffer[-keep:]
+                return
+            self._data(self.buffer[:at])
+            end = self.buffer.find(b";", at)
+            if end < 0:
+                self.buffer = self.buffer[at:]
+                return
+            marker = self.buffer[at + len(self.prefix):end].decode(errors="replace").split(":")
+            self.buffer = self.buffer[end + 1:]
+            if self.current is not None:
+                self.current.finish()
+                self.current = None
+            if marker[0] == "BEGIN" and len(marker) == 3:
+                log(f"run {marker[1]}: {marker[2]} begins")
+                self.current = Run(marker[1], marker[2], self.imuemu, self.results)
+                self.runs.append(self.current)
+            elif marker == ["END"]:
+                self.ended = True
+            else:
+                raise RuntimeError(f"unknown marker {marker}")
+
+    def close(self):
+        self._data(self.buffer)
+        self.buffer = b""
+        if self.current is not None:
+            self.current.finish()
+            self.current = None
+
+
+def connect(path, fixture, deadline):
+    """QEMU creates the socket once the cached kernel and initramfs are
+    ready (minutes on a first run that downloads the kernel) and waits."""
+    while time.monotonic() < deadline:
+        if fixture.poll() is not None:
+            return None
+        if os.path.exists(path):
+            s = socket.socket(socket.AF_UNIX, socket.SOCK_STREAM)
+            try:
+                s.connect(path)
+                return s
+            except OSError:
+                s.close()
+        time.sleep(0.05)
+    return None
+
+
+def boot_and_capture(guest, imuemu, results, token, guest_args=()):
+    """Runs the guest script under qemu_run.sh; returns (fixture status, splitter)."""
+    with tempfile.TemporaryDirectory(prefix="hil_uart.") as tmp:
+        sock_path = os.path.join(tmp, "ttyS1.sock")
+        includes = [imuemu, guest]
+        command = [os.path.join(HERE, "qemu_run.sh"), "--serial1", f"socket,path={sock_path},server=on,wait=on",
+                   "--results", results, "--timeout", "200"]
+        for path in includes:
+            command += ["--include", path]
+        command += ["--", "sh", guest, imuemu, token, *map(str, guest_args)]
+        fixture = subprocess.Popen(command)
+        s = connect(sock_path, fixture, time.monotonic() + 250)
+        splitter = Splitter(token, imuemu, results)
+        if s is None:
+            fixture.kill()
+            rc = fixture.wait()
+            log(f"never connected to {sock_path} (fixture status {rc})")
+            return FIXTURE_FAILURE, splitter
+        try:
+            with s:
+                s.settimeout(200)
+                while True:
+                    try:
+                        chunk = s.recv(65536)
+                    except socket.timeout:
+                        log("no bytes on ttyS1 for 200 s")
+                        break
+                    if not chunk:
+                        break  # QEMU exited
+                    splitter.feed(chunk)
+            splitter.close()
+            return fixture.wait(timeout=60), splitter
+        finally:
+            if fixture.poll() is None:  # a failure here must not leave QEMU running
+                fixture.terminate()
+                fixture.wait()
+
+
+# ---------------------------------------------------------------- checks
+
+
+class Checks:
+    def __init__(self):
+        self.failures = []
+
+    def expect(self, ok, message):
+        if not ok:
+            self.failures.append(message)
+            log(f"FAILED: {message}")
+        return ok
+
+
+def emit_stats(results, name):
+    path = os.path.join(results, f"{name}.emit.json")
+    try:
+        with open(path) as f:
+            return json.load(f)
+    except (OSError, ValueError) as e:
+        return {"_error": f"{path}: {e}"}
+
+
+def emit_device(stats):
+    """The one device of `imuemu emit --stats-json` (daemon/emission.cpp to_json)."""
+    devices = stats.get("devices")
+    return devices[0] if isinstance(devices, list) and len(devices) == 1 and isinstance(devices[0], dict) else {}
+
+
+def check_stream_run(run, results, rate_hz, c, static=True):
+    """What every byte-stream run must show; returns emit's device stats."""
+    stats = emit_stats(results, run.name)
+    device = emit_device(stats)
+    s = run.summary
+    emitted = device.get("emitted")
+    # Ticks emit itself skipped (a wake-up more than a period late is dropped,
+    # not sent late): sample times and native counters jump by them.
+    skipped = device.get("ticks", 0) - (emitted or 0)
+    tag = f"{run.name} ({run.protocol})"
+    c.expect(run.write_error is None, f"{tag}: {run.write_error}")
+    c.expect(run.listen_rc == 0, f"{tag}: imuemu listen exited with {run.listen_rc}")
+    c.expect(s.get("end_reason") == "end of stream", f"{tag}: listen ended with '{s.get('end_reason')}'")
+    c.expect(isinstance(emitted, int) and emitted > 0, f"{tag}: emit stats give no positive 'emitted' count: {stats}")
+    c.expect(s.get("samples") == emitted, f"{tag}: listen decoded {s.get('samples')} samples, emit reports {emitted}")
+    c.expect(len(run.samples) == s.get("samples"),
+             f"{tag}: {len(run.samples)} sample lines, listen's summary says {s.get('samples')}")
+    c.expect(s.get("bytes_received") == run.bytes,
+             f"{tag}: listen read {s.get('bytes_received')} bytes, the host received {run.bytes}")
+    transport = device.get("transport", {})
+    c.expect(transport.get("frames") == transport.get("frames_sent") and device.get("bytes") == run.bytes,
+             f"{tag}: emit offered {transport.get('frames')} frames ({device.get('bytes')} bytes) and sent "
+             f"{transport.get('frames_sent')}; the host received {run.bytes} bytes through ttyS1")
+    for counter in ("checksum_errors", "resync_bytes", "other_errors", "sequence_backward_steps"):
+        c.expect(s.get(counter) == 0, f"{tag}: listen {counter} = {s.get(counter)}, expected 0")
+    if run.protocol != "native":  # native: checked against the skipped ticks below
+        c.expect(s.get("sequence_gaps") == 0, f"{tag}: listen sequence_gaps = {s.get('sequence_gaps')}, expected 0")
+    if s.get("own_sequence_gaps") is not None and run.protocol != "native":
+        # MAVLink's seq counts packets, which skipped ticks do not interrupt.
+        c.expect(s["own_sequence_gaps"] == 0, f"{tag}: listen own_sequence_gaps = {s['own_sequence_gaps']}, expected 0")
+    times = [x["t_ns"] for x in run.samples if x.get("t_ns") is not None]
+    period_ns = 1e9 / rate_hz
+    if c.expect(len(times) == len(run.samples), f"{tag}: {len(run.samples) - len(times)} samples without a time"):
+        # Tick k of the output grid is at k periods of trajectory time (the
+        # grid starts at 0), to the wire's time resolution (1 us MAVLink, GPS
+        # time for MIP): the times name which ticks were sent, and every tick
+        # emit counted was either sent or skipped.
+        off_grid = [t for t in times if abs(t / period_ns - round(t / period_ns)) * period_ns > 1000]
+        c.expect(not off_grid, f"{tag}: sample times off the {period_ns:.0f} ns grid: {off_grid[:5]}")
+        ticks = [round(t / period_ns) for t in times]
+        c.expect(all(a < b for a, b in zip(ticks, ticks[1:])) and
+                 (not ticks or (ticks[0] >= 0 and ticks[-1] < device.get("ticks", 0))),
+                 f"{tag}: sample ticks {ticks[:3]}...{ticks[-3:]} not increasing within emit's {device.get('ticks')} ticks")
+        if run.protocol == "native":
+            # The native frame's counter is the sample counter: the tick index
+            # (so skipped ticks show as gaps, and as nothing else).
+            sequences = [x.get("sequence") for x in run.samples]
+            c.expect(sequences == ticks, f"{tag}: native sample counters are not the samples' tick indices")
+            inner_skipped = ticks[-1] - ticks[0] + 1 - len(ticks) if ticks else 0
+            for counter in ("sequence_gaps", "own_sequence_gaps"):
+                c.expect(s.get(counter) == inner_skipped,
+                         f"{tag}: listen {counter} = {s.get(counter)}, {inner_skipped} ticks skipped between samples")
+    if static:
+        for x in run.samples:
+            a = x["accel_m_s2"]
+            norm = math.sqrt(sum(v * v for v in a))
+            if not c.expect(9.7 < norm < 9.9 and a[2] < -9.6,
+                            f"{tag}: sample {x['index']}: static specific force {a} m/s^2, expected ~1 g up (FRD z < -9.6)"):
+                break
+    log(f"{tag}: host received {run.bytes} bytes, listen {s.get('samples')} samples "
+        f"({s.get('frames')} frames, checksum errors {s.get('checksum_errors')}, sequence gaps "
+        f"{s.get('sequence_gaps')}), emit {emitted} samples, {device.get('bytes')} bytes, {skipped} ticks skipped")
+    return device
+
+
+# ---------------------------------------------------------------- wire decoding
+# Independent of imuemu's decoders: written from the protocol documents.
+
+# MAVLink 2 (mavlink.io "Serialization"): 0xFD, len, incompat, compat, seq,
+# sysid, compid, msgid (3 LE), payload (trailing zeros truncated), CRC-16/
+# MCRF4XX (X.25) over len..payload then CRC_EXTRA, little-endian. CRC_EXTRA
+# from common.xml as pymavlink generates it.
+MAVLINK_CRC_EXTRA = {0: 50, 105: 93, 107: 108}  # HEARTBEAT, HIGHRES_IMU, HIL_SENSOR
+
+
+def x25_crc(data, crc=0xFFFF):
+    for byte in data:
+        tmp = (byte ^ crc) & 0xFF
+        tmp = (tmp ^ (tmp << 4)) & 0xFF
+        crc = ((crc >> 8) ^ (tmp << 8) ^ (tmp << 3) ^ (tmp >> 4)) & 0xFFFF
+    return crc
+
+
+def check_mavlink_wire(run, emitted, c):
+    tag = f"{run.name} (mavlink2, decoded here)"
+    wire, at, seqs, msgids, accels = bytes(run.wire), 0, [], [], []
+    while at < len(wire):
+        if not c.expect(wire[at] == 0xFD and at + 12 <= len(wire), f"{tag}: no MAVLink 2 packet at byte {at}"):
+            return
+        length, incompat = wire[at + 1], wire[at + 2]
+        end = at + 10 + length + 2 + (13 if incompat & 1 else 0)
+        if not c.expect(end <= len(wire), f"{tag}: packet at byte {at} runs past the end"):
+            return
+        msgid = int.from_bytes(wire[at + 7:at + 10], "little")
+        payload = wire[at + 10:at + 10 + length]
+        crc = int.from_bytes(wire[at + 10 + length:at + 12 + length], "little")
+        if not c.expect(msgid in MAVLINK_CRC_EXTRA, f"{tag}: unexpected message id {msgid} at byte {at}"):
+            return
+        c.expect(x25_crc(bytes([MAVLINK_CRC_EXTRA[msgid]]), x25_crc(wire[at + 1:at + 10 + length])) == crc,
+                 f"{tag}: CRC mismatch in message {msgid} at byte {at}")
+        seqs.append(wire[at + 4])
+        msgids.append(msgid)
+        if msgid in (105, 107):  # time_usec u64, then xacc, yacc, zacc float32 (m/s^2)
+            full = payload + bytes(max(0, 20 - len(payload)))
+            accels.append(struct.unpack_from("<3f", full, 8))
+        at = end
+    c.expect(all((b - a) % 256 == 1 for a, b in zip(seqs, seqs[1:])), f"{tag}: packet sequence numbers not consecutive")
+    samples = sum(1 for m in msgids if m != 0)
+    c.expect(samples == emitted, f"{tag}: {samples} IMU messages, emit reports {emitted}")
+    c.expect(0 in msgids, f"{tag}: no HEARTBEAT")
+    bad = [a for a in accels if not 9.7 < math.sqrt(sum(v * v for v in a)) < 9.9]
+    c.expect(not bad, f"{tag}: static specific force not ~1 g: {bad[:3]}")
+    log(f"{tag}: {len(msgids)} packets, {samples} IMU messages "
+        f"({sorted(set(msgids))}), {msgids.count(0)} HEARTBEAT")
+
+
+# MIP (3DM-GX5 DCP manual, "MIP packet overview"): 0x75 0x65, descriptor set,
+# payload length, fields (length, descriptor, data), Fletcher-16 over header
+# and payload (two 8-bit running sums, sent MSB first). Data set 0x80 field
+# 0x04 is the scaled accelerometer, 3 big-endian float32 in g.
+def check_mip_wire(run, emitted, c):
+    tag = f"{run.name} (mip, decoded here)"
+    wire, at, samples, accels = bytes(run.wire), 0, 0, []
+    while at < len(wire):
+        if not c.expect(wire[at:at + 2] == b"\x75\x65" and at + 6 <= len(wire), f"{tag}: no MIP packet at byte {at}"):
+            return
+        end = at + 4 + wire[at + 3] + 2
+        if not c.expect(end <= len(wire), f"{tag}: packet at byte {at} runs past the end"):
+            return
+        sum1 = sum2 = 0
+        for byte in wire[at:end - 2]:
+            sum1 = (sum1 + byte) & 0xFF
+            sum2 = (sum2 + sum1) & 0xFF
+        c.expect(wire[end - 2] == sum1 and wire[end - 1] == sum2, f"{tag}: Fletcher checksum mismatch at byte {at}")
+        if c.expect(wire[at + 2] == 0x80, f"{tag}: descriptor set {wire[at + 2]:#x}, expected 0x80 at byte {at}"):
+            samples += 1
+            field = at + 4
+            while field < end - 2:
+                if wire[field + 1] == 0x04 and wire[field] == 14:
+                    accels.append(struct.unpack_from(">3f", wire, field + 2))
+                field += max(wire[field], 2)
+        at = end
+    c.expect(samples == emitted, f"{tag}: {samples} 0x80 packets, emit reports {emitted}")
+    c.expect(len(accels) == samples, f"{tag}: {samples - len(accels)} packets without the scaled accelerometer (0x04)")
+    bad = [a for a in accels if not 0.985 < math.sqrt(sum(v * v for v in a)) < 1.01]
+    c.expect(not bad, f"{tag}: static scaled accelerometer not ~1 g: {bad[:3]}")
+    log(f"{tag}: {samples} packets, first scaled accelerometer {accels[0] if accels else None} g")
+
+
+def check_common(rc, splitter, expected_runs, c):
+    if rc != 0:
+        c.expect(False, f"the guest script exited with {rc} (its output is above)")
+    c.expect(splitter.ended, "the guest's end marker never arrived")
+    c.expect(splitter.stray_bytes == 0, f"{splitter.stray_bytes} bytes on ttyS1 outside any run")
+    names = [r.name for r in splitter.runs]
+    c.expect(names == expected_runs, f"runs {names}, expected {expected_runs}")
+
+
+UART_RATE_HZ = 200  # passed to tests/hil/uart_emit_guest.sh
+
+
+def test_uart(args, results):
+    token = secrets.token_hex(8)
+    guest = os.path.join(HERE, "uart_emit_guest.sh")
+    rc, splitter = boot_and_capture(guest, args.imuemu, results, token, (UART_RATE_HZ,))
+    if rc == FIXTURE_FAILURE:
+        return rc
+    c = Checks()
+    check_common(rc, splitter, ["mavlink2", "mip"], c)
+    for run in splitter.runs:
+        device = check_stream_run(run, results, UART_RATE_HZ, c)
+        {"mavlink2": check_mavlink_wire, "mip": check_mip_wire}[run.protocol](run, device.get("emitted"), c)
+    return 1 if c.failures else 0
+
+
+# Passed to tests/hil/gpio_sync_guest.sh.
+GPIO_RATE_HZ = 100
+GPIO_EVERY = 20
+GPIO_WIDTH_US = 2000
+GPIO_RUNS = {"sync_high": (0, False), "sync_low": (1, True)}  # run: (line, active low)
+
+
+def read_recorder(path, c):
+    with open(path) as f:
+        lines = f.read().splitlines()
+    c.expect(bool(lines) and lines[0].startswith("#") and "dropped 0)" in lines[0],
+             f"recorder header missing or events dropped: {lines[:1]}")
+    return [tuple(int(x) for x in line.split()) for line in lines[1:] if line.strip()]
+
+
+def check_gpio_run(run, device, events, line, active_low, c):
+    tag = f"{run.name} (line {line}, active {'low' if active_low else 'high'})"
+    samples = run.summary.get("samples") or 0
+    sequences = [x.get("sequence") for x in run.samples]  # = tick indices (check_stream_run)
+    idle, active = (1, 0) if active_low else (0, 1)
+    levels = [(t, v) for t, ln, v in events if ln == line]
+    if not c.expect(bool(levels), f"{tag}: the recorder saw nothing on line {line}"):
+        return
+    # Requesting the line as an output drives its idle level first.
+    c.expect(levels[0][1] == idle, f"{tag}: first level driven {levels[0][1]}, expected idle {idle}")
+    c.expect(levels[-1][1] == idle, f"{tag}: line left at {levels[-1][1]}, expected idle {idle}")
+    pulses = []  # (leading edge t, trailing edge t)
+    level, lead = levels[0][1], None
+    for t, v in levels[1:]:
+        if v == level:
+            continue  # a write of the same level is no edge
+        if v == active:
+            lead = t
+        elif lead is not None:
+            pulses.append((lead, t))
+            lead = None
+        level = v
+    # A pulse goes with every sample whose counter is a multiple of N
+    # (ceil(samples / N) when emit skipped no tick).
+    expected = sum(1 for q in sequences if q is not None and q % GPIO_EVERY == 0)
+    c.expect(samples > 0, f"{tag}: listen decoded no samples")
+    c.expect(len(pulses) == expected,
+             f"{tag}: {len(pulses)} pulses on the recorder, {expected} samples with a counter multiple of "
+             f"{GPIO_EVERY} (of {samples}; ceil = {math.ceil(samples / GPIO_EVERY)})")
+    gpio = device.get("gpio") or {}
+    c.expect(gpio.get("pulses") == len(pulses), f"{tag}: emit reports {gpio.get('pulses')} pulses, recorder {len(pulses)}")
+    for key in ("skipped_pulses", "set_errors"):
+        c.expect(gpio.get(key) == 0, f"{tag}: emit reports {key} = {gpio.get(key)}")
+    period_ns = 1e9 / GPIO_RATE_HZ
+    width_ns = GPIO_WIDTH_US * 1000
+    widths = [b - a for a, b in pulses]
+    if widths:
+        # TCG timing is loose: the trailing edge comes from a timer thread,
+        # so only a lower bound and "well inside the pulse period" hold.
+        c.expect(min(widths) >= width_ns,
+                 f"{tag}: narrowest pulse {min(widths)} ns < configured {width_ns} ns (measured between the kernel's "
+                 f"timestamps of the two line writes: a trailing edge timed from before the leading edge's write "
+                 f"cuts the pulse short by that write's latency)")
+        c.expect(max(widths) < 0.5 * GPIO_EVERY * period_ns,
+                 f"{tag}: widest pulse {max(widths)} ns, not well below N x period = {GPIO_EVERY * period_ns:.0f} ns")
+    sent_multiples = [q for q in sequences if q is not None and q % GPIO_EVERY == 0]
+    if len(pulses) == len(sent_multiples) and pulses:
+        # The k-th pulse belongs to the k-th sent sample whose counter is a
+        # multiple of N: its leading edge is that sample's tick time on the
+        # guest's clock plus the emission thread's lateness, so edge time
+        # minus counter x period stays within the lateness spread (a pulse
+        # assigned to the wrong multiple of N would be N periods off).
+        offsets = [lead - q * period_ns for (lead, _), q in zip(pulses, sent_multiples)]
+        spread = max(offsets) - min(offsets)
+        c.expect(spread < 0.5 * GPIO_EVERY * period_ns,
+                 f"{tag}: leading edge minus counter x period varies by {spread / 1e6:.1f} ms: pulses do not line "
+                 f"up with samples {sent_multiples[:4]}...")
+        log(f"{tag}: pulses line up with samples {sent_multiples[0]}, {sent_multiples[1] if len(sent_multiples) > 1 else ''}"
+            f"... {sent_multiples[-1]} within {spread / 1e6:.1f} ms")
+    if len(pulses) > 2 and len(pulses) == len(sent_multiples):
+        # emit paces the samples on CLOCK_MONOTONIC, so over the run the
+        # pulses keep the samples' spacing (a skipped multiple of N leaves a
+        # double gap, accounted for by the counters).
+        expected_spacing = (sent_multiples[-1] - sent_multiples[0]) / (len(pulses) - 1) * period_ns
+        mean_spacing = (pulses[-1][0] - pulses[0][0]) / (len(pulses) - 1)
+        c.expect(abs(mean_spacing - expected_spacing) < 0.25 * expected_spacing,
+                 f"{tag}: pulses {mean_spacing:.0f} ns apart on average, expected {expected_spacing:.0f} ns (+-25%)")
+        log(f"{tag}: {len(pulses)} pulses for {samples} samples, widths {min(widths) / 1e3:.0f}.."
+            f"{max(widths) / 1e3:.0f} us (configured {GPIO_WIDTH_US} us), mean spacing {mean_spacing / 1e6:.2f} ms "
+            f"(expected {expected_spacing / 1e6:.2f} ms)")
+
+
+def test_gpio(args, results):
+    token = secrets.token_hex(8)
+    guest = os.path.join(HERE, "gpio_sync_guest.sh")
+    rc, splitter = boot_and_capture(guest, args.imuemu, results, token, (GPIO_RATE_HZ, GPIO_EVERY, GPIO_WIDTH_US))
+    if rc == FIXTURE_FAILURE:
+        return rc
+    c = Checks()
+    check_common(rc, splitter, list(GPIO_RUNS), c)
+    events = read_recorder(os.path.join(results, "gpio_recorder.txt"), c)
+    for run in splitter.runs:
+        device = check_stream_run(run, results, GPIO_RATE_HZ, c)
+        if run.name in GPIO_RUNS:
+            check_gpio_run(run, device, events, *GPIO_RUNS[run.name], c)
+    lines_used = {ln for _, ln, _ in events}
+    c.expect(lines_used <= {line for line, _ in GPIO_RUNS.values()},
+             f"the recorder saw lines {sorted(lines_used)}, only {[line for line, _ in GPIO_RUNS.values()]} were used")
+    return 1 if c.failures else 0
+
+
+def main():
+    parser = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    parser.add_argument("test", choices=["uart", "gpio"])
+    parser.add_argument("--imuemu", required=True, help="the imuemu binary (release build)")
+    parser.add_argument("--results", help="keep the results here, emptied first (default: a temporary directory, "
+                        "removed when the test passes)")
+    args = parser.parse_args()
+    start = time.monotonic()
+    results = args.results or tempfile.mkdtemp(prefix=f"hil_{args.test}_results.")
+    # Emptied first: a stale emit.json or recorder log must not pass for this run's.
+    shutil.rmtree(results, ignore_errors=True)
+    os.makedirs(results)
+    try:
+        rc = (test_uart if args.test == "uart" else test_gpio)(args, results)
+    except (RuntimeError, OSError) as e:
+        log(f"FAILED: {e}")
+        rc = 1
+    log(f"{'PASSED' if rc == 0 else 'FAILED'} in {time.monotonic() - start:.1f} s (results: {results})")
+    if not args.results and rc == 0:
+        shutil.rmtree(results, ignore_errors=True)
+    return rc
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,350 @@
+// daemon/control_socket (server) and daemon/status_command (client and
+// `imuemu status`): one line in, one JSON document out; 0660 permissions and
+// group; stale/live/foreign files at the path; slow and garbage clients do
+// not block others; every client error names the socket path.
+#include <gtest/gtest.h>
+
+#include <grp.h>
+#include <stdlib.h>
+#include <sys/socket.h>
+#include <sys/stat.h>
+#include <sys/un.h>
+#include <unistd.h>
+
+#include <array>
+#include <atomic>
+#include <chrono>
+#include <cstdio>
+#include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <optional>
+#include <string>
+#include <thread>
+
+#include <boost/asio/executor_work_guard.hpp>
+#include <boost/asio/io_context.hpp>
+#include <boost/asio/post.hpp>
+#include <nlohmann/json.hpp>
+
+#include "daemon/control_socket.hpp"
+#include "daemon/log.hpp"
+#include "daemon/status_command.hpp"
+
+namespace svc = imuemu::service;
+using imuemu::cli::ControlClientError;
+using imuemu::cli::query_control_socket;
+using nlohmann::json;
+using namespace std::chrono_literals;
+
+namespace {
+
+class TempDir {
+ public:
+  TempDir() {
+    char dir_template[] = "/tmp/imuemu_ctl_XXXXXX";
+    path = ::mkdtemp(dir_template);
+  }
+  ~TempDir() { std::filesystem::remove_all(path); }
+  std::string path;
+};
+
+class IoThread {
+ public:
+  IoThread() : work_(io.get_executor()), thread_([this] { io.run(); }) {}
+  ~IoThread() {
+    work_.reset();
+    io.stop();
+    thread_.join();
+  }
+  template <class F>
+  void run(F f) {
+    std::atomic<bool> done{false};
+    boost::asio::post(io, [&] {
+      f();
+      done = true;
+    });
+    while (!done) std::this_thread::sleep_for(1ms);
+  }
+  boost::asio::io_context io;
+
+ private:
+  boost::asio::executor_work_guard<boost::asio::io_context::executor_type> work_;
+  std::thread thread_;
+};
+
+// A daemon with a status counter, served on its own io thread.
+struct Daemon {
+  explicit Daemon(const std::string& path, const std::string& group = "", std::chrono::milliseconds timeout = 2000ms) {
+    svc::set_log_threshold(svc::LogLevel::warning);
+    io.run([&] {
+      server.emplace(io.io, svc::ControlSocketOptions{path, group, timeout});
+      server->add_command("status", "counters", [this] {
+        return json{{"samples_emitted", samples.load()}, {"scene", "bench"}};
+      });
+      server->add_command("stats-reset", "zero the counters", [this] {
+        samples = 0;
+        return json{{"reset", true}};
+      });
+      server->add_command("explode", "throws", []() -> json { throw std::runtime_error("boom"); });
+    });
+  }
+  ~Daemon() { io.run([&] { server.reset(); }); }
+  IoThread io;
+  std::optional<svc::ControlServer> server;
+  std::atomic<std::uint64_t> samples{12345};
+};
+
+int connect_raw(const std::string& path) {
+  const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_CLOEXEC, 0);
+  sockaddr_un address{};
+  address.sun_family = AF_UNIX;
+  std::strncpy(address.sun_path, path.c_str(), sizeof address.sun_path - 1);
+  if (::connect(fd, reinterpret_cast<sockaddr*>(&address), sizeof address) != 0) {
+    ::close(fd);
+    return -1;
+  }
+  return fd;
+}
+
+// A socket file nothing listens on: what a killed daemon leaves behind.
+void make_stale_socket(const std::string& path) {
+  const int fd = ::socket(AF_UNIX, SOCK_STREAM, 0);
+  sockaddr_un address{};
+  address.sun_family = AF_UNIX;
+  std::strncpy(address.sun_path, path.c_str(), sizeof address.sun_path - 1);
+  ASSERT_EQ(::bind(fd, reinterpret_cast<sockaddr*>(&address), sizeof address), 0);
+  ::close(fd);
+}
+
+std::string read_all(int fd) {
+  std::string out;
+  char buffer[4096];
+  ssize_t n;
+  while ((n = ::read(fd, buffer, sizeof buffer)) > 0) out.append(buffer, static_cast<std::size_t>(n));
+  return out;
+}
+
+std::string error_of(const std::string& path, const std::string& command, std::chrono::milliseconds timeout) {
+  try {
+    query_control_socket(path, command, timeout);
+  } catch (const ControlClientError& e) {
+    return e.what();
+  }
+  return "(no error)";
+}
+
+struct ShellRun {
+  int exit_code;
+  std::string out;
+};
+ShellRun run_shell(const std::string& command) {
+  FILE* p = ::popen(command.c_str(), "r");
+  std::string out;
+  std::array<char, 4096> buffer{};
+  std::size_t n;
+  while ((n = std::fread(buffer.data(), 1, buffer.size(), p)) > 0) out.append(buffer.data(), n);
+  const int status = ::pclose(p);
+  return {WIFEXITED(status) ? WEXITSTATUS(status) : -1, out};
+}
+
+}  // namespace
+
+TEST(ControlSocket, StatusReplyIsTheProvidersJson) {
+  TempDir dir;
+  const std::string path = dir.path + "/bench.sock";
+  Daemon daemon(path);
+  const json reply = query_control_socket(path, "status", 2000ms);
+  EXPECT_EQ(reply, (json{{"samples_emitted", 12345}, {"scene", "bench"}}));
+  daemon.samples = 7;
+  EXPECT_EQ(query_control_socket(path, "status", 2000ms)["samples_emitted"], 7);
+  EXPECT_EQ(query_control_socket(path, "stats-reset", 2000ms), (json{{"reset", true}}));
+  EXPECT_EQ(daemon.samples.load(), 0u);
+  const json help = query_control_socket(path, "help", 2000ms);
+  EXPECT_EQ(help["commands"]["status"], "counters");
+}
+
+TEST(ControlSocket, UnknownCommandAndThrowingHandlerAnswerWithErrors) {
+  TempDir dir;
+  const std::string path = dir.path + "/s.sock";
+  Daemon daemon(path);
+  const json unknown = query_control_socket(path, "self-destruct", 2000ms);
+  EXPECT_EQ(unknown["error"], "unknown command 'self-destruct'");
+  EXPECT_EQ(unknown["commands"], (json{"help", "explode", "stats-reset", "status"}));
+  EXPECT_EQ(query_control_socket(path, "explode", 2000ms), (json{{"error", "explode: boom"}}));
+  // Blanks and CRLF around the command are not part of it.
+  const int fd = connect_raw(path);
+  ASSERT_GE(fd, 0);
+  ASSERT_EQ(::write(fd, "  status\r\n", 10), 10);
+  EXPECT_EQ(json::parse(read_all(fd))["scene"], "bench");
+  ::close(fd);
+}
+
+TEST(ControlSocket, Mode0660AndGroupAndRemovedAtExit) {
+  TempDir dir;
+  const std::string path = dir.path + "/p.sock";
+  const struct group* own = ::getgrgid(::getegid());
+  ASSERT_NE(own, nullptr);
+  {
+    ::umask(0);  // bind() would leave 0777: the server must narrow it itself
+    Daemon daemon(path, own->gr_name);
+    ::umask(022);
+    struct stat st {};
+    ASSERT_EQ(::stat(path.c_str(), &st), 0);
+    EXPECT_TRUE(S_ISSOCK(st.st_mode));
+    EXPECT_EQ(st.st_mode & 07777, 0660u);
+    EXPECT_EQ(st.st_gid, ::getegid());
+  }
+  EXPECT_FALSE(std::filesystem::exists(path));
+}
+
+TEST(ControlSocket, MissingGroupIsAClearErrorAndLeavesNoFile) {
+  TempDir dir;
+  const std::string path = dir.path + "/g.sock";
+  boost::asio::io_context io;
+  try {
+    svc::ControlServer server(io, {path, "imuemu-no-such-group", 1000ms});
+    FAIL() << "expected ControlSocketError";
+  } catch (const svc::ControlSocketError& e) {
+    EXPECT_NE(std::string(e.what()).find("group 'imuemu-no-such-group' does not exist"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find(path), std::string::npos) << e.what();
+  }
+  EXPECT_FALSE(std::filesystem::exists(path));
+}
+
+TEST(ControlSocket, StaleSocketReplacedLiveOneAndOtherFilesRefused) {
+  TempDir dir;
+  const std::string path = dir.path + "/x.sock";
+  make_stale_socket(path);
+  ASSERT_TRUE(std::filesystem::is_socket(path));
+  Daemon daemon(path);
+  EXPECT_EQ(query_control_socket(path, "status", 2000ms)["scene"], "bench");
+
+  boost::asio::io_context io;
+  try {
+    svc::ControlServer second(io, {path, "", 1000ms});
+    FAIL() << "a live socket must not be taken over";
+  } catch (const svc::ControlSocketError& e) {
+    EXPECT_NE(std::string(e.what()).find("another process is serving it"), std::string::npos) << e.what();
+  }
+  EXPECT_EQ(query_control_socket(path, "status", 2000ms)["scene"], "bench");  // still served
+
+  const std::string regular = dir.path + "/notes.txt";
+  std::ofstream(regular) << "keep me";
+  EXPECT_THROW(svc::ControlServer(io, {regular, "", 1000ms}), svc::ControlSocketError);
+  EXPECT_TRUE(std::filesystem::is_regular_file(regular));
+  EXPECT_THROW(svc::ControlServer(io, {dir.path + "/no/such/dir.sock", "", 1000ms}), svc::ControlSocketError);
+  EXPECT_THROW(svc::ControlServer(io, {dir.path + "/" + std::string(120, 'a'), "", 1000ms}), svc::ControlSocketError);
+}
+
+TEST(ControlSocket, SlowAndGarbageClientsDoNotBlockOthers) {
+  TempDir dir;
+  const std::string path = dir.path + "/slow.sock";
+  Daemon daemon(path, "", 1500ms);
+  // Silent client, and one that sends half a command and stalls.
+  const int silent = connect_raw(path);
+  const int half = connect_raw(path);
+  ASSERT_GE(silent, 0);
+  ASSERT_GE(half, 0);
+  ASSERT_EQ(::write(half, "sta", 3), 3);
+  // Others are served at once meanwhile.
+  const auto t0 = std::chrono::steady_clock::now();
+  for (int i = 0; i < 20; ++i) EXPECT_EQ(query_control_socket(path, "status", 2000ms)["scene"], "bench");
+  // A server that served one client at a time would wait for the silent ones
+  // to time out (1.5 s) before answering anyone.
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, 1000ms);
+  // Over-long garbage: an error reply, not a hang or a crash.
+  const int garbage = connect_raw(path);
+  const std::string junk(5000, '\x7f');
+  ASSERT_EQ(::write(garbage, junk.data(), junk.size()), static_cast<ssize_t>(junk.size()));
+  EXPECT_EQ(json::parse(read_all(garbage))["error"], "command longer than 256 bytes");
+  ::close(garbage);
+  // Binary garbage on one line: unknown command (bytes replaced in the JSON text).
+  const int binary = connect_raw(path);
+  ASSERT_EQ(::write(binary, "\xff\xfe\x01\n", 4), 4);
+  EXPECT_TRUE(json::parse(read_all(binary)).contains("error"));
+  ::close(binary);
+  // The stalled clients are dropped after the client timeout (EOF, no reply).
+  const auto t1 = std::chrono::steady_clock::now();
+  EXPECT_EQ(read_all(silent), "");
+  EXPECT_EQ(read_all(half), "");
+  EXPECT_LT(std::chrono::steady_clock::now() - t1, 3000ms);
+  ::close(silent);
+  ::close(half);
+  EXPECT_EQ(query_control_socket(path, "status", 2000ms)["scene"], "bench");
+}
+
+TEST(ControlClient, ErrorsNameTheSocketAndTheCause) {
+  TempDir dir;
+  const std::string missing = dir.path + "/missing.sock";
+  std::string e = error_of(missing, "status", 500ms);
+  EXPECT_NE(e.find("no control socket at " + missing), std::string::npos) << e;
+
+  const std::string stale = dir.path + "/stale.sock";
+  make_stale_socket(stale);
+  e = error_of(stale, "status", 500ms);
+  EXPECT_NE(e.find("nothing is listening on control socket " + stale), std::string::npos) << e;
+
+  // A hung daemon: the kernel accepts into the backlog, nobody answers.
+  const std::string hung = dir.path + "/hung.sock";
+  const int fd = ::socket(AF_UNIX, SOCK_STREAM, 0);
+  sockaddr_un address{};
+  address.sun_family = AF_UNIX;
+  std::strncpy(address.sun_path, hung.c_str(), sizeof address.sun_path - 1);
+  ASSERT_EQ(::bind(fd, reinterpret_cast<sockaddr*>(&address), sizeof address), 0);
+  ASSERT_EQ(::listen(fd, 4), 0);
+  const auto t0 = std::chrono::steady_clock::now();
+  e = error_of(hung, "status", 300ms);
+  const auto waited = std::chrono::steady_clock::now() - t0;
+  EXPECT_NE(e.find("did not respond on control socket " + hung + " within 300 ms"), std::string::npos) << e;
+  EXPECT_GE(waited, 300ms);
+  EXPECT_LT(waited, 1500ms);
+  ::close(fd);
+
+  EXPECT_NE(error_of(hung, "two\nlines", 300ms).find("one line"), std::string::npos);
+}
+
+TEST(ControlClient, PermissionDeniedNamesTheGroup) {
+  TempDir dir;
+  ::chmod(dir.path.c_str(), 0755);
+  const std::string path = dir.path + "/perm.sock";
+  Daemon daemon(path);
+  const struct group* own = ::getgrgid(::getegid());
+  ASSERT_NE(own, nullptr);
+  std::string e;
+  if (::geteuid() == 0) {
+    // root passes any mode check: ask as nobody, through the real command.
+    const ShellRun r = run_shell("setpriv --reuid=65534 --regid=65534 --clear-groups " + std::string(IMUEMU_CLI_PATH) +
+                            " status --socket " + path + " 2>&1");
+    EXPECT_EQ(r.exit_code, 4);
+    e = r.out;
+  } else {
+    ::chmod(path.c_str(), 0);
+    e = error_of(path, "status", 500ms);
+  }
+  EXPECT_NE(e.find("permission denied on control socket " + path), std::string::npos) << e;
+  EXPECT_NE(e.find(std::string("group '") + own->gr_name + "'"), std::string::npos) << e;
+}
+
+TEST(StatusCommand, PrintsPrettyJsonAndExitCodes) {
+  TempDir dir;
+  const std::string path = dir.path + "/cli.sock";
+  Daemon daemon(path);
+  const std::string cli = IMUEMU_CLI_PATH;
+  ShellRun r = run_shell(cli + " status --socket " + path);
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_EQ(json::parse(r.out), (json{{"samples_emitted", 12345}, {"scene", "bench"}}));
+  EXPECT_NE(r.out.find("\n  \"s"), std::string::npos) << "pretty, indented: " << r.out;
+  r = run_shell(cli + " status --compact --socket " + path);
+  EXPECT_EQ(r.out, "{\"samples_emitted\":12345,\"scene\":\"bench\"}\n");
+  r = run_shell(cli + " status --socket " + path + " --command nope 2>&1");
+  EXPECT_EQ(r.exit_code, 4);
+  EXPECT_NE(r.out.find("answered with an error"), std::string::npos) << r.out;
+  r = run_shell(cli + " status --socket " + dir.path + "/none.sock 2>&1");
+  EXPECT_EQ(r.exit_code, 4);
+  EXPECT_NE(r.out.find("imuemu status: no control socket at " + dir.path + "/none.sock"), std::string::npos) << r.out;
+  r = run_shell(cli + " status --scene no-such-scene-xyz 2>&1");
+  EXPECT_NE(r.out.find("/run/imuemu/no-such-scene-xyz.sock"), std::string::npos) << r.out;
+  r = run_shell(cli + " status --socket " + path + " --timeout-s 0 2>&1");
+  EXPECT_EQ(r.exit_code, 2);
+}

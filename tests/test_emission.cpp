@@ -1,0 +1,680 @@
+// The real-time emission engine (daemon/emission.hpp): counts, grid, order and
+// values against the batch pipeline, several devices on one thread, stopping
+// at a packet boundary, the watchdog heartbeat and a starved producer.
+// Timing on this shared machine is not asserted beyond "it was recorded":
+// the assertions are on counts, order and values.
+#include <gtest/gtest.h>
+
+#include <atomic>
+#include <chrono>
+#include <cmath>
+#include <mutex>
+#include <nlohmann/json.hpp>
+#include <thread>
+#include <vector>
+
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <cstdio>
+#include <fstream>
+#include <numbers>
+
+#include "core/attitude.hpp"
+#include "core/pipeline.hpp"
+#include "core/reference_motion.hpp"
+#include "daemon/emission.hpp"
+#include "drivers/byte_stream_reader.hpp"
+#include "drivers/protocols/can_protocols.hpp"
+#include "drivers/protocols/stream_protocols.hpp"
+#include "io/pose_source.hpp"
+#include "io/scene_poses.hpp"
+#include "io/trajectory_csv.hpp"
+
+namespace imuemu::emission {
+namespace {
+
+using namespace std::chrono_literals;
+
+// Records every frame whole, with the device tag and the frame's order among
+// all recording transports (a shared sequence), so tests can check the
+// emission thread's merged order.
+struct SharedLog {
+  std::mutex mutex;
+  std::vector<std::pair<int, std::size_t>> order;  // (device tag, frame index on that device)
+};
+
+class RecordingTransport final : public drivers::Transport {
+ public:
+  explicit RecordingTransport(int tag = 0, SharedLog* log = nullptr) : tag_(tag), log_(log) {}
+  bool write_frame(std::span<const std::byte> frame) override {
+    std::lock_guard lock(mutex_);
+    const auto* p = reinterpret_cast<const std::uint8_t*>(frame.data());
+    frames_.emplace_back(p, p + frame.size());
+    ++counters_.frames;
+    ++counters_.frames_sent;
+    counters_.bytes += frame.size();
+    counters_.bytes_sent += frame.size();
+    if (log_ != nullptr) {
+      std::lock_guard l(log_->mutex);
+      log_->order.emplace_back(tag_, frames_.size() - 1);
+    }
+    return true;
+  }
+  std::string describe() const override { return "recording"; }
+  drivers::TransportCounters counters() const override {
+    std::lock_guard lock(mutex_);
+    return counters_;
+  }
+  bool flush(std::chrono::milliseconds) override {
+    flushes_.fetch_add(1);
+    return true;
+  }
+  std::vector<std::vector<std::uint8_t>> frames() const {
+    std::lock_guard lock(mutex_);
+    return frames_;
+  }
+  int flushes() const { return flushes_.load(); }
+
+ private:
+  int tag_;
+  SharedLog* log_;
+  mutable std::mutex mutex_;
+  std::vector<std::vector<std::uint8_t>> frames_;
+  drivers::TransportCounters counters_;
+  std::atomic<int> flushes_{0};
+};
+
+std::vector<Pose> circle_knots(double duration_s) {
+  const reference::Circle circle(200.0, 20.0, 0, static_cast<TimeNs>(duration_s * 1e9));
+  return reference::sample_knots(circle, kNsPerSecond);
+}
+
+PipelineOptions flat_pipeline(std::int64_t rate_hz) {
+  PipelineOptions po;
+  po.scene.physics = Physics::flat;
+  po.rate_hz = rate_hz;
+  po.kernel.delta = static_cast<int>(rate_hz);  // one knot interval, as generate's default
+  return po;
+}
+
+// A device on a recording transport (not owned by the test: the engine owns it).
+DeviceOptions native_device(const std::string& name, std::int64_t rate_hz, RecordingTransport** transport,
+                            int tag = 0, SharedLog* log = nullptr) {
+  DeviceOptions d;
+  d.name = name;
+  d.rate_hz = rate_hz;
+  d.pipeline = flat_pipeline(rate_hz);
+  d.stream_encoder = drivers::make_stream_encoder("native");
+  auto t = std::make_unique<RecordingTransport>(tag, log);
+  *transport = t.get();
+  d.transport = std::move(t);
+  return d;
+}
+
+std::vector<drivers::DecodedSample> decode_native(const std::vector<std::vector<std::uint8_t>>& frames,
+                                                  drivers::DecoderCounters* counters = nullptr) {
+  auto decoder = drivers::make_stream_decoder("native");
+  std::vector<drivers::DecodedSample> out;
+  for (const auto& f : frames) decoder->feed(f, [&](const drivers::DecodedSample& s) { out.push_back(s); });
+  if (counters != nullptr) *counters = decoder->counters();
+  return out;
+}
+
+__extension__ typedef __int128 Int128;
+
+TimeNs grid(TimeNs t0, std::uint64_t k, std::int64_t rate) {
+  // Independent of the engine's split form: 128-bit floor(k * 1e9 / rate).
+  return t0 + static_cast<TimeNs>(static_cast<Int128>(k) * kNsPerSecond / rate);
+}
+
+bool finite(const Vec3& v) { return std::isfinite(v.x()) && std::isfinite(v.y()) && std::isfinite(v.z()); }
+
+TEST(LatenessHistogram, BucketsAreLogLinearFromOneMicrosecondToOneSecond) {
+  EXPECT_EQ(LatenessHistogram::bucket_of(-5), 0u);
+  EXPECT_EQ(LatenessHistogram::bucket_of(999), 0u);
+  EXPECT_EQ(LatenessHistogram::bucket_of(1000), 1u);
+  EXPECT_EQ(LatenessHistogram::bucket_of(1099), 1u);
+  EXPECT_EQ(LatenessHistogram::bucket_of(1100), 2u);
+  EXPECT_EQ(LatenessHistogram::bucket_of(kNsPerSecond), LatenessHistogram::kBuckets - 1);
+  // Every value lies below its bucket's upper edge and at or above the previous edge.
+  for (TimeNs v : {1'000LL, 1'234LL, 9'999LL, 10'000LL, 123'456LL, 5'000'000LL, 999'999'999LL}) {
+    const std::size_t b = LatenessHistogram::bucket_of(v);
+    EXPECT_LT(v, LatenessHistogram::upper_edge_ns(b)) << v;
+    EXPECT_GE(v, LatenessHistogram::upper_edge_ns(b - 1)) << v;
+    EXPECT_LE(LatenessHistogram::upper_edge_ns(b), v + v / 10 + 1) << "resolution 10% at worst, " << v;
+  }
+  LatenessHistogram h;
+  for (int i = 0; i < 1000; ++i) h.record(i < 990 ? 2'000 : 500'000);  // 99% at 2 us, 1% at 500 us
+  const LatenessSummary s = h.summary();
+  EXPECT_EQ(s.count, 1000u);
+  EXPECT_EQ(s.p50_ns, 2'100);
+  EXPECT_EQ(s.p99_ns, 2'100);
+  EXPECT_EQ(s.p999_ns, 500'000);  // bucket [500, 510) us capped by the exact maximum
+  EXPECT_EQ(s.max_ns, 500'000);
+}
+
+TEST(Emission, ExactCountOnTheGridAndBitIdenticalToBatch) {
+  const std::vector<Pose> knots = circle_knots(10.0);
+  RecordingTransport* rec = nullptr;
+  std::vector<DeviceOptions> devices;
+  devices.push_back(native_device("imu0", 400, &rec));
+  EngineOptions eo;
+  eo.trajectory = knots;
+  eo.drop_late_ticks = false;  // a late wake-up on this shared machine still sends: counts stay exact
+  eo.max_ticks_per_device = 800;  // 400 Hz x 2 s
+  eo.ring_capacity = 1024;        // the whole run computed before the clock starts: counts do not depend on load
+  EmissionEngine engine(std::move(eo), std::move(devices));
+  engine.start();
+  ASSERT_TRUE(engine.wait(10s));
+  engine.stop();
+
+  const BatchResult batch = run_batch(knots, flat_pipeline(400));
+  drivers::DecoderCounters dc;
+  const auto samples = decode_native(rec->frames(), &dc);
+  ASSERT_EQ(samples.size(), 800u);
+  EXPECT_EQ(dc.checksum_errors + dc.resync_bytes + dc.other_errors, 0u);
+  for (std::size_t k = 0; k < samples.size(); ++k) {
+    const drivers::DecodedSample& s = samples[k];
+    ASSERT_TRUE(s.has_sequence && s.has_time);
+    EXPECT_EQ(s.sequence, k);  // no gaps, in order
+    EXPECT_EQ(s.t_ns, grid(knots.front().t_ns, k, 400));
+    EXPECT_EQ(s.t_ns, batch.imu[k].t_ns);
+    // The stream is the batch's loop: bit-identical for exact samples.
+    EXPECT_EQ(s.gyro_rad_s, batch.imu[k].gyro_rad_s) << k;
+    EXPECT_EQ(s.accel_m_s2, batch.imu[k].accel_m_s2) << k;
+    EXPECT_EQ(s.status & drivers::kStatusExtrapolated, 0u);
+    if (k > 0) {  // trapezoid over the period ending at t_k
+      const double dt = 1.0 / 400.0;
+      EXPECT_NEAR((s.delta_theta_rad - 0.5 * dt * (batch.imu[k - 1].gyro_rad_s + batch.imu[k].gyro_rad_s)).norm(), 0.0, 1e-15);
+      EXPECT_NEAR((s.delta_velocity_m_s - 0.5 * dt * (batch.imu[k - 1].accel_m_s2 + batch.imu[k].accel_m_s2)).norm(), 0.0, 1e-12);
+    }
+  }
+  const EngineStats st = engine.stats();
+  ASSERT_EQ(st.devices.size(), 1u);
+  const DeviceStats& d = st.devices[0];
+  EXPECT_TRUE(st.finished);
+  EXPECT_EQ(d.ticks, 800u);
+  EXPECT_EQ(d.emitted, 800u);
+  EXPECT_EQ(d.exact, 800u);
+  EXPECT_EQ(d.producer_late, 0u);
+  EXPECT_EQ(d.packets, 800u);
+  EXPECT_EQ(d.lateness.count, 800u);  // every wake-up recorded
+  EXPECT_GE(d.lateness.max_ns, d.lateness.p50_ns);
+  EXPECT_EQ(d.last_sample_counter, 799u);
+  EXPECT_EQ(rec->flushes(), 1);
+  const nlohmann::json j = to_json(st);
+  EXPECT_EQ(j["devices"][0]["emitted"], 800u);
+  EXPECT_TRUE(j["devices"][0]["lateness"].contains("p99_9_ns"));
+}
+
+TEST(Emission, WithoutALimitEmitsTheWholeTrajectoryGrid) {
+  const std::vector<Pose> knots = circle_knots(2.0);  // knots at 0, 1, 2 s
+  RecordingTransport* rec = nullptr;
+  std::vector<DeviceOptions> devices;
+  devices.push_back(native_device("imu0", 100, &rec));
+  EngineOptions eo;
+  eo.trajectory = knots;
+  eo.drop_late_ticks = false;  // a late wake-up on this shared machine still sends: counts stay exact
+  EmissionEngine engine(std::move(eo), std::move(devices));
+  engine.start();
+  ASSERT_TRUE(engine.wait(10s));
+  engine.stop();
+  const auto samples = decode_native(rec->frames());
+  const auto batch_grid = output_grid(knots.front().t_ns, knots.back().t_ns, 100);
+  ASSERT_EQ(samples.size(), batch_grid.size());  // 201: both ends included
+  EXPECT_EQ(samples.back().t_ns, batch_grid.back());
+}
+
+TEST(Emission, TwoDevicesAtDifferentRatesOnOneThread) {
+  const std::vector<Pose> knots = circle_knots(10.0);
+  SharedLog log;
+  RecordingTransport* slow = nullptr;
+  RecordingTransport* fast = nullptr;
+  std::vector<DeviceOptions> devices;
+  devices.push_back(native_device("slow", 400, &slow, 0, &log));
+  devices.push_back(native_device("fast", 1000, &fast, 1, &log));
+  EngineOptions eo;
+  eo.trajectory = knots;
+  eo.drop_late_ticks = false;  // a late wake-up on this shared machine still sends: counts stay exact
+  eo.ring_capacity = 2048;  // all computed before the clock starts
+  EmissionEngine engine(std::move(eo), std::move(devices));
+  engine.start();
+  std::this_thread::sleep_for(1200ms);
+  engine.stop();
+  const auto slow_samples = decode_native(slow->frames());
+  const auto fast_samples = decode_native(fast->frames());
+  ASSERT_GT(slow_samples.size(), 100u);
+  ASSERT_GT(fast_samples.size(), 250u);
+  // Each device on its own grid with no gaps.
+  for (std::size_t k = 0; k < slow_samples.size(); ++k) {
+    EXPECT_EQ(slow_samples[k].sequence, k);
+    EXPECT_EQ(slow_samples[k].t_ns, grid(0, k, 400));
+  }
+  for (std::size_t k = 0; k < fast_samples.size(); ++k) {
+    EXPECT_EQ(fast_samples[k].sequence, k);
+    EXPECT_EQ(fast_samples[k].t_ns, grid(0, k, 1000));
+  }
+  // One timeline: the merged write order is the order of the sample times.
+  TimeNs previous = -1;
+  for (const auto& [tag, index] : log.order) {
+    const TimeNs t = tag == 0 ? slow_samples.at(index).t_ns : fast_samples.at(index).t_ns;
+    EXPECT_GE(t, previous);
+    previous = t;
+  }
+  // Rates in the ratio 2:5 (both stopped at the same instant: within one tick).
+  const double ratio = static_cast<double>(fast_samples.size()) / static_cast<double>(slow_samples.size());
+  EXPECT_NEAR(ratio, 2.5, 5.0 / static_cast<double>(slow_samples.size()));
+}
+
+TEST(Emission, TwoDevicesEachWithItsExactCount) {
+  const std::vector<Pose> knots = circle_knots(10.0);
+  RecordingTransport* slow = nullptr;
+  std::vector<DeviceOptions> devices;
+  devices.push_back(native_device("slow", 400, &slow));
+  DeviceOptions null_dev;
+  null_dev.name = "fast";
+  null_dev.rate_hz = 1000;
+  null_dev.pipeline = flat_pipeline(1000);
+  null_dev.stream_encoder = drivers::make_stream_encoder("mavlink2");
+  null_dev.transport = std::make_unique<drivers::NullTransport>();
+  devices.push_back(std::move(null_dev));
+  EngineOptions eo;
+  eo.trajectory = knots;
+  eo.drop_late_ticks = false;  // a late wake-up on this shared machine still sends: counts stay exact
+  eo.max_ticks_per_device = 1000;  // 2.5 s at 400 Hz, 1 s at 1000 Hz
+  eo.ring_capacity = 1024;
+  EmissionEngine engine(std::move(eo), std::move(devices));
+  engine.start();
+  ASSERT_TRUE(engine.wait(10s));
+  engine.stop();
+  const EngineStats st = engine.stats();
+  ASSERT_EQ(st.devices.size(), 2u);
+  EXPECT_EQ(st.devices[0].emitted, 1000u);
+  EXPECT_EQ(st.devices[1].emitted, 1000u);
+  EXPECT_EQ(st.devices[1].packets, 1000u);
+  EXPECT_EQ(st.emitted, 2000u);
+  EXPECT_EQ(st.lateness.count, 2000u);
+  EXPECT_EQ(decode_native(slow->frames()).size(), 1000u);
+}
+
+TEST(Emission, StopsAtAPacketBoundaryFlushesAndReleasesGpio) {
+  const std::vector<Pose> knots = circle_knots(30.0);
+  RecordingTransport* rec = nullptr;
+  std::vector<DeviceOptions> devices;
+  devices.push_back(native_device("imu0", 400, &rec));
+  std::mutex gpio_mutex;
+  std::vector<bool> levels;
+  drivers::GpioSyncOptions go;
+  go.every_n_samples = 4;
+  go.pulse_width_ns = 200'000;
+  go.sample_period_ns = kNsPerSecond / 400;
+  devices[0].gpio = std::make_unique<drivers::GpioSyncOutput>(
+      go,
+      [&](bool active) {
+        std::lock_guard lock(gpio_mutex);
+        levels.push_back(active);
+        return true;
+      },
+      drivers::GpioSyncOutput::LineWriter{});
+  EngineOptions eo;
+  eo.trajectory = knots;
+  eo.drop_late_ticks = false;  // a late wake-up on this shared machine still sends: counts stay exact
+  EmissionEngine engine(std::move(eo), std::move(devices));
+  engine.start();
+  std::this_thread::sleep_for(300ms);
+  engine.request_stop();
+  engine.stop();
+  const std::uint64_t emitted_at_stop = engine.stats().devices[0].emitted;
+  std::this_thread::sleep_for(50ms);
+  const EngineStats st = engine.stats();
+  EXPECT_EQ(st.devices[0].emitted, emitted_at_stop);  // nothing after stop
+  EXPECT_FALSE(st.finished);
+  drivers::DecoderCounters dc;
+  const auto frames = rec->frames();
+  const auto samples = decode_native(frames, &dc);
+  ASSERT_GT(samples.size(), 10u);
+  EXPECT_EQ(samples.size(), frames.size());  // every frame whole: no partial packet
+  EXPECT_EQ(samples.size(), st.devices[0].emitted);
+  EXPECT_EQ(dc.checksum_errors + dc.resync_bytes + dc.other_errors, 0u);
+  for (std::size_t k = 0; k < samples.size(); ++k) EXPECT_EQ(samples[k].sequence, k);
+  EXPECT_EQ(rec->flushes(), 1);
+  ASSERT_TRUE(st.devices[0].gpio.has_value());
+  // A pulse on samples 0, 4, 8, ... (one due while the previous had not ended,
+  // the trailing-edge thread being late on this shared machine, is skipped and counted).
+  EXPECT_EQ(st.devices[0].gpio->pulses + st.devices[0].gpio->skipped_pulses, (samples.size() + 3) / 4);
+  std::lock_guard lock(gpio_mutex);
+  ASSERT_FALSE(levels.empty());
+  EXPECT_FALSE(levels.back());  // released inactive
+}
+
+TEST(Emission, StalledEmissionThreadStopsTheHeartbeat) {
+  const std::vector<Pose> knots = circle_knots(30.0);
+  std::vector<DeviceOptions> devices;
+  DeviceOptions d;
+  d.rate_hz = 200;
+  d.pipeline = flat_pipeline(200);
+  d.stream_encoder = drivers::make_stream_encoder("native");
+  d.transport = std::make_unique<drivers::NullTransport>();
+  devices.push_back(std::move(d));
+  EngineOptions eo;
+  eo.trajectory = knots;
+  EmissionEngine engine(std::move(eo), std::move(devices));
+  EXPECT_EQ(engine.last_progress_ns(), 0);
+  EXPECT_FALSE(engine.healthy(monotonic_now_ns(), kNsPerSecond));
+  engine.start();
+  std::this_thread::sleep_for(200ms);
+  EXPECT_TRUE(engine.healthy(monotonic_now_ns(), kNsPerSecond));
+  engine.set_emission_stall_for_test(true);
+  std::this_thread::sleep_for(100ms);  // the tick in progress finishes
+  const TimeNs stalled_at = engine.last_progress_ns();
+  const std::uint64_t emitted_stalled = engine.stats().devices[0].emitted;
+  std::this_thread::sleep_for(400ms);
+  EXPECT_EQ(engine.last_progress_ns(), stalled_at);
+  EXPECT_EQ(engine.stats().devices[0].emitted, emitted_stalled);
+  EXPECT_FALSE(engine.healthy(monotonic_now_ns(), 300'000'000));
+  engine.set_emission_stall_for_test(false);
+  std::this_thread::sleep_for(200ms);
+  EXPECT_GT(engine.last_progress_ns(), stalled_at);
+  EXPECT_TRUE(engine.healthy(monotonic_now_ns(), 300'000'000));
+  engine.stop();
+  // The ticks whose deadlines passed during the stall are late, not sent late in a burst beyond one period.
+  EXPECT_GT(engine.stats().devices[0].deadline_misses, 0u);
+}
+
+TEST(Emission, StarvedProducerCountsLateTicksAndSendsNothingNonFinite) {
+  const std::vector<Pose> knots = circle_knots(10.0);
+  RecordingTransport* rec = nullptr;
+  std::vector<DeviceOptions> devices;
+  devices.push_back(native_device("imu0", 400, &rec));
+  EngineOptions eo;
+  eo.trajectory = knots;
+  eo.ring_capacity = 16;            // 40 ms computed ahead
+  eo.max_ticks_per_device = 400;    // 1 s
+  EmissionEngine engine(std::move(eo), std::move(devices));
+  engine.set_producer_stall_for_test(true);  // the prefill of start() still happens
+  engine.start();
+  std::this_thread::sleep_for(300ms);
+  engine.set_producer_stall_for_test(false);
+  ASSERT_TRUE(engine.wait(10s));
+  engine.stop();
+  const DeviceStats st = engine.stats().devices[0];
+  EXPECT_EQ(st.ticks, 400u);
+  EXPECT_GT(st.producer_late, 50u);  // >= 260 ms of 2.5 ms ticks starved
+  EXPECT_EQ(st.emitted + st.producer_late + st.dropped_late, 400u);
+  const auto samples = decode_native(rec->frames());
+  ASSERT_EQ(samples.size(), st.emitted);
+  const BatchResult batch = run_batch(knots, flat_pipeline(400));
+  std::uint64_t previous = 0;
+  for (std::size_t i = 0; i < samples.size(); ++i) {
+    const drivers::DecodedSample& s = samples[i];
+    if (i > 0) {
+      EXPECT_GT(s.sequence, previous);  // gaps allowed, never out of order
+    }
+    previous = s.sequence;
+    EXPECT_EQ(s.t_ns, grid(0, s.sequence, 400));
+    EXPECT_TRUE(finite(s.gyro_rad_s) && finite(s.accel_m_s2) && finite(s.delta_theta_rad) && finite(s.delta_velocity_m_s));
+    EXPECT_EQ(s.gyro_rad_s, batch.imu[s.sequence].gyro_rad_s);  // late ticks skipped, the others still exact
+  }
+  EXPECT_EQ(samples.front().sequence, 0u);
+  // Caught up after the starvation (ticks 16.. ~120 had nothing): later ticks go out again.
+  EXPECT_GT(samples.back().sequence, 200u);
+}
+
+// Pose lines (docs/pose-wire-format.md) of a local NED trajectory.
+std::string pose_lines(const std::vector<Pose>& knots) {
+  std::string text = "time_s,north_m,east_m,down_m,heading_deg,pitch_deg,roll_deg\n";
+  char line[256];
+  for (const Pose& p : knots) {
+    const attitude::HeadingPitchRoll hpr = attitude::hpr_from_rotation(p.attitude);
+    const double deg = 180.0 / std::numbers::pi;
+    std::snprintf(line, sizeof line, "%lld.%09lld,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g\n",
+                  static_cast<long long>(p.t_ns / kNsPerSecond), static_cast<long long>(p.t_ns % kNsPerSecond),
+                  p.position_m.x(), p.position_m.y(), p.position_m.z(), hpr.heading_rad * deg, hpr.pitch_rad * deg,
+                  hpr.roll_rad * deg);
+    text += line;
+  }
+  return text;
+}
+
+TEST(Emission, LivePoseSourceEmitsToTheEndOfTheInputAsTheBatchDoes) {
+  const std::string text = pose_lines(circle_knots(3.0));
+  // The reference: the same lines read as a file, through the batch pipeline.
+  const std::string path = ::testing::TempDir() + "emission_live_poses.csv";
+  std::ofstream(path) << text;
+  const std::vector<Pose> parsed = io::poses_in_scene(io::read_trajectory_csv(path), Physics::flat);
+  std::remove(path.c_str());
+  ASSERT_EQ(parsed.size(), 4u);
+  int fds[2];
+  ASSERT_EQ(::pipe(fds), 0);
+  ASSERT_EQ(::write(fds[1], text.data(), text.size()), static_cast<ssize_t>(text.size()));
+  ::close(fds[1]);  // end of input after the four poses
+  io::PoseSourceOptions so;
+  so.physics = Physics::flat;
+  so.log = [](std::string_view) {};
+  auto source = io::make_fd_pose_source(fds[0], so);
+
+  RecordingTransport* rec = nullptr;
+  std::vector<DeviceOptions> devices;
+  devices.push_back(native_device("imu0", 100, &rec));
+  EngineOptions eo;
+  eo.source = source.get();
+  eo.emit_delay_ns = 300'000'000;  // every pose is there at once: a short delay suffices
+  eo.drop_late_ticks = false;
+  EmissionEngine engine(std::move(eo), std::move(devices));
+  engine.start();
+  ASSERT_TRUE(engine.wait(20s));  // ends by itself at the end of the input
+  engine.stop();
+  ::close(fds[0]);
+
+  const BatchResult batch = run_batch(parsed, flat_pipeline(100));
+  const EngineStats st = engine.stats();
+  const DeviceStats& d = st.devices[0];
+  EXPECT_EQ(d.ticks, batch.imu.size());  // 301: the grid from the first to the last pose
+  EXPECT_EQ(d.ticks, d.emitted + d.producer_late + d.not_sent);
+  EXPECT_EQ(d.extrapolated + d.blending, 0u);
+  ASSERT_TRUE(st.pose_source.has_value());
+  EXPECT_EQ(st.pose_source->accepted, 4u);
+  EXPECT_EQ(st.poses_pushed, 4u);
+  const auto samples = decode_native(rec->frames());
+  ASSERT_EQ(samples.size(), d.emitted);
+  ASSERT_GT(samples.size(), 250u);
+  for (const drivers::DecodedSample& s : samples) {
+    ASSERT_LT(s.sequence, batch.imu.size());
+    EXPECT_EQ(s.t_ns, batch.imu[s.sequence].t_ns);
+    EXPECT_EQ(s.gyro_rad_s, batch.imu[s.sequence].gyro_rad_s);
+    EXPECT_EQ(s.accel_m_s2, batch.imu[s.sequence].accel_m_s2);
+  }
+}
+
+class RecordingCanOutput final : public CanOutput {
+ public:
+  bool send(const drivers::CanFrame& frame) override {
+    std::lock_guard lock(mutex_);
+    frames_.push_back(frame);
+    ++counters_.frames;
+    ++counters_.frames_sent;
+    counters_.bytes += frame.len;
+    return true;
+  }
+  std::string describe() const override { return "recording can"; }
+  drivers::TransportCounters counters() const override {
+    std::lock_guard lock(mutex_);
+    return counters_;
+  }
+  std::vector<drivers::CanFrame> frames() const {
+    std::lock_guard lock(mutex_);
+    return frames_;
+  }
+
+ private:
+  mutable std::mutex mutex_;
+  std::vector<drivers::CanFrame> frames_;
+  drivers::TransportCounters counters_;
+};
+
+TEST(Emission, CanDeviceSendsEveryTickAsDroneCanFrames) {
+  const std::vector<Pose> knots = circle_knots(5.0);
+  std::vector<DeviceOptions> devices;
+  DeviceOptions d;
+  d.name = "can0";
+  d.rate_hz = 100;
+  d.pipeline = flat_pipeline(100);
+  d.can_encoder = drivers::make_can_encoder("dronecan");
+  auto out = std::make_unique<RecordingCanOutput>();
+  RecordingCanOutput* rec = out.get();
+  d.can_output = std::move(out);
+  devices.push_back(std::move(d));
+  EngineOptions eo;
+  eo.trajectory = knots;
+  eo.max_ticks_per_device = 200;
+  eo.drop_late_ticks = false;
+  eo.ring_capacity = 256;
+  EmissionEngine engine(std::move(eo), std::move(devices));
+  engine.start();
+  ASSERT_TRUE(engine.wait(10s));
+  engine.stop();
+  auto decoder = drivers::make_can_decoder("dronecan");
+  std::vector<drivers::DecodedSample> samples;
+  for (const drivers::CanFrame& f : rec->frames())
+    decoder->feed(f, [&](const drivers::DecodedSample& s) { samples.push_back(s); });
+  const BatchResult batch = run_batch(knots, flat_pipeline(100));
+  ASSERT_EQ(samples.size(), 200u);
+  EXPECT_EQ(engine.stats().devices[0].emitted, 200u);
+  for (std::size_t k = 0; k < samples.size(); ++k) {
+    if (k > 0) {
+      EXPECT_EQ(samples[k].sequence, samples[k - 1].sequence + 1);
+      EXPECT_EQ(samples[k].t_ns, batch.imu[k].t_ns - batch.imu[k].t_ns % 1000);  // microsecond timestamps
+    }
+    // float16 on the wire: 2^-11 relative.
+    EXPECT_NEAR(samples[k].gyro_rad_s.z(), batch.imu[k].gyro_rad_s.z(), 1e-3 * std::abs(batch.imu[k].gyro_rad_s.z()) + 1e-4);
+    EXPECT_NEAR(samples[k].accel_m_s2.y(), batch.imu[k].accel_m_s2.y(), 1e-3 * std::abs(batch.imu[k].accel_m_s2.y()) + 1e-3);
+  }
+}
+
+TEST(Emission, RejectsBadConfigurationNamingTheDevice) {
+  std::vector<DeviceOptions> devices;
+  DeviceOptions d;
+  d.name = "left";
+  d.rate_hz = 0;
+  d.stream_encoder = drivers::make_stream_encoder("native");
+  d.transport = std::make_unique<drivers::NullTransport>();
+  devices.push_back(std::move(d));
+  EngineOptions eo;
+  eo.trajectory = circle_knots(3.0);
+  try {
+    EmissionEngine engine(std::move(eo), std::move(devices));
+    FAIL() << "rate 0 accepted";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("'left'"), std::string::npos) << e.what();
+  }
+  std::vector<DeviceOptions> no_output(1);
+  EngineOptions eo2;
+  eo2.trajectory = circle_knots(3.0);
+  EXPECT_THROW(EmissionEngine(std::move(eo2), std::move(no_output)), std::invalid_argument);
+}
+
+// `imuemu emit` end to end: a pty read by this test, decoded, compared with the
+// batch pipeline on the same file (what `imuemu generate` writes).
+class EmitCommand : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    char tmpl[] = "/tmp/imuemu-test-emit-XXXXXX";
+    ASSERT_NE(::mkdtemp(tmpl), nullptr);
+    dir_ = tmpl;
+    const std::string cmd = std::string(IMUEMU_CLI_PATH) + " sample-trajectory --kind circle --duration-s 30 --out " +
+                            dir_ + "/traj.csv";
+    ASSERT_EQ(std::system(cmd.c_str()), 0);
+  }
+  void TearDown() override { std::system(("rm -rf " + dir_).c_str()); }
+
+  pid_t spawn(const std::vector<std::string>& args) {
+    // Everything allocated before fork: the child only calls async-signal-safe functions.
+    const std::string log_path = dir_ + "/emit.log";
+    std::vector<char*> argv;
+    argv.push_back(const_cast<char*>(IMUEMU_CLI_PATH));
+    for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+    argv.push_back(nullptr);
+    const pid_t pid = ::fork();
+    if (pid == 0) {
+      const int log = ::open(log_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+      ::dup2(log, 1);
+      ::dup2(log, 2);
+      ::execv(IMUEMU_CLI_PATH, argv.data());
+      ::_exit(127);
+    }
+    return pid;
+  }
+  static int exit_status(pid_t pid) {
+    int status = 0;
+    ::waitpid(pid, &status, 0);
+    return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+  }
+  nlohmann::json stats() const {
+    std::ifstream in(dir_ + "/stats.json");
+    return nlohmann::json::parse(in);
+  }
+  std::string dir_;
+};
+
+TEST_F(EmitCommand, PtySamplesEqualTheBatchAndSigtermStopsWithASummary) {
+  const pid_t pid = spawn({"emit", "--trajectory", dir_ + "/traj.csv", "--scene", "flat", "--rate", "200", "--device",
+                           "pty:" + dir_ + "/tty", "--stats-json", dir_ + "/stats.json"});
+  ASSERT_GT(pid, 0);
+  for (int i = 0; i < 500 && ::access((dir_ + "/tty").c_str(), F_OK) != 0; ++i) std::this_thread::sleep_for(10ms);
+  std::vector<drivers::DecodedSample> samples;
+  {
+    drivers::ByteStreamReader reader(dir_ + "/tty");
+    auto decoder = drivers::make_stream_decoder("native");
+    std::vector<std::uint8_t> buffer(4096);
+    const auto until = std::chrono::steady_clock::now() + 1500ms;
+    while (std::chrono::steady_clock::now() < until) {
+      const drivers::ReadResult r = reader.read_some(buffer, 100ms);
+      if (r.end_of_stream) break;
+      decoder->feed(std::span<const std::uint8_t>(buffer.data(), r.bytes),
+                    [&](const drivers::DecodedSample& s) { samples.push_back(s); });
+    }
+    EXPECT_EQ(decoder->counters().checksum_errors, 0u);
+  }
+  ASSERT_EQ(::kill(pid, SIGTERM), 0);
+  EXPECT_EQ(exit_status(pid), 0);
+  const nlohmann::json j = stats();
+  EXPECT_FALSE(j["finished"].get<bool>());
+  EXPECT_GE(j["devices"][0]["emitted"].get<std::uint64_t>(), samples.size());
+
+  const std::vector<Pose> knots = io::poses_in_scene(io::read_trajectory_csv(dir_ + "/traj.csv"), Physics::flat);
+  const BatchResult batch = run_batch(knots, flat_pipeline(200));
+  ASSERT_GT(samples.size(), 50u);
+  for (std::size_t i = 0; i < samples.size(); ++i) {
+    const drivers::DecodedSample& s = samples[i];
+    if (i > 0) {
+      EXPECT_GT(s.sequence, samples[i - 1].sequence);  // a tick dropped after a deadline miss leaves a gap
+    }
+    ASSERT_LT(s.sequence, batch.imu.size());
+    EXPECT_EQ(s.t_ns, batch.imu[s.sequence].t_ns);
+    EXPECT_EQ(s.gyro_rad_s, batch.imu[s.sequence].gyro_rad_s);
+    EXPECT_EQ(s.accel_m_s2, batch.imu[s.sequence].accel_m_s2);
+  }
+}
+
+TEST_F(EmitCommand, SecondsLimitsTheTicksToRateTimesSeconds) {
+  const pid_t pid = spawn({"emit", "--sample", "static", "--duration-s", "10", "--rate", "250", "--seconds", "1.5",
+                           "--device", "pty:" + dir_ + "/tty", "--stats-json", dir_ + "/stats.json"});
+  EXPECT_EQ(exit_status(pid), 0);
+  const nlohmann::json d = stats()["devices"][0];
+  EXPECT_EQ(d["ticks"].get<std::uint64_t>(), 375u);
+  EXPECT_EQ(d["emitted"].get<std::uint64_t>() + d["dropped_late"].get<std::uint64_t>() +
+                d["underruns"].get<std::uint64_t>(),
+            375u);
+  EXPECT_TRUE(stats()["finished"].get<bool>());
+}
+
+TEST_F(EmitCommand, RefusesAMismatchedProtocolAndDevice) {
+  EXPECT_EQ(exit_status(spawn({"emit", "--sample", "static", "--protocol", "dronecan", "--device", "pty:" + dir_ + "/x"})), 2);
+  EXPECT_EQ(exit_status(spawn({"emit", "--trajectory", dir_ + "/missing.csv", "--device", "pty:" + dir_ + "/x"})), 3);
+}
+
+}  // namespace
+}  // namespace imuemu::emission

@@ -1,0 +1,308 @@
+// daemon/service_notify, daemon/log, daemon/service_signals: the sd_notify
+// messages as a service manager receives them (a fake NOTIFY_SOCKET bound
+// here, the protocol of sd_notify(3)), the watchdog petted only while the
+// emitter beats, journald priority prefixes (sd-daemon(3)), rate limiting.
+#include <gtest/gtest.h>
+
+#include <poll.h>
+#include <stdlib.h>
+#include <sys/socket.h>
+#include <sys/un.h>
+#include <unistd.h>
+
+#include <atomic>
+#include <chrono>
+#include <csignal>
+#include <cstring>
+#include <filesystem>
+#include <optional>
+#include <string>
+#include <thread>
+#include <vector>
+
+#include <boost/asio/executor_work_guard.hpp>
+#include <boost/asio/io_context.hpp>
+#include <boost/asio/post.hpp>
+
+#include "daemon/log.hpp"
+#include "daemon/service_notify.hpp"
+#include "daemon/service_signals.hpp"
+
+namespace svc = imuemu::service;
+using namespace std::chrono_literals;
+
+namespace {
+
+// The service manager's end: a datagram socket at a temp path, NOTIFY_SOCKET
+// pointing at it while the fixture lives.
+class FakeNotifySocket {
+ public:
+  FakeNotifySocket() {
+    char dir_template[] = "/tmp/imuemu_notify_XXXXXX";
+    dir_ = ::mkdtemp(dir_template);
+    path_ = dir_ + "/notify";
+    fd_ = ::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+    sockaddr_un address{};
+    address.sun_family = AF_UNIX;
+    std::strncpy(address.sun_path, path_.c_str(), sizeof address.sun_path - 1);
+    if (::bind(fd_, reinterpret_cast<sockaddr*>(&address), sizeof address) != 0) throw std::runtime_error("bind");
+    ::setenv("NOTIFY_SOCKET", path_.c_str(), 1);
+  }
+  ~FakeNotifySocket() {
+    ::unsetenv("NOTIFY_SOCKET");
+    ::close(fd_);
+    std::filesystem::remove_all(dir_);
+  }
+  // Next datagram within `timeout`, or nullopt.
+  std::optional<std::string> receive(std::chrono::milliseconds timeout) {
+    pollfd p{fd_, POLLIN, 0};
+    if (::poll(&p, 1, static_cast<int>(timeout.count())) != 1) return std::nullopt;
+    char buffer[4096];
+    const ssize_t n = ::recv(fd_, buffer, sizeof buffer, 0);
+    if (n < 0) return std::nullopt;
+    return std::string(buffer, static_cast<std::size_t>(n));
+  }
+  // Every datagram arriving within `window`.
+  std::vector<std::string> collect(std::chrono::milliseconds window) {
+    std::vector<std::string> got;
+    const auto end = std::chrono::steady_clock::now() + window;
+    while (true) {
+      const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(end - std::chrono::steady_clock::now());
+      if (left.count() <= 0) break;
+      if (auto m = receive(left)) got.push_back(*m);
+    }
+    return got;
+  }
+
+ private:
+  std::string dir_, path_;
+  int fd_ = -1;
+};
+
+class IoThread {
+ public:
+  IoThread() : work_(io.get_executor()), thread_([this] { io.run(); }) {}
+  ~IoThread() {
+    work_.reset();
+    io.stop();
+    thread_.join();
+  }
+  // Runs f on the io thread and waits for it.
+  template <class F>
+  void run(F f) {
+    std::atomic<bool> done{false};
+    boost::asio::post(io, [&] {
+      f();
+      done = true;
+    });
+    while (!done) std::this_thread::sleep_for(1ms);
+  }
+  boost::asio::io_context io;
+
+ private:
+  boost::asio::executor_work_guard<boost::asio::io_context::executor_type> work_;
+  std::thread thread_;
+};
+
+// Stderr captured through a pipe while alive.
+class StderrCapture {
+ public:
+  StderrCapture() {
+    if (::pipe(pipe_) != 0) throw std::runtime_error("pipe");
+    saved_ = ::dup(STDERR_FILENO);
+    ::dup2(pipe_[1], STDERR_FILENO);
+  }
+  std::string finish() {
+    ::dup2(saved_, STDERR_FILENO);
+    ::close(saved_);
+    ::close(pipe_[1]);
+    std::string out;
+    char buffer[4096];
+    ssize_t n;
+    while ((n = ::read(pipe_[0], buffer, sizeof buffer)) > 0) out.append(buffer, static_cast<std::size_t>(n));
+    ::close(pipe_[0]);
+    return out;
+  }
+
+ private:
+  int pipe_[2]{};
+  int saved_ = -1;
+};
+
+}  // namespace
+
+TEST(ServiceNotify, NoOpWithoutNotifySocket) {
+  ::unsetenv("NOTIFY_SOCKET");
+  EXPECT_EQ(svc::notify_ready("running"), svc::NotifyOutcome::not_under_systemd);
+  EXPECT_EQ(svc::notify_watchdog(), svc::NotifyOutcome::not_under_systemd);
+  EXPECT_EQ(svc::notify_stopping(), svc::NotifyOutcome::not_under_systemd);
+}
+
+TEST(ServiceNotify, ExactMessagesOnTheNotifySocket) {
+  FakeNotifySocket manager;
+  EXPECT_EQ(svc::notify_ready("scene car-urban: 2 IMUs at 400 Hz"), svc::NotifyOutcome::sent);
+  EXPECT_EQ(manager.receive(1s), "READY=1\nSTATUS=scene car-urban: 2 IMUs at 400 Hz");
+  svc::notify_status("line one\nline two");
+  EXPECT_EQ(manager.receive(1s), "STATUS=line one line two");  // a newline would end the assignment
+  svc::notify_reloading();
+  EXPECT_EQ(manager.receive(1s), "RELOADING=1");
+  svc::notify_stopping();
+  EXPECT_EQ(manager.receive(1s), "STOPPING=1");
+  svc::notify_watchdog();
+  EXPECT_EQ(manager.receive(1s), "WATCHDOG=1");
+  EXPECT_EQ(manager.receive(50ms), std::nullopt);
+}
+
+TEST(ServiceNotify, FailureIsReportedNotThrown) {
+  ::setenv("NOTIFY_SOCKET", "/nonexistent-imuemu-dir/notify", 1);
+  EXPECT_EQ(svc::notify_watchdog(), svc::NotifyOutcome::failed);
+  ::unsetenv("NOTIFY_SOCKET");
+}
+
+TEST(ServiceNotify, WatchdogIntervalFromEnvironment) {
+  ::unsetenv("WATCHDOG_USEC");
+  ::unsetenv("WATCHDOG_PID");
+  EXPECT_EQ(svc::watchdog_interval(), std::nullopt);
+  ::setenv("WATCHDOG_USEC", "2500000", 1);
+  EXPECT_EQ(svc::watchdog_interval(), std::chrono::microseconds(2'500'000));
+  ::setenv("WATCHDOG_PID", std::to_string(::getpid()).c_str(), 1);
+  EXPECT_EQ(svc::watchdog_interval(), std::chrono::microseconds(2'500'000));
+  // Meant for another process (a child that inherited the environment).
+  ::setenv("WATCHDOG_PID", std::to_string(::getpid() + 1).c_str(), 1);
+  EXPECT_EQ(svc::watchdog_interval(), std::nullopt);
+  ::unsetenv("WATCHDOG_USEC");
+  ::unsetenv("WATCHDOG_PID");
+}
+
+TEST(EmissionHeartbeat, AliveOnlyWithinTheAge) {
+  svc::EmissionHeartbeat heartbeat;
+  EXPECT_FALSE(heartbeat.alive_within(1'000'000'000, 5));  // never beaten
+  EXPECT_EQ(heartbeat.last_beat_ns(), std::nullopt);
+  heartbeat.beat(100);
+  EXPECT_TRUE(heartbeat.alive_within(50, 150));
+  EXPECT_FALSE(heartbeat.alive_within(50, 151));
+  EXPECT_EQ(heartbeat.last_beat_ns(), 100);
+}
+
+TEST(WatchdogPetter, PetsOnlyWhileTheEmitterBeats) {
+  FakeNotifySocket manager;
+  svc::EmissionHeartbeat heartbeat;
+  std::atomic<bool> emitter_running{true};
+  std::thread emitter([&] {
+    while (emitter_running) {
+      heartbeat.beat();
+      std::this_thread::sleep_for(2ms);
+    }
+  });
+  constexpr auto kInterval = 120ms;  // WatchdogSec; pets every 60 ms
+  constexpr std::int64_t kMaxAge_ns = 60'000'000;
+  IoThread io;
+  std::optional<svc::WatchdogPetter> petter;
+  io.run([&] {
+    petter.emplace(io.io, std::chrono::duration_cast<std::chrono::microseconds>(kInterval),
+                   [&] { return heartbeat.alive_within(kMaxAge_ns); });
+    petter->start();
+  });
+  EXPECT_EQ(petter->pet_period(), 60ms);
+
+  // Healthy: about 600 / 60 = 10 pets, nothing else.
+  const auto healthy = manager.collect(600ms);
+  EXPECT_GE(healthy.size(), 6u);
+  EXPECT_LE(healthy.size(), 11u);
+  for (const auto& m : healthy) EXPECT_EQ(m, "WATCHDOG=1");
+
+  // Stall the emitter: after the beats age out (60 ms) and a pet that may be
+  // in flight, not one more pet.
+  emitter_running = false;
+  emitter.join();
+  manager.collect(150ms);
+  const std::uint64_t withheld_before = petter->pets_withheld();
+  EXPECT_TRUE(manager.collect(500ms).empty());
+  EXPECT_GE(petter->pets_withheld(), withheld_before + 6);
+
+  // Progress again: pets resume.
+  emitter_running = true;
+  std::thread emitter2([&] {
+    while (emitter_running) {
+      heartbeat.beat();
+      std::this_thread::sleep_for(2ms);
+    }
+  });
+  EXPECT_EQ(manager.receive(500ms), "WATCHDOG=1");
+  emitter_running = false;
+  emitter2.join();
+  io.run([&] { petter.reset(); });
+}
+
+TEST(WatchdogPetter, RejectsNonsense) {
+  boost::asio::io_context io;
+  EXPECT_THROW(svc::WatchdogPetter(io, std::chrono::microseconds(1), [] { return true; }), std::invalid_argument);
+  EXPECT_THROW(svc::WatchdogPetter(io, std::chrono::microseconds(1000), nullptr), std::invalid_argument);
+}
+
+TEST(ServiceLog, SyslogPriorityPrefixes) {
+  // RFC 5424 severities: err 3, warning 4, notice 5, info 6, debug 7.
+  EXPECT_EQ(svc::format_log_line(svc::LogLevel::err, "device lost"), "<3>device lost\n");
+  EXPECT_EQ(svc::format_log_line(svc::LogLevel::warning, "w"), "<4>w\n");
+  EXPECT_EQ(svc::format_log_line(svc::LogLevel::notice, "n"), "<5>n\n");
+  EXPECT_EQ(svc::format_log_line(svc::LogLevel::info, "i"), "<6>i\n");
+  EXPECT_EQ(svc::format_log_line(svc::LogLevel::debug, "d"), "<7>d\n");
+  EXPECT_EQ(svc::format_log_line(svc::LogLevel::info, "a\nb\r"), "<6>a b \n");
+}
+
+TEST(ServiceLog, WritesToStderrAboveThreshold) {
+  const svc::LogLevel saved = svc::log_threshold();
+  svc::set_log_threshold(svc::LogLevel::info);
+  StderrCapture capture;
+  svc::log_err("e1");
+  svc::log_debug("dropped");
+  svc::log_info("i1");
+  svc::set_log_threshold(svc::LogLevel::debug);
+  svc::log_debug("d1");
+  const std::string out = capture.finish();
+  svc::set_log_threshold(saved);
+  EXPECT_EQ(out, "<3>e1\n<6>i1\n<7>d1\n");
+}
+
+TEST(RateLimiter, BurstThenSuppressedCountReported) {
+  svc::RateLimiter limiter(1'000'000'000, 3);  // 3 lines per second
+  int emitted = 0;
+  for (int i = 0; i < 10; ++i) emitted += limiter.check(i * 10'000'000).emit ? 1 : 0;
+  EXPECT_EQ(emitted, 3);
+  const auto next_window = limiter.check(1'000'000'000);
+  EXPECT_TRUE(next_window.emit);
+  EXPECT_EQ(next_window.suppressed_before, 7u);
+  EXPECT_EQ(limiter.check(1'000'000'001).suppressed_before, 0u);
+
+  StderrCapture capture;
+  svc::RateLimiter once(1'000'000'000, 1);
+  once.log(svc::LogLevel::warning, "bad datagram", 0);
+  once.log(svc::LogLevel::warning, "bad datagram", 1);
+  once.log(svc::LogLevel::warning, "bad datagram", 2);
+  once.log(svc::LogLevel::warning, "bad datagram", 1'000'000'000);
+  EXPECT_EQ(capture.finish(), "<4>bad datagram\n<4>bad datagram (2 similar messages suppressed)\n");
+}
+
+TEST(ServiceSignals, TermStopsOnceHupReloads) {
+  IoThread io;
+  std::atomic<int> stops{0}, reloads{0}, stop_signal{0};
+  std::optional<svc::ServiceSignals> signals;
+  io.run([&] {
+    signals.emplace(io.io, [&](int s) { stop_signal = s; ++stops; }, [&] { ++reloads; });
+  });
+  StderrCapture quiet;  // the handlers log
+  ::kill(::getpid(), SIGHUP);
+  ::kill(::getpid(), SIGHUP);
+  for (int i = 0; i < 200 && reloads < 2; ++i) std::this_thread::sleep_for(5ms);
+  ::kill(::getpid(), SIGTERM);
+  for (int i = 0; i < 200 && stops < 1; ++i) std::this_thread::sleep_for(5ms);
+  ::kill(::getpid(), SIGTERM);  // while stopping: ignored
+  ::kill(::getpid(), SIGHUP);   // while stopping: ignored
+  std::this_thread::sleep_for(100ms);
+  const std::string log = quiet.finish();
+  io.run([&] { signals.reset(); });
+  EXPECT_EQ(reloads.load(), 2);
+  EXPECT_EQ(stops.load(), 1);
+  EXPECT_EQ(stop_signal.load(), SIGTERM);
+  EXPECT_NE(log.find("<6>SIGTERM: stopping"), std::string::npos) << log;
+}
