@@ -13,6 +13,9 @@
 #include <unordered_map>
 
 #include "core/attitude.hpp"
+#include "core/mounting.hpp"
+#include "core/stream.hpp"
+#include "daemon/scene_runner.hpp"
 #include "core/earth.hpp"
 #include "core/pipeline.hpp"
 #include "core/reference_motion.hpp"
@@ -109,7 +112,43 @@ int run_guarded(Fn&& fn) {
 
 }  // namespace
 
+namespace {
+
+// generate --scene-file: the batch pipeline over exactly what imuemud feeds
+// one device (scene_runner.hpp), so the two can be compared sample by sample.
+int generate_for_scene(const GenerateArgs& args) {
+  const scene::SceneConfig sc = scene::parse_scene_file(args.scene_file);
+  const scene::ImuConfig* imu = nullptr;
+  for (const scene::ImuConfig& i : sc.imus)
+    if (args.imu_name.empty() ? imu == nullptr : i.name == args.imu_name) imu = &i;
+  if (imu == nullptr)
+    throw std::invalid_argument("scene " + args.scene_file + " has no [[imu]] named '" + args.imu_name + "'");
+  const PipelineOptions opt = scene::pipeline_options(sc, *imu);
+  std::vector<Pose> knots;
+  for (const Pose& p : scene::scene_trajectory(sc)) knots.push_back(sensor_pose(p, imu->mounting));
+  TimeNs end_ns = std::numeric_limits<TimeNs>::max();
+  if (args.max_seconds > 0 && knots.size() >= 2) {
+    end_ns = knots.front().t_ns + static_cast<TimeNs>(std::llround(args.max_seconds * 1e9));
+    // A sample sees knots up to its look-ahead: beyond it (plus a margin of
+    // knots) nothing changes the samples kept.
+    const TimeNs interval_ns = static_cast<TimeNs>(std::llround(sc.trajectory.knot_interval_s * 1e9));
+    const TimeNs keep_ns = end_ns + StreamPipeline::lookahead_ns(opt, interval_ns) + 10 * interval_ns;
+    while (knots.size() > 2 && knots.back().t_ns > keep_ns) knots.pop_back();
+  }
+  BatchResult result = run_batch(knots, opt);
+  std::erase_if(result.imu, [end_ns](const ImuSample& s) { return s.t_ns >= end_ns; });
+  io::write_imu_csv(args.out_path, result.imu);
+  if (!args.quiet)
+    std::cerr << "imuemu: scene " << sc.name << ", imu " << imu->name << ": " << knots.size() << " knots -> "
+              << result.imu.size() << " samples at " << imu->rate_hz << " Hz (Delta " << opt.kernel.delta << ") -> "
+              << args.out_path << "\n";
+  return static_cast<int>(kOk);
+}
+
+}  // namespace
+
 int generate(const GenerateArgs& args) {
+  if (!args.scene_file.empty()) return run_guarded([&] { return generate_for_scene(args); });
   return run_guarded([&] {
     const auto wall_start = std::chrono::steady_clock::now();
     const io::Trajectory trajectory = io::read_trajectory_csv(args.in_path);

@@ -34,6 +34,13 @@ struct GenerateArgs {
   std::string scene = "ecef";
   double gravity_m_s2 = 9.80665;
   bool quiet = false;
+  // Instead of --in and the method options: one [[imu]] of a scene file, as
+  // imuemud emits it (the scene's trajectory without looping, smoothing,
+  // physics, the IMU's rate and mounting): the batch reference for the
+  // daemon's output. max_seconds > 0: only the first seconds of output (the
+  // knots beyond what those samples can see are not read).
+  std::string scene_file, imu_name;
+  double max_seconds = -1.0;
 };
 int generate(const GenerateArgs& args);
 

@@ -147,6 +147,8 @@ struct Device {
   std::unique_ptr<live::LiveEmitter> emitter;
   std::unique_ptr<live::ExactSampleSource> samples;
   OnDemandSource* on_demand = nullptr;  // trajectory input: == samples
+  bool mounted = false;                 // mounting is not the identity
+  std::vector<Pose> sensor_knots;       // trajectory input, mounted: the sensor's poses
   boost::lockfree::spsc_queue<Slot> ring;
 
   // Producer thread only.
@@ -256,8 +258,13 @@ EmissionEngine::EmissionEngine(EngineOptions options, std::vector<DeviceOptions>
     lo.underrun = d->options.underrun;
     lo.blend_ns = d->options.blend_ns;
     d->emitter = std::make_unique<live::LiveEmitter>(lo);
+    d->mounted = d->options.mounting.sensor_to_body != Mat3::Identity() || !d->options.mounting.lever_arm_b_m.isZero();
     if (o.source == nullptr) {
-      auto s = std::make_unique<OnDemandSource>(*d->engine, o.trajectory);
+      if (d->mounted) {
+        d->sensor_knots.reserve(o.trajectory.size());
+        for (const Pose& p : o.trajectory) d->sensor_knots.push_back(sensor_pose(p, d->options.mounting));
+      }
+      auto s = std::make_unique<OnDemandSource>(*d->engine, d->mounted ? d->sensor_knots : o.trajectory);
       d->on_demand = s.get();
       d->samples = std::move(s);
       const std::uint64_t n = ticks_within(o.trajectory.back().t_ns - o.trajectory.front().t_ns, d->options.rate_hz);
@@ -351,7 +358,7 @@ void EmissionEngine::Impl::take_live_input() {
     bool refused = false;
     for (auto& d : devices) {
       try {
-        d->engine->push(p.pose);
+        d->engine->push(d->mounted ? sensor_pose(p.pose, d->options.mounting) : p.pose);
       } catch (const std::exception&) {
         refused = true;  // counted, never fatal (as `imuemu stream`)
       }

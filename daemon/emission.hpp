@@ -32,6 +32,7 @@
 #include <nlohmann/json_fwd.hpp>
 
 #include "core/live_emitter.hpp"
+#include "core/mounting.hpp"
 #include "core/pipeline.hpp"
 #include "core/time_mapping.hpp"
 #include "daemon/lateness_histogram.hpp"
@@ -76,6 +77,9 @@ struct DeviceOptions {
   std::unique_ptr<drivers::CanEncoder> can_encoder;
   std::unique_ptr<CanOutput> can_output;
   std::unique_ptr<drivers::GpioSyncOutput> gpio;  // optional: pulse(k, t_k) after each sent sample
+  // Where this IMU sits on the body (core/mounting.hpp): the device smooths
+  // and differentiates the sensor's own poses, sensor_pose(pose, mounting).
+  Mounting mounting;
 };
 
 enum class StartAlignment { now, next_realtime_second };

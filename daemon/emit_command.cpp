@@ -250,6 +250,7 @@ int emit(const EmitArgs& a) {
   eo.realtime.priority = a.priority;
   eo.realtime.lock_memory = a.lock_memory;
   eo.realtime.require_realtime = a.require_realtime;
+  eo.drop_late_ticks = a.late_ticks == "drop";
 
   const int delta_used = dev.pipeline.kernel.delta;
   std::vector<emission::DeviceOptions> devices;
@@ -333,6 +334,10 @@ void add_emit_command(CLI::App& app, int& exit_code) {
   c->add_flag("--lock-memory", a.lock_memory, "mlockall(MCL_CURRENT|MCL_FUTURE)");
   c->add_flag("--require-realtime", a.require_realtime, "Fail instead of running without the priority or the memory lock");
   c->add_option("--stats-json", a.stats_json_path, "Write the final statistics (JSON) here");
+  c->add_option("--late-ticks", a.late_ticks,
+                "A tick whose wake-up missed its deadline by more than a period: drop (the receiver sees a gap, "
+                "as from a real IMU that skipped a sample) or send (late, no gap)")
+      ->capture_default_str()->check(CLI::IsMember({"drop", "send"}));
   c->add_option("--start", a.start, "now, or next-second (the next whole second of CLOCK_REALTIME)")->capture_default_str()
       ->check(CLI::IsMember({"now", "next-second"}));
   c->callback([args, &exit_code] { exit_code = emit(*args); });

@@ -37,6 +37,7 @@ struct EmitArgs {
   bool lock_memory = false;
   bool require_realtime = false;
   std::string stats_json_path;
+  std::string late_ticks = "drop"; // drop | send: a tick woken more than a period late (EngineOptions::drop_late_ticks)
   std::string start = "now";    // now | next-second
 };
 

@@ -16,7 +16,13 @@ int main(int argc, char** argv) {
 
   GenerateArgs gen;
   auto* g = app.add_subcommand("generate", "Interpolate, smooth and differentiate a trajectory into IMU samples");
-  g->add_option("--in", gen.in_path, "Trajectory CSV (docs/trajectory-format.md)")->required();
+  auto* gen_in = g->add_option("--in", gen.in_path, "Trajectory CSV (docs/trajectory-format.md)");
+  auto* gen_scene = g->add_option("--scene-file", gen.scene_file,
+                                  "Instead of --in and the method options: what imuemud emits for one [[imu]] of this scene "
+                                  "(its trajectory once, smoothing, physics, rate, mounting)");
+  gen_in->excludes(gen_scene);
+  g->add_option("--imu", gen.imu_name, "--scene-file: the [[imu]] name (default: the first)");
+  g->add_option("--max-seconds", gen.max_seconds, "--scene-file: only the first seconds of output")->check(CLI::PositiveNumber);
   g->add_option("--out", gen.out_path, "IMU CSV to write (time_ns, gyro rad/s, accel m/s^2)")->required();
   g->add_option("--trajectory-out", gen.trajectory_out_path, "Also write the smoothed trajectory CSV");
   g->add_option("--rate", gen.rate_hz, "Output rate in Hz (integer)")->capture_default_str()->check(CLI::Range(1, 1000000));
@@ -103,7 +109,13 @@ int main(int argc, char** argv) {
     const int code = app.exit(e);
     return code == 0 ? kOk : kUsageError;
   }
-  if (*g) return generate(gen);
+  if (*g) {
+    if (gen.in_path.empty() == gen.scene_file.empty()) {
+      std::cerr << "imuemu generate: give --in TRAJECTORY or --scene-file SCENE\n";
+      return kUsageError;
+    }
+    return generate(gen);
+  }
   if (*v) return verify(ver);
   if (*s) return sample_trajectory(smp);
   if (*d) return demo(demo_dir, demo_rate);

@@ -1,34 +1,42 @@
-// imuemud: FIRST, PLACEHOLDER version (written with the service plumbing,
-// issue 6) so the systemd unit and the user-mode-Linux systemd test run a real
-// binary. It does the service side for real — scene file, sd_notify
-// READY/STATUS/STOPPING/RELOADING, the watchdog petted only while the
-// emission thread progresses, the control socket, SIGTERM/SIGINT/SIGHUP,
-// SCHED_FIFO and mlockall as the scene asks — but its emission thread only
-// ticks at the first device's rate and counts: no poses, no encoders, no
-// transports. The emission engine (daemon/emission.*) replaces
-// PlaceholderEmitter; everything around it stays.
+// imuemud: the imuemu IMU emulator service (issue 6, docs/daemon.md).
 //
-//   imuemud --scene /etc/imuemu/NAME.toml [--control-socket PATH] [--log-level L]
+//   imuemud [--scene FILE] [--control-socket PATH] [--pty-link-dir DIR]
+//           [--seconds S] [--stats-json PATH] [--log-level L]
+//   imuemud --check-config FILE [--json]
+//
+// Reads a scene (docs/scene-format.md; without --scene the built-in
+// config/default.toml), opens its devices (fail fast naming the device, or
+// wait with back-off when [daemon] device_missing = "wait"), builds one
+// emission engine (daemon/emission.hpp: a producer thread smoothing the poses,
+// one absolute-deadline emission thread for all devices), and only then tells
+// systemd READY=1. Everything else runs on one Boost.Asio io_context: the
+// control socket (`imuemu status`), signals, STATUS= lines, the watchdog
+// (petted only while the emission thread makes progress) and the periodic
+// log summary. SIGTERM/SIGINT stop at a packet boundary, flush and close the
+// devices and exit 0; SIGHUP re-reads the scene and restarts emission with it
+// (devices reopened, a new time base); a scene that does not load is logged
+// and the running one kept.
 //
 // Test hook: with IMUEMU_TEST_HOOKS=1 in the environment the control socket
 // also offers "stall-emitter" (the emission thread stops making progress
 // while staying alive), which tests/hil/uml_systemd_run.sh uses to prove the
 // watchdog restarts a stalled daemon. Never set in the shipped unit.
-#include <pthread.h>
-#include <sched.h>
 #include <sys/mman.h>
 #include <unistd.h>
 
-#include <atomic>
 #include <chrono>
-#include <cerrno>
 #include <cmath>
 #include <cstdlib>
 #include <cstring>
+#include <filesystem>
+#include <fstream>
+#include <functional>
+#include <iostream>
+#include <map>
 #include <memory>
 #include <optional>
+#include <sstream>
 #include <string>
-#include <thread>
 
 #include <CLI/CLI.hpp>
 #include <boost/asio/io_context.hpp>
@@ -36,143 +44,338 @@
 #include <nlohmann/json.hpp>
 
 #include "daemon/control_socket.hpp"
+#include "daemon/default_scene.hpp"
+#include "daemon/emission.hpp"
 #include "daemon/log.hpp"
+#include "daemon/scene_check.hpp"
 #include "daemon/scene_config.hpp"
+#include "daemon/scene_runner.hpp"
 #include "daemon/service_notify.hpp"
 #include "daemon/service_signals.hpp"
+#include "io/pose_source.hpp"
 
 namespace {
 
 namespace svc = imuemu::service;
-using imuemu::TimeNs;
+namespace sc = imuemu::scene;
 using imuemu::kNsPerSecond;
+using imuemu::TimeNs;
+using imuemu::emission::monotonic_now_ns;
 
-// Exit codes for systemd: 0 clean stop; anything else is a failure that
-// Restart=on-failure acts on (a scene that does not parse fails every time
-// and ends in the unit's start limit, visibly).
+// Exit codes for systemd: 0 clean stop (or the trajectory ended); anything
+// else is a failure that Restart=on-failure acts on (a scene that does not
+// parse fails every time and ends in the unit's start limit, visibly).
 constexpr int kExitOk = 0;
 constexpr int kExitStartFailed = 1;
 constexpr int kExitUsage = 2;
 constexpr int kExitBadScene = 3;
+constexpr int kExitLinkRefused = 4;
 
-TimeNs monotonic_now_ns() {
-  timespec ts{};
-  ::clock_gettime(CLOCK_MONOTONIC, &ts);
-  return static_cast<TimeNs>(ts.tv_sec) * kNsPerSecond + ts.tv_nsec;
+// The emission thread must have looped within this long to count as alive
+// when no watchdog interval is known (status only).
+constexpr TimeNs kAliveWithinNs = kNsPerSecond;
+constexpr auto kSummaryLogPeriod = std::chrono::seconds(60);
+
+TimeNs seconds_ns(double s) { return static_cast<TimeNs>(std::llround(s * 1e9)); }
+
+std::string us_text(TimeNs ns) { return std::to_string(ns / 1000) + " us"; }
+
+// The one-line health summary: STATUS= and the periodic log line.
+std::string summary_line(const sc::SceneConfig& scene, const imuemu::emission::EngineStats& s, bool alive) {
+  std::ostringstream out;
+  out << "scene " << scene.name << ":";
+  bool first = true;
+  for (const auto& d : s.devices) {
+    out << (first ? " " : "; ") << d.name << " " << d.emitted << " samples";
+    if (d.extrapolated > 0 || d.blending > 0) out << " (" << d.extrapolated << " extrapolated, " << d.blending << " blending)";
+    if (d.producer_late > 0) out << ", " << d.producer_late << " underruns";
+    if (d.deadline_misses > 0) out << ", " << d.deadline_misses << " late";
+    if (d.write_errors > 0) out << ", " << d.write_errors << " not written";
+    if (d.transport.dropped_link_down > 0) out << " (" << d.transport.dropped_link_down << " while no reader/link down)";
+    first = false;
+  }
+  out << "; lateness p99 " << us_text(s.lateness.p99_ns) << ", max " << us_text(s.lateness.max_ns);
+  if (s.pose_source) {
+    out << "; input " << s.pose_source->accepted << " poses";
+    if (s.pose_source->lost > 0) out << ", " << s.pose_source->lost << " lost";
+    if (s.pose_source->rejected > 0) out << ", " << s.pose_source->rejected << " rejected";
+    if (s.pose_source->accepted == 0) out << " (waiting for the first pose)";
+  }
+  if (!alive) out << "; EMITTER STALLED";
+  return out.str();
 }
 
-// Stands in for the emission engine: one thread ticking on an absolute
-// CLOCK_MONOTONIC grid, one heartbeat per tick.
-class PlaceholderEmitter {
+class Daemon {
  public:
-  PlaceholderEmitter(std::int64_t rate_hz, int realtime_priority, svc::EmissionHeartbeat& heartbeat)
-      : period_ns_(kNsPerSecond / std::max<std::int64_t>(rate_hz, 1)), priority_(realtime_priority), heartbeat_(heartbeat) {}
-  ~PlaceholderEmitter() { stop(); }
+  Daemon(boost::asio::io_context& io, std::string scene_path, sc::SceneConfig scene, sc::RunnerOptions runner,
+         std::optional<double> run_seconds, bool test_hooks)
+      : io_(io),
+        scene_path_(std::move(scene_path)),
+        scene_(std::move(scene)),
+        runner_(std::move(runner)),
+        run_seconds_(run_seconds),
+        test_hooks_(test_hooks),
+        retry_timer_(io),
+        status_timer_(io),
+        stop_timer_(io) {}
 
-  // Throws std::runtime_error when the real-time priority cannot be had.
-  void start() {
-    running_ = true;
-    std::atomic<int> started{0};  // 1 ok, -errno on failure
-    thread_ = std::thread([this, &started] {
-      if (priority_ > 0) {
-        sched_param param{};
-        param.sched_priority = priority_;
-        const int r = ::pthread_setschedparam(::pthread_self(), SCHED_FIFO, &param);
-        if (r != 0) {
-          started = -r;
-          return;
-        }
-      }
-      started = 1;
-      run();
-    });
-    while (started == 0) std::this_thread::sleep_for(std::chrono::milliseconds(1));
-    if (started < 0) {
-      thread_.join();
-      running_ = false;
-      throw std::runtime_error("SCHED_FIFO priority " + std::to_string(priority_) +
-                               " for the emission thread: " + std::strerror(-started.load()) +
-                               " (needs CAP_SYS_NICE or LimitRTPRIO)");
+  const sc::SceneConfig& scene() const { return scene_; }
+  int exit_code() const { return exit_code_; }
+  std::optional<imuemu::emission::EngineStats> final_stats() const { return final_stats_; }
+
+  void attach(svc::ControlServer& control, svc::WatchdogPetter* petter, std::optional<std::chrono::microseconds> watchdog) {
+    petter_ = petter;
+    watchdog_ = watchdog;
+    control.add_command("status", "scene, devices, counters, lateness, watchdog", [this] { return status_json(); });
+    if (test_hooks_) {
+      control.add_command("stall-emitter", "TEST HOOK: the emission thread stops progressing (watchdog test)", [this] {
+        svc::log_warning("test hook: emitter stalled on request");
+        if (built_.engine) built_.engine->set_emission_stall_for_test(true);
+        return nlohmann::json{{"stalled", true}};
+      });
     }
   }
-  void stop() {
-    running_ = false;
-    if (thread_.joinable()) thread_.join();
+
+  // Healthy: the emission thread looped within max_age_ns (or it is still
+  // waiting for a device, which is reported in STATUS= instead).
+  bool healthy(TimeNs max_age_ns) const {
+    if (!built_.engine) return waiting_for_device_;
+    return built_.engine->healthy(monotonic_now_ns(), max_age_ns);
   }
-  void stall() { stalled_ = true; }  // test hook
-  std::uint64_t ticks() const { return ticks_.load(); }
-  void reset_counters() { ticks_ = 0; }
-  bool stalled() const { return stalled_; }
+
+  // Opens the devices and starts emission; READY=1 once running.
+  void start() { try_start(seconds_ns(scene_.daemon.device_retry_initial_s)); }
+
+  void stop(int exit_code) {
+    if (stopping_) return;
+    stopping_ = true;
+    exit_code_ = exit_code;
+    svc::notify_stopping();
+    retry_timer_.cancel();
+    status_timer_.cancel();
+    stop_timer_.cancel();
+    if (petter_) petter_->stop();
+    stop_engine();
+    if (on_stopped_) on_stopped_();
+  }
+  void on_stopped(std::function<void()> f) { on_stopped_ = std::move(f); }
+
+  void reload() {
+    svc::notify_reloading();
+    try {
+      sc::SceneConfig next = scene_path_.empty() ? sc::default_scene() : sc::parse_scene_file(scene_path_);
+      const sc::SceneCheck check = sc::check_scene(next);
+      if (check.refused) throw std::runtime_error("link budget over 100 %:\n" + sc::to_text(check));
+      svc::log_notice("reload: restarting emission with the re-read scene " + next.name);
+      stop_engine();
+      scene_ = std::move(next);
+    } catch (const std::exception& e) {
+      svc::log_err(std::string("reload failed, keeping the running scene: ") + e.what());
+      if (built_.engine) {
+        svc::notify_ready(ready_text());
+        return;
+      }
+    }
+    retry_timer_.cancel();
+    start();
+  }
 
  private:
-  void run() {
-    TimeNs next_ns = monotonic_now_ns();
-    while (running_) {
-      next_ns += period_ns_;
-      const timespec until{static_cast<time_t>(next_ns / kNsPerSecond), static_cast<long>(next_ns % kNsPerSecond)};
-      ::clock_nanosleep(CLOCK_MONOTONIC, TIMER_ABSTIME, &until, nullptr);
-      if (stalled_) continue;  // alive but no progress: what a blocked device write looks like
-      ticks_.fetch_add(1, std::memory_order_relaxed);
-      heartbeat_.beat();
-      const TimeNs now_ns = monotonic_now_ns();
-      if (now_ns - next_ns > kNsPerSecond) next_ns = now_ns;  // suspended or starved: resume the grid from now
+  std::string ready_text() const {
+    std::string text = "scene " + scene_.name + ": ";
+    for (std::size_t i = 0; i < built_.outputs.size(); ++i) text += (i ? "; " : "") + built_.outputs[i];
+    return text;
+  }
+
+  void try_start(TimeNs next_retry_ns) {
+    if (stopping_) return;
+    try {
+      built_ = sc::build_engine(scene_, runner_);
+      built_.engine->start();
+    } catch (const sc::DeviceOpenError& e) {
+      built_ = {};
+      if (scene_.daemon.device_missing == sc::DeviceMissingPolicy::wait) {
+        waiting_for_device_ = true;
+        const std::string what = std::string(e.what()) + "; retrying in " +
+                                 std::to_string(static_cast<double>(next_retry_ns) / 1e9).substr(0, 5) + " s";
+        svc::notify_status("waiting for a device: " + what);
+        svc::log_warning(what);
+        retry_timer_.expires_after(std::chrono::nanoseconds(next_retry_ns));
+        retry_timer_.async_wait([this, next_retry_ns](const boost::system::error_code& ec) {
+          if (ec) return;
+          try_start(std::min(2 * next_retry_ns, seconds_ns(scene_.daemon.device_retry_max_s)));
+        });
+        return;
+      }
+      svc::log_err(std::string(e.what()) + " ([daemon] device_missing = \"fail\")");
+      stop(kExitStartFailed);
+      return;
+    } catch (const std::exception& e) {
+      built_ = {};
+      svc::log_err(e.what());
+      stop(kExitStartFailed);
+      return;
+    }
+    waiting_for_device_ = false;
+    const imuemu::emission::EngineStats s = built_.engine->stats();
+    if (!s.realtime_note.empty()) svc::log_warning(s.realtime_note + " (running without it; require_realtime = false)");
+    if (s.realtime_priority) svc::log_info("emission thread SCHED_FIFO priority " + std::to_string(scene_.daemon.realtime_priority));
+    if (s.memory_locked) svc::log_info("memory locked (mlockall)");
+    svc::notify_ready(ready_text());
+    svc::log_info("ready: " + ready_text() +
+                  (watchdog_ ? "; watchdog " + std::to_string(watchdog_->count() / 1000) + " ms" : "; no watchdog") +
+                  (test_hooks_ ? "; TEST HOOKS ENABLED" : ""));
+    if (!started_once_) {
+      started_once_ = true;
+      if (petter_) petter_->start();
+      if (run_seconds_) {
+        stop_timer_.expires_after(std::chrono::nanoseconds(seconds_ns(*run_seconds_)));
+        stop_timer_.async_wait([this](const boost::system::error_code& ec) {
+          if (!ec) {
+            svc::log_info("--seconds reached");
+            stop(kExitOk);
+          }
+        });
+      }
+      last_summary_ = std::chrono::steady_clock::now();
+      schedule_status();
     }
   }
 
-  TimeNs period_ns_;
-  int priority_;
-  svc::EmissionHeartbeat& heartbeat_;
-  std::thread thread_;
-  std::atomic<bool> running_{false};
-  std::atomic<bool> stalled_{false};
-  std::atomic<std::uint64_t> ticks_{0};
-};
-
-struct Running {
-  imuemu::scene::SceneConfig scene;
-  std::unique_ptr<PlaceholderEmitter> emitter;
-};
-
-std::int64_t first_rate_hz(const imuemu::scene::SceneConfig& scene) {
-  return scene.imus.empty() ? 100 : scene.imus.front().rate_hz;
-}
-
-std::string ready_text(const imuemu::scene::SceneConfig& scene) {
-  return "scene " + scene.name + ": " + std::to_string(scene.imus.size()) + " IMU(s), placeholder emitter at " +
-         std::to_string(first_rate_hz(scene)) + " Hz";
-}
-
-void apply_memory_lock(const imuemu::scene::SceneConfig& scene) {
-  if (!scene.daemon.lock_memory) return;
-  if (::mlockall(MCL_CURRENT | MCL_FUTURE) == 0) {
-    svc::log_info("memory locked (mlockall)");
-    return;
+  void stop_engine() {
+    if (!built_.engine) return;
+    built_.engine->stop();
+    final_stats_ = built_.engine->stats();
+    svc::log_info("emission stopped: " + summary_line(scene_, *final_stats_, true));
+    built_ = {};
   }
-  const std::string what = std::string("mlockall: ") + std::strerror(errno) + " (needs CAP_IPC_LOCK or LimitMEMLOCK)";
-  if (scene.daemon.require_realtime) throw std::runtime_error(what);
-  svc::log_warning(what + "; continuing without (require_realtime = false)");
-}
 
-std::unique_ptr<PlaceholderEmitter> start_emitter(const imuemu::scene::SceneConfig& scene, svc::EmissionHeartbeat& heartbeat) {
-  auto emitter = std::make_unique<PlaceholderEmitter>(first_rate_hz(scene), scene.daemon.realtime_priority, heartbeat);
+  void schedule_status() {
+    const auto period = std::chrono::nanoseconds(seconds_ns(std::max(scene_.daemon.status_interval_s, 0.1)));
+    status_timer_.expires_after(std::min<std::chrono::nanoseconds>(period, std::chrono::milliseconds(500)));
+    status_timer_.async_wait([this, period](const boost::system::error_code& ec) {
+      if (ec || stopping_) return;
+      on_status_tick(period);
+      if (!stopping_) schedule_status();
+    });
+  }
+
+  void on_status_tick(std::chrono::nanoseconds status_period) {
+    if (!built_.engine) return;
+    const imuemu::emission::EngineStats s = built_.engine->stats();
+    if (s.finished) {
+      if (scene_.trajectory.loop) {
+        svc::log_notice("the looped trajectory ended: restarting the run (devices reopened, new time base)");
+        stop_engine();
+        start();
+      } else {
+        svc::log_notice("the trajectory ended: stopping");
+        stop(kExitOk);
+      }
+      return;
+    }
+    const auto now = std::chrono::steady_clock::now();
+    const bool alive = built_.engine->healthy(monotonic_now_ns(), kAliveWithinNs);
+    if (now - last_status_ >= status_period) {
+      last_status_ = now;
+      const std::string line = summary_line(scene_, s, alive);
+      svc::notify_status(line);
+      if (now - last_summary_ >= kSummaryLogPeriod) {
+        last_summary_ = now;
+        svc::log_info(line);
+      } else {
+        svc::log_debug(line);
+      }
+    }
+  }
+
+  nlohmann::json status_json() const {
+    nlohmann::json status{
+        {"scene", scene_.name},
+        {"scene_file", scene_.file},
+        {"pid", ::getpid()},
+        {"uptime_s", static_cast<double>(monotonic_now_ns() - started_ns_) / 1e9},
+        {"imus", scene_.imus.size()},
+        {"waiting_for_device", waiting_for_device_},
+    };
+    if (built_.engine) {
+      const imuemu::emission::EngineStats s = built_.engine->stats();
+      status["samples_emitted"] = s.emitted;
+      status["emitter_progressing"] = built_.engine->healthy(monotonic_now_ns(), kAliveWithinNs);
+      status["engine"] = imuemu::emission::to_json(s);
+    } else {
+      status["samples_emitted"] = 0;
+      status["emitter_progressing"] = false;
+      status["engine"] = nullptr;
+    }
+    if (petter_ && watchdog_) {
+      status["watchdog"] = {{"interval_s", static_cast<double>(watchdog_->count()) / 1e6},
+                            {"pets_sent", petter_->pets_sent()},
+                            {"pets_withheld", petter_->pets_withheld()}};
+    } else {
+      status["watchdog"] = nullptr;
+    }
+    return status;
+  }
+
+  boost::asio::io_context& io_;
+  std::string scene_path_;  // empty: the built-in scene
+  sc::SceneConfig scene_;
+  sc::RunnerOptions runner_;
+  std::optional<double> run_seconds_;
+  bool test_hooks_;
+  boost::asio::steady_timer retry_timer_, status_timer_, stop_timer_;
+  sc::BuiltEngine built_;
+  svc::WatchdogPetter* petter_ = nullptr;
+  std::optional<std::chrono::microseconds> watchdog_;
+  bool waiting_for_device_ = false;
+  bool started_once_ = false;
+  bool stopping_ = false;
+  int exit_code_ = kExitOk;
+  std::function<void()> on_stopped_;
+  std::optional<imuemu::emission::EngineStats> final_stats_;
+  std::chrono::steady_clock::time_point last_status_{}, last_summary_{};
+  TimeNs started_ns_ = monotonic_now_ns();
+};
+
+// --check-config: parse, compute the figures, print them. Nothing is opened.
+int check_config(const std::string& path, bool json) {
+  sc::SceneConfig scene;
   try {
-    emitter->start();
+    scene = path == "-" ? sc::default_scene() : sc::parse_scene_file(path);
   } catch (const std::exception& e) {
-    if (scene.daemon.require_realtime) throw;
-    svc::log_warning(std::string(e.what()) + "; running with normal scheduling (require_realtime = false)");
-    emitter = std::make_unique<PlaceholderEmitter>(first_rate_hz(scene), 0, heartbeat);
-    emitter->start();
+    std::cerr << e.what() << "\n";
+    return kExitBadScene;
   }
-  return emitter;
+  const sc::SceneCheck check = sc::check_scene(scene);
+  std::cout << (json ? sc::to_json(check) : sc::to_text(check));
+  if (check.refused) {
+    std::cerr << "imuemud: " << scene.file << ": refused: a link is loaded beyond 100 % (see above)\n";
+    return kExitLinkRefused;
+  }
+  return kExitOk;
 }
 
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"imuemud: the imuemu IMU emulator service (PLACEHOLDER emitter; see daemon/imuemud_main.cpp)"};
-  std::string scene_path, socket_override, log_level = "info";
-  app.add_option("--scene", scene_path, "Scene file (docs/scene-format.md)")->required();
+  CLI::App app{"imuemud: the imuemu IMU emulator service (docs/daemon.md)"};
+  std::string scene_path, check_path, socket_override, pty_link_dir, stats_json, log_level = "info";
+  std::optional<double> run_seconds;
+  bool json = false;
+  app.add_option("--scene", scene_path, "Scene file (docs/scene-format.md); default: the built-in config/default.toml");
+  app.add_option("--check-config", check_path,
+                 "Validate this scene file ('-': the built-in one) without opening devices, print the derived figures "
+                 "(look-ahead, link budget, CPU estimate) and exit");
+  app.add_flag("--json", json, "--check-config: print JSON");
   app.add_option("--control-socket", socket_override, "Control socket path (default: the scene's [daemon] control_socket)");
+  app.add_option("--pty-link-dir", pty_link_dir, "Publish every pty link in this directory instead of the scene's paths");
+  app.add_option("--seconds", run_seconds, "Stop cleanly after this many seconds of emission (tests, demos)")
+      ->check(CLI::PositiveNumber);
+  std::string late_ticks;
+  app.add_option("--late-ticks", late_ticks, "Override the scene's [daemon] late_ticks: drop or send")
+      ->check(CLI::IsMember({"drop", "send"}));
+  app.add_option("--stats-json", stats_json, "At exit, write the emission statistics (JSON) here");
   app.add_option("--log-level", log_level, "err, warning, notice, info, debug")->capture_default_str()
       ->check(CLI::IsMember({"err", "warning", "notice", "info", "debug"}));
   try {
@@ -180,129 +383,74 @@ int main(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     return app.exit(e) == 0 ? kExitOk : kExitUsage;
   }
+  if (!check_path.empty()) return check_config(check_path, json);
+
   const std::map<std::string, svc::LogLevel> levels{{"err", svc::LogLevel::err}, {"warning", svc::LogLevel::warning},
       {"notice", svc::LogLevel::notice}, {"info", svc::LogLevel::info}, {"debug", svc::LogLevel::debug}};
   svc::set_log_threshold(levels.at(log_level));
 
-  Running running;
+  sc::SceneConfig scene;
   try {
-    running.scene = imuemu::scene::parse_scene_file(scene_path);
+    scene = scene_path.empty() ? sc::default_scene() : sc::parse_scene_file(scene_path);
+    const sc::SceneCheck check = sc::check_scene(scene);
+    for (const std::string& w : check.warnings) svc::log_warning(w);
+    if (check.refused) {
+      svc::log_err(scene.file + ": refused: a link is loaded beyond 100 %:\n" + sc::to_text(check));
+      return kExitLinkRefused;
+    }
   } catch (const std::exception& e) {
     svc::log_err(e.what());
     return kExitBadScene;
   }
+  if (scene_path.empty()) svc::log_info("no --scene: running the built-in scene (config/default.toml)");
   const bool test_hooks = [] {
     const char* v = std::getenv("IMUEMU_TEST_HOOKS");
     return v != nullptr && std::string(v) == "1";
   }();
 
   boost::asio::io_context io;
-  svc::EmissionHeartbeat heartbeat;
-  const TimeNs started_ns = monotonic_now_ns();
+  sc::RunnerOptions runner;
+  runner.pty_link_dir = pty_link_dir;
+  if (!late_ticks.empty()) runner.drop_late_ticks = late_ticks == "drop";
+  runner.log = [](std::string_view line) { svc::log_notice(line); };
+  Daemon daemon(io, scene_path, scene, runner, run_seconds, test_hooks);
   try {
-    apply_memory_lock(running.scene);
     const std::string socket_path = !socket_override.empty() ? socket_override
-                                    : !running.scene.daemon.control_socket.empty()
-                                        ? running.scene.daemon.control_socket
-                                        : svc::default_control_socket_path(running.scene.name);
-    svc::ControlServer control(io, {socket_path, running.scene.daemon.control_group, std::chrono::seconds(2)});
+                                    : !scene.daemon.control_socket.empty()
+                                        ? scene.daemon.control_socket
+                                        : svc::default_control_socket_path(scene.name);
+    {
+      // /run/imuemu comes from the unit's RuntimeDirectory=; the built-in
+      // scene's /tmp/imuemu and test directories are made here.
+      std::error_code ec;
+      std::filesystem::create_directories(std::filesystem::path(socket_path).parent_path(), ec);
+    }
+    svc::ControlServer control(io, {socket_path, scene.daemon.control_group, std::chrono::seconds(2)});
 
     std::optional<svc::WatchdogPetter> petter;
-    const std::optional<std::chrono::microseconds> watchdog = running.scene.daemon.watchdog ? svc::watchdog_interval() : std::nullopt;
+    const std::optional<std::chrono::microseconds> watchdog = scene.daemon.watchdog ? svc::watchdog_interval() : std::nullopt;
     if (watchdog) {
-      // Healthy = a sample went out within half the watchdog interval: a
-      // stall is noticed at the next pet and costs at most WatchdogSec.
+      // Healthy = the emission thread looped within half the watchdog
+      // interval: a stall is noticed at the next pet and costs at most WatchdogSec.
       const TimeNs max_age_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(*watchdog / 2).count();
-      petter.emplace(io, *watchdog, [&heartbeat, max_age_ns] { return heartbeat.alive_within(max_age_ns); });
+      petter.emplace(io, *watchdog, [&daemon, max_age_ns] { return daemon.healthy(max_age_ns); });
     }
-
-    control.add_command("status", "scene, counters, watchdog", [&] {
-      nlohmann::json status{
-          {"scene", running.scene.name},
-          {"scene_file", running.scene.file},
-          {"pid", ::getpid()},
-          {"uptime_s", static_cast<double>(monotonic_now_ns() - started_ns) / 1e9},
-          {"placeholder_emitter", true},
-          {"samples_emitted", running.emitter ? running.emitter->ticks() : 0},
-          {"emitter_rate_hz", first_rate_hz(running.scene)},
-          {"emitter_progressing", heartbeat.alive_within(kNsPerSecond)},
-          {"imus", running.scene.imus.size()},
-      };
-      if (petter) {
-        status["watchdog"] = {{"interval_s", static_cast<double>(watchdog->count()) / 1e6},
-                              {"pets_sent", petter->pets_sent()},
-                              {"pets_withheld", petter->pets_withheld()}};
-      } else {
-        status["watchdog"] = nullptr;
-      }
-      return status;
+    daemon.attach(control, petter ? &*petter : nullptr, watchdog);
+    svc::ServiceSignals signals(io, [&](int) { daemon.stop(kExitOk); }, [&] { daemon.reload(); });
+    daemon.on_stopped([&] {
+      control.close();
+      io.stop();
     });
-    control.add_command("stats-reset", "zero the counters", [&] {
-      if (running.emitter) running.emitter->reset_counters();
-      return nlohmann::json{{"reset", true}};
-    });
-    if (test_hooks) {
-      control.add_command("stall-emitter", "TEST HOOK: the emission thread stops progressing (watchdog test)", [&] {
-        svc::log_warning("test hook: emitter stalled on request");
-        if (running.emitter) running.emitter->stall();
-        return nlohmann::json{{"stalled", true}};
-      });
-    }
-
-    boost::asio::steady_timer status_timer(io);
-    const auto status_period = std::chrono::nanoseconds(
-        static_cast<std::int64_t>(std::llround(std::max(running.scene.daemon.status_interval_s, 0.1) * 1e9)));
-    std::function<void()> schedule_status = [&] {
-      status_timer.expires_after(status_period);
-      status_timer.async_wait([&](const boost::system::error_code& ec) {
-        if (ec) return;
-        const std::string line = "scene " + running.scene.name + ": " +
-                                 std::to_string(running.emitter ? running.emitter->ticks() : 0) + " samples" +
-                                 (heartbeat.alive_within(kNsPerSecond) ? "" : ", EMITTER STALLED");
-        svc::notify_status(line);
-        svc::log_debug(line);
-        schedule_status();
-      });
-    };
-
-    svc::ServiceSignals signals(
-        io,
-        [&](int) {
-          svc::notify_stopping();
-          if (petter) petter->stop();
-          status_timer.cancel();
-          if (running.emitter) running.emitter->stop();
-          control.close();
-          io.stop();
-        },
-        [&] {
-          svc::notify_reloading();
-          try {
-            imuemu::scene::SceneConfig next = imuemu::scene::parse_scene_file(scene_path);
-            running.emitter.reset();  // joins
-            running.scene = std::move(next);
-            running.emitter = start_emitter(running.scene, heartbeat);
-            svc::log_info("reloaded: " + ready_text(running.scene));
-          } catch (const std::exception& e) {
-            svc::log_err(std::string("reload failed, keeping the running scene: ") + e.what());
-            if (!running.emitter) running.emitter = start_emitter(running.scene, heartbeat);
-          }
-          svc::notify_ready(ready_text(running.scene));
-        });
-
-    running.emitter = start_emitter(running.scene, heartbeat);
-    if (petter) petter->start();
-    schedule_status();
-    svc::notify_ready(ready_text(running.scene));
-    svc::log_info("ready: " + ready_text(running.scene) + "; control socket " + control.path() +
-                  (watchdog ? "; watchdog " + std::to_string(watchdog->count() / 1000) + " ms" : "; no watchdog") +
-                  (test_hooks ? "; TEST HOOKS ENABLED" : ""));
+    daemon.start();
     io.run();
-    running.emitter.reset();
   } catch (const std::exception& e) {
     svc::log_err(e.what());
     return kExitStartFailed;
   }
-  svc::log_info("stopped");
-  return kExitOk;
+  if (!stats_json.empty()) {
+    std::ofstream out(stats_json);
+    out << (daemon.final_stats() ? imuemu::emission::to_json(*daemon.final_stats()).dump(2) : std::string("null")) << "\n";
+  }
+  svc::log_info(daemon.exit_code() == kExitOk ? "stopped" : "stopped after a failure");
+  return daemon.exit_code();
 }

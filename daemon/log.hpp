@@ -33,6 +33,7 @@ LogLevel log_threshold();
 void log(LogLevel level, std::string_view text);
 inline void log_err(std::string_view text) { log(LogLevel::err, text); }
 inline void log_warning(std::string_view text) { log(LogLevel::warning, text); }
+inline void log_notice(std::string_view text) { log(LogLevel::notice, text); }
 inline void log_info(std::string_view text) { log(LogLevel::info, text); }
 inline void log_debug(std::string_view text) { log(LogLevel::debug, text); }
 

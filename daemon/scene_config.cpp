@@ -383,7 +383,7 @@ void parse_live_section(const Table& t, LiveConfig& out) {
 
 void parse_daemon_section(const Table& t, const std::string& scene_name, DaemonConfig& out) {
   t.allow_only({"realtime_priority", "lock_memory", "require_realtime", "control_socket", "control_group",
-                "status_interval_s", "watchdog", "device_missing", "device_retry_initial_s", "device_retry_max_s"});
+                "status_interval_s", "watchdog", "late_ticks", "device_missing", "device_retry_initial_s", "device_retry_max_s"});
   out.realtime_priority = static_cast<int>(t.integer("realtime_priority", 0, 0, 99));
   out.lock_memory = t.boolean("lock_memory", false);
   out.require_realtime = t.boolean("require_realtime", false);
@@ -396,6 +396,7 @@ void parse_daemon_section(const Table& t, const std::string& scene_name, DaemonC
   out.control_group = t.string("control_group", "");
   out.status_interval_s = t.number("status_interval_s", 1.0, 0.0, 86400.0);
   out.watchdog = t.boolean("watchdog", true);
+  out.drop_late_ticks = t.choice("late_ticks", "drop", {"drop", "send"}) == "drop";
   out.device_missing = t.choice("device_missing", "fail", {"fail", "wait"}) == "fail" ? DeviceMissingPolicy::fail
                                                                                     : DeviceMissingPolicy::wait;
   if (out.device_missing == DeviceMissingPolicy::fail) {

@@ -4,6 +4,7 @@
 // are not frames (drivers/gpio_sync.hpp); both report the same counters.
 #pragma once
 
+#include <atomic>
 #include <chrono>
 #include <cstddef>
 #include <cstdint>
@@ -62,20 +63,25 @@ class Transport {
 };
 
 // Discards frames, counting them as sent: for timing benchmarks and dry runs.
+// Counted with relaxed atomics: write_frame runs on the emission thread while
+// counters() is read by the status socket.
 class NullTransport final : public Transport {
  public:
   bool write_frame(std::span<const std::byte> frame) override {
-    ++counters_.frames;
-    counters_.bytes += frame.size();
-    ++counters_.frames_sent;
-    counters_.bytes_sent += frame.size();
+    frames_.fetch_add(1, std::memory_order_relaxed);
+    bytes_.fetch_add(frame.size(), std::memory_order_relaxed);
     return true;
   }
   std::string describe() const override { return "null"; }
-  TransportCounters counters() const override { return counters_; }
+  TransportCounters counters() const override {
+    TransportCounters c;
+    c.frames = c.frames_sent = frames_.load(std::memory_order_relaxed);
+    c.bytes = c.bytes_sent = bytes_.load(std::memory_order_relaxed);
+    return c;
+  }
 
  private:
-  TransportCounters counters_;
+  std::atomic<std::uint64_t> frames_{0}, bytes_{0};
 };
 
 }  // namespace imuemu::drivers

@@ -17,10 +17,11 @@ run_flavour() {
 # The hardware-in-the-loop fixtures (label hil: user-mode Linux and QEMU,
 # tests/hil/README.md) run once, on the release binaries: ASan binaries cannot
 # run under user-mode Linux, and the fixtures test kernels and wires, not
-# memory safety (the same code runs under ASan in the unit tests).
+# memory safety (the same code runs under ASan in the unit tests). So do the
+# 60-s loopback runs (label loopback): they test delivery at the exact rate.
 run_flavour release
 # The parsers' libFuzzer targets, bounded in time (FUZZ_SECONDS per target).
 echo "=== fuzz"
 bash scripts/fuzz.sh "${FUZZ_SECONDS:-60}" || status=1
-run_flavour asan -LE hil
+run_flavour asan -LE "hil|loopback"
 exit $status
