@@ -4,7 +4,7 @@
 // kMaxCommandBytes), and receives ONE JSON document followed by "\n", then
 // the daemon closes the connection. Protocol documented in docs/daemon.md.
 //
-// Commands are registered by the daemon (status, stats-reset, test hooks);
+// Commands are registered by the daemon (status, test hooks);
 // an unknown command gets {"error": "...", "commands": [...]}, a handler
 // that throws gets {"error": "<command>: <what>"}. A client that sends
 // nothing, too much or no newline within the client timeout is dropped; it

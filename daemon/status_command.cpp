@@ -130,7 +130,7 @@ void add_status_command(CLI::App& app, int& exit_code) {
   auto* socket_option = cmd->add_option("--socket", args->socket_path, "Control socket path (default /run/imuemu/SCENE.sock)");
   cmd->add_option("--scene", args->scene, "Scene name, for the default socket path")->capture_default_str()->excludes(socket_option);
   cmd->add_option("--command", args->command,
-                  "Command to send: status, stats-reset, help (lists what the daemon offers)")->capture_default_str();
+                  "Command to send: status, help (lists what the daemon offers)")->capture_default_str();
   cmd->add_option("--timeout-s", args->timeout_s, "Give up when no reply comes within this")->capture_default_str();
   cmd->add_flag("--compact", args->compact, "One-line JSON");
   cmd->callback([args, &exit_code] { exit_code = run_status(*args); });

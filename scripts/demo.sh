@@ -1,9 +1,42 @@
 #!/usr/bin/env bash
-# Installs everything, builds, and runs the main job on the built-in sample
-# trajectory: a 10-minute aircraft-like flight given at 1 Hz becomes a 400 Hz
-# ideal IMU in the ecef scene, which is then integrated back and compared.
+# The main job, no hardware needed: installs everything, builds, then
+#  1. starts the daemon imuemud on its built-in scene (config/default.toml:
+#     the aircraft-like flight near Barcelona, 1 Hz knots, WGS84 ECEF physics,
+#     a 400 Hz IMU in imuemu's native protocol on the virtual serial port
+#     /tmp/imuemu/ttyIMU0), and shows live decoded samples for a few seconds
+#     with `imuemu listen`, then the daemon's status and a clean stop;
+#  2. runs the batch job on the same flight: 10 minutes of 1 Hz knots to a
+#     400 Hz IMU, integrated back to print the closed-loop drift (out/demo/).
+# DEMO_SECONDS sets how long samples are shown (default 5).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
 bash scripts/build.sh release
-exec build/release/daemon/imuemu demo --out-dir out/demo "$@"
+bin=build/release/daemon
+seconds=${DEMO_SECONDS:-5}
+link=/tmp/imuemu/ttyIMU0
+socket=/tmp/imuemu/default.sock
+
+echo "=== imuemud on the built-in scene"
+"$bin/imuemud" --check-config -
+"$bin/imuemud" &
+daemon=$!
+trap 'kill "$daemon" 2>/dev/null || true' EXIT
+for _ in $(seq 1 200); do
+  [[ -L $link && -S $socket ]] && break
+  kill -0 "$daemon" 2>/dev/null || { echo "imuemud exited early" >&2; exit 1; }
+  sleep 0.05
+done
+echo "=== imuemu listen --device $link (every 40th sample: 10 lines per second, for $seconds s)"
+"$bin/imuemu" listen --protocol native --device "$link" --expect-rate 400 --every 40 --duration-s "$seconds"
+echo "=== imuemu status (control socket $socket)"
+"$bin/imuemu" status --socket "$socket" --compact | head -c 1200
+echo
+echo "=== stopping imuemud (SIGTERM: stops at a packet boundary, exit 0)"
+kill -TERM "$daemon"
+wait "$daemon"
+trap - EXIT
+echo "imuemud exited with status 0"
+
+echo "=== batch: 10-minute flight -> 400 Hz IMU -> closed-loop check"
+exec "$bin/imuemu" demo --out-dir out/demo "$@"

@@ -36,5 +36,24 @@ run() { # name line [--sync-active-low]
 
 run sync_high 0
 run sync_low 1 --sync-active-low
+
+# A line another process holds (gpioset keeps it requested until signalled):
+# emit must refuse before sending anything, naming the chip, the line and the
+# owner. gpioset drives line 2 to 0 once; the host allows that line's events.
+gpioset --mode=signal "$HIL_GPIOCHIP" 2=0 &
+holder=$!
+sleep 0.5
+out=$("$imuemu" emit --sample static --duration-s 3 --seconds 1 --rate 100 --protocol native \
+  --device serial:/dev/ttyS1,baud=921600 --gpio "$HIL_GPIOCHIP:2" 2>&1)
+rc=$?
+kill "$holder"
+wait "$holder" 2>/dev/null
+echo "gpio_sync_guest: claimed line: emit exit status $rc: $out"
+if [ $rc -ne 0 ] && echo "$out" | grep -q "line 2 is already claimed by 'gpioset'"; then
+  echo "gpio_sync_guest: claimed line: refused with a clear error: PASS"
+else
+  echo "gpio_sync_guest: claimed line: FAIL (expected a non-zero exit naming line 2 and its owner gpioset)"
+  status=1
+fi
 marker END
 exit $status
