@@ -18,7 +18,9 @@
 # write goes to tmpfs inside the guest: /run, /tmp, /var, and a copy of /etc
 # (sysusers adds the user imuemu there, never on the host). Only the results
 # directory is written on the host, so it must not be under /tmp, /run, /var
-# or /etc (default: a fresh directory under $PWD).
+# or /etc (default: a fresh directory under $PWD); a tree or results directory
+# there is copied to a work directory under /opt (or /srv, /mnt,
+# IMUEMU_HIL_WORK_DIR) first and the results copied back.
 # Results: checks.txt (PASS/FAIL lines), journal.txt, console.log, rc.
 # Exit: 0 all checks passed, 1 a check failed, 125 the fixture failed (no
 # boot, no verdict within the timeout).
@@ -64,10 +66,41 @@ if [[ -z $results_dir ]]; then
 fi
 mkdir -p "$results_dir"
 results_dir=$(cd "$results_dir" && pwd)
-case "$results_dir/" in
-  /tmp/*|/run/*|/var/*|/etc/*|/dev/*|/proc/*|/sys/*)
-    fail "results directory $results_dir is under a path the guest hides behind tmpfs; use --results elsewhere" ;;
-esac
+guest_check=$src/tests/hil/systemd_guest_check.sh
+
+# Paths the guest cannot use: under tmpfs inside the guest (/tmp, /run, /var,
+# the /etc copy), or hidden from the hardened service (ProtectHome= hides
+# /home and /root, so a daemon binary there cannot be executed). A checkout
+# or build tree there (a CI clone in /tmp, say) is copied to a work
+# directory the guest sees, and the results copied back at the end.
+hidden_from_guest() { case "$1/" in /tmp/*|/run/*|/var/*|/etc/*|/dev/*|/proc/*|/sys/*|/home/*|/root/*) return 0 ;; esac; return 1; }
+final_results=""
+relocate=no
+for p in "$results_dir" "$daemon" "$cli" "$guest_check" "$unit_file" "$sysusers_file" "$tmpfiles_file" "$scene_file"; do
+  hidden_from_guest "$p" && relocate=yes
+done
+if [[ $relocate == yes ]]; then
+  base=""
+  for cand in "${IMUEMU_HIL_WORK_DIR:-}" /opt /srv /mnt; do
+    [[ -n $cand && -d $cand && -w $cand ]] || continue
+    cand=$(cd "$cand" && pwd)
+    hidden_from_guest "$cand" || { base=$cand; break; }
+  done
+  [[ -n $base ]] || fail "the tree is under a path the guest hides (/tmp, /run, /var, /etc, /home, /root) and none of IMUEMU_HIL_WORK_DIR, /opt, /srv, /mnt is writable to copy it to"
+  work=$(mktemp -d "$base/imuemu-hil-systemd.XXXXXX")
+  chmod 755 "$work"  # mktemp makes it 0700: the service runs as user imuemu
+  mkdir -p "$work/bin" "$work/files" "$work/results"
+  cp "$daemon" "$work/bin/imuemud" && daemon=$work/bin/imuemud
+  cp "$cli" "$work/bin/imuemu" && cli=$work/bin/imuemu
+  cp "$guest_check" "$work/files/" && guest_check=$work/files/$(basename "$guest_check")
+  for v in unit_file sysusers_file tmpfiles_file scene_file; do
+    cp "${!v}" "$work/files/"
+    printf -v "$v" '%s' "$work/files/$(basename "${!v}")"
+  done
+  final_results=$results_dir
+  results_dir=$work/results
+  echo "uml_systemd_run: working in $work (the tree is where the guest cannot see it); results go to $final_results" >&2
+fi
 rm -f "$results_dir"/{rc,checks.txt,exit_status.txt,journal.txt,failures,guest_setup.txt,console.log}
 # Staging (unit, drop-in, target, scene) next to the results: the guest reads it.
 stage=$results_dir/stage
@@ -104,7 +137,7 @@ SuccessAction=poweroff-force
 FailureAction=poweroff-force
 [Service]
 Type=oneshot
-ExecStart=/bin/bash $src/tests/hil/systemd_guest_check.sh $cli $results_dir
+ExecStart=/bin/bash $guest_check $cli $results_dir
 StandardOutput=file:$results_dir/check_output.txt
 StandardError=inherit
 EOF2
@@ -141,7 +174,14 @@ EOF2
 chmod +x "$init"
 
 uml_pid=""
-cleanup() { [[ -n $uml_pid ]] && kill "$uml_pid" 2>/dev/null; true; }
+cleanup() {
+  [[ -n $uml_pid ]] && kill "$uml_pid" 2>/dev/null
+  if [[ -n $final_results ]]; then
+    cp -a "$results_dir/." "$final_results/" 2>/dev/null
+    rm -rf "$work"
+  fi
+  true
+}
 trap cleanup EXIT
 trap 'exit 143' TERM INT HUP
 boot_rc=0
@@ -169,5 +209,5 @@ if [[ $rc != 0 ]]; then
   echo "uml_systemd_run: $(<"$results_dir/failures") check(s) failed; journal of the unit:" >&2
   tail -n 60 "$results_dir/journal.txt" >&2
 fi
-echo "uml_systemd_run: boot+checks+poweroff ${elapsed} s, results in $results_dir" >&2
+echo "uml_systemd_run: boot+checks+poweroff ${elapsed} s, results in ${final_results:-$results_dir}" >&2
 exit "$rc"
