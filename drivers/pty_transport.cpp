@@ -4,14 +4,17 @@
 #include <poll.h>
 #include <pty.h>
 #include <sys/file.h>
+#include <sys/ioctl.h>
 #include <sys/stat.h>
 #include <termios.h>
 #include <unistd.h>
 
 #include <array>
 #include <cerrno>
+#include <chrono>
 #include <filesystem>
 #include <system_error>
+#include <thread>
 
 #include "drivers/queued_writer.hpp"
 
@@ -28,7 +31,10 @@ std::string read_link(const std::string& path) {
 class PtyDevice final : public WriterDevice {
  public:
   PtyDevice(int master_fd, std::string slave_path) : master_(master_fd), slave_path_(std::move(slave_path)) {}
-  ~PtyDevice() override { ::close(master_); }
+  ~PtyDevice() override {
+    drain_before_close();
+    ::close(master_);
+  }
 
   bool datagrams() const override { return false; }
   int poll_fd() const override { return master_; }
@@ -76,6 +82,31 @@ class PtyDevice final : public WriterDevice {
   bool initially_up() const override { return reader_present(); }
 
  private:
+  // Closing the master hangs the slave up, and Linux discards what the reader
+  // has not read yet: the last frames of an orderly stop would be lost. While
+  // a reader is connected, wait (bounded) until it has read everything.
+  // The unread count is the slave's input queue (FIONREAD on a slave
+  // descriptor; the master's own queue does not report it).
+  void drain_before_close() const {
+    constexpr auto kLimit = std::chrono::milliseconds(500);
+    if (!reader_present()) return;  // nobody to read it: nothing to wait for
+    const auto until = std::chrono::steady_clock::now() + kLimit;
+    // Our own slave descriptor keeps POLLHUP off the master from here on, so
+    // a reader that leaves meanwhile costs the bounded wait, no more.
+    const int fd = ::open(slave_path_.c_str(), O_RDWR | O_NOCTTY | O_NONBLOCK | O_CLOEXEC);
+    if (fd < 0) return;
+    int quiet_checks = 0;
+    while (std::chrono::steady_clock::now() < until) {
+      int unread = 0;
+      if (::ioctl(fd, FIONREAD, &unread) != 0) break;
+      // Twice empty, 2 ms apart: the kernel's flip buffer may still hold
+      // bytes on their way to the queue on the first look.
+      quiet_checks = unread == 0 ? quiet_checks + 1 : 0;
+      if (quiet_checks >= 2) break;
+      std::this_thread::sleep_for(std::chrono::milliseconds(2));
+    }
+    ::close(fd);
+  }
   bool reader_present() const {
     pollfd p{master_, POLLOUT, 0};
     return ::poll(&p, 1, 0) >= 0 && (p.revents & POLLHUP) == 0;

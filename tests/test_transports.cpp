@@ -257,6 +257,35 @@ TEST(PtyTransport, ReaderSeesEndOfStreamWhenTheTransportCloses) {
   EXPECT_EQ(r.bytes, 0u);
 }
 
+// Closing the master hangs the slave up, and Linux then discards what the
+// reader has not read: an orderly stop must wait (bounded) until a connected
+// reader has everything, or the last frames of every run are lost. The reader
+// here starts reading only after the transport has been told to close.
+TEST(PtyTransport, FramesWrittenBeforeCloseReachAReaderThatReadsLate) {
+  TempDir dir;
+  imuemu::drivers::PtyTransportOptions options;
+  options.link_path = (dir.path() / "tty").string();
+  options.log = [](std::string_view) {};
+  auto pty = std::make_unique<imuemu::drivers::PtyTransport>(options);
+  ByteStreamReader reader(options.link_path);
+  ASSERT_TRUE(wait_until([&] { return pty->link_up(); }, 2s));
+  constexpr std::uint32_t kFrames = 40;  // ~1.4 KB: fits the kernel's buffer, so nothing blocks
+  std::size_t expected_bytes = 0;
+  for (std::uint32_t s = 0; s < kFrames; ++s) {
+    const auto frame = make_frame(s);
+    expected_bytes += frame.size();
+    ASSERT_TRUE(pty->write_frame(frame));
+  }
+  ASSERT_TRUE(pty->flush(2s));
+  std::vector<std::uint8_t> received;
+  std::thread closer([&] { pty.reset(); });
+  std::this_thread::sleep_for(100ms);  // the transport is closing; the reader has read nothing yet
+  received = read_stream(reader, SIZE_MAX, 1000ms);
+  closer.join();
+  EXPECT_EQ(received.size(), expected_bytes);
+  EXPECT_EQ(parse_frames(received).sequences.size(), kFrames);
+}
+
 TEST(PtyTransport, WithoutAReaderFramesAreDroppedAndCountedAndNothingGoesStale) {
   TempDir dir;
   imuemu::drivers::PtyTransportOptions options;
