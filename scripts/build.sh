@@ -6,7 +6,9 @@ cd "$(dirname "$0")/.."
 flavour=${1:-release}
 case "$flavour" in
   release) extra=(-DCMAKE_BUILD_TYPE=Release -DIMUEMU_SANITIZE=OFF -DIMUEMU_BUILD_BENCH=ON) ;;
-  asan) extra=(-DCMAKE_BUILD_TYPE=RelWithDebInfo -DIMUEMU_SANITIZE=ON -DIMUEMU_BUILD_BENCH=OFF) ;;
+  # -O1 -g1: half the compile time of -O2 -g (the sanitizers' instrumentation
+  # dominates), still line numbers in every report; keeps CI under 30 minutes.
+  asan) extra=(-DCMAKE_BUILD_TYPE=RelWithDebInfo "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O1 -g1 -DNDEBUG" -DIMUEMU_SANITIZE=ON -DIMUEMU_BUILD_BENCH=OFF) ;;
   *) echo "usage: $0 release|asan" >&2; exit 2 ;;
 esac
 cmake -S . -B "build/$flavour" -G Ninja "${extra[@]}" >/dev/null

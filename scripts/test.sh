@@ -22,6 +22,6 @@ run_flavour() {
 run_flavour release
 # The parsers' libFuzzer targets, bounded in time (FUZZ_SECONDS per target).
 echo "=== fuzz"
-bash scripts/fuzz.sh "${FUZZ_SECONDS:-60}" || status=1
+bash scripts/fuzz.sh "${FUZZ_SECONDS:-30}" || status=1
 run_flavour asan -LE "hil|loopback"
 exit $status
