@@ -4,6 +4,8 @@
 #include <cstdint>
 #include <string>
 
+#include "io/pose_source.hpp"
+
 namespace imuemu::cli {
 
 // Exit codes (documented in README.md).
@@ -85,6 +87,10 @@ struct StreamArgs {
   double duration_s = -1.0;     // < 0: until the input ends (or SIGINT/SIGTERM)
 };
 int stream(const StreamArgs& args);
+
+// "udp:127.0.0.1:5005" (scheme "udp") -> address and port; std::invalid_argument
+// naming the option value otherwise. Used by `stream` and `emit` --source.
+io::NetEndpoint endpoint_of(const std::string& spec, const std::string& scheme);
 
 // The README's main job: sample flight -> generate -> verify, in out_dir.
 int demo(const std::string& out_dir, std::int64_t rate_hz);

@@ -58,21 +58,6 @@ int median_interval_delta(const std::vector<Pose>& knots, std::int64_t rate_hz) 
   return std::max(1, static_cast<int>(std::lround(median_s * static_cast<double>(rate_hz))));
 }
 
-io::NetEndpoint endpoint_of(const std::string& spec, const std::string& scheme) {
-  const std::string rest = spec.substr(scheme.size() + 1);
-  const auto colon = rest.rfind(':');
-  if (colon == std::string::npos) throw std::invalid_argument("--source " + spec + ": expected " + scheme + ":ADDRESS:PORT");
-  io::NetEndpoint ep;
-  ep.address = rest.substr(0, colon);
-  unsigned port = 0;
-  const std::string p = rest.substr(colon + 1);
-  const auto [end, ec] = std::from_chars(p.data(), p.data() + p.size(), port);
-  if (ec != std::errc() || end != p.data() + p.size() || port > 65535)
-    throw std::invalid_argument("--source " + spec + ": port '" + p + "' is not 0..65535");
-  ep.port = static_cast<std::uint16_t>(port);
-  ep.receive_buffer_bytes = 1 << 20;
-  return ep;
-}
 
 // "serial:/dev/ttyUSB0,baud=921600" -> port and settings.
 drivers::SerialTransportOptions serial_options_of(const std::string& spec) {

@@ -35,22 +35,6 @@ void sleep_until_monotonic(TimeNs due_ns) {
   }
 }
 
-// "udp:127.0.0.1:5005" -> address, port.
-io::NetEndpoint endpoint_of(const std::string& spec, const std::string& scheme) {
-  const std::string rest = spec.substr(scheme.size() + 1);
-  const auto colon = rest.rfind(':');
-  if (colon == std::string::npos) throw std::invalid_argument("--source " + spec + ": expected " + scheme + ":ADDRESS:PORT");
-  io::NetEndpoint ep;
-  ep.address = rest.substr(0, colon);
-  unsigned port = 0;
-  const std::string p = rest.substr(colon + 1);
-  const auto [end, ec] = std::from_chars(p.data(), p.data() + p.size(), port);
-  if (ec != std::errc() || end != p.data() + p.size() || port > 65535)
-    throw std::invalid_argument("--source " + spec + ": port '" + p + "' is not 0..65535");
-  ep.port = static_cast<std::uint16_t>(port);
-  ep.receive_buffer_bytes = 1 << 20;
-  return ep;
-}
 
 struct Output {
   std::FILE* file = nullptr;
@@ -68,6 +52,23 @@ void write_row(std::FILE* f, const live::Emission& e) {
 }
 
 }  // namespace
+
+// "udp:127.0.0.1:5005" -> address, port.
+io::NetEndpoint endpoint_of(const std::string& spec, const std::string& scheme) {
+  const std::string rest = spec.substr(scheme.size() + 1);
+  const auto colon = rest.rfind(':');
+  if (colon == std::string::npos) throw std::invalid_argument("--source " + spec + ": expected " + scheme + ":ADDRESS:PORT");
+  io::NetEndpoint ep;
+  ep.address = rest.substr(0, colon);
+  unsigned port = 0;
+  const std::string p = rest.substr(colon + 1);
+  const auto [end, ec] = std::from_chars(p.data(), p.data() + p.size(), port);
+  if (ec != std::errc() || end != p.data() + p.size() || port > 65535)
+    throw std::invalid_argument("--source " + spec + ": port '" + p + "' is not 0..65535");
+  ep.port = static_cast<std::uint16_t>(port);
+  ep.receive_buffer_bytes = 1 << 20;
+  return ep;
+}
 
 int stream(const StreamArgs& args) {
   PipelineOptions po;
