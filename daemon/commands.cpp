@@ -268,46 +268,56 @@ int verify(const VerifyArgs& args) {
   });
 }
 
+std::string sample_trajectory_csv(const std::string& kind, double duration_s, double period_s) {
+  const auto duration_ns = static_cast<TimeNs>(std::llround(duration_s * 1e9));
+  const auto period_ns = static_cast<TimeNs>(std::llround(period_s * 1e9));
+  std::string text;
+  auto line = [&](TimeNs t, const Vec3& p, const attitude::HeadingPitchRoll& hpr) {
+    text += io::format_decimal_seconds(t);
+    for (double v : {p.x(), p.y(), p.z(), hpr.heading_rad * kRadToDeg, hpr.pitch_rad * kRadToDeg,
+                     hpr.roll_rad * kRadToDeg}) {
+      text += ',';
+      text += number(v);
+    }
+    text += '\n';
+  };
+  if (kind == "circle") {
+    const reference::Circle motion(500.0, 50.0, 0, duration_ns);
+    text = "# imuemu sample: horizontal circle, radius 500 m at 50 m/s, local NED frame\n"
+           "time_s,north_m,east_m,down_m,heading_deg,pitch_deg,roll_deg\n";
+    for (const Pose& p : reference::sample_knots(motion, period_ns))
+      line(p.t_ns, p.position_m, attitude::hpr_from_rotation(p.attitude));
+  } else {
+    std::unique_ptr<reference::Motion> motion;
+    if (kind == "static")
+      motion = std::make_unique<reference::Static>(reference::AircraftFlight::default_origin(),
+                                                   attitude::HeadingPitchRoll{0.5, 0.02, -0.01}, Physics::ecef, 0,
+                                                   duration_ns);
+    else
+      motion = std::make_unique<reference::AircraftFlight>(Physics::ecef, reference::AircraftFlight::default_origin(),
+                                                           0, duration_ns);
+    text = "# imuemu sample: " + kind +
+           " near Barcelona, WGS84 geodetic position, attitude body FRD to local NED\n"
+           "time_s,lat_deg,lon_deg,h_m,heading_deg,pitch_deg,roll_deg\n";
+    for (const Pose& p : reference::sample_knots(*motion, period_ns)) {
+      const earth::Geodetic g = earth::geodetic_from_ecef(p.position_m);
+      const Mat3 R_b_l = attitude::ned_to_ecef(g.latitude_rad, g.longitude_rad).transpose() * p.attitude;
+      line(p.t_ns, Vec3(g.latitude_rad * kRadToDeg, g.longitude_rad * kRadToDeg, g.height_m),
+           attitude::hpr_from_rotation(R_b_l));
+    }
+  }
+  return text;
+}
+
+std::vector<Pose> sample_trajectory_poses(const std::string& kind, double duration_s, double period_s,
+                                          Physics physics) {
+  const std::string text = sample_trajectory_csv(kind, duration_s, period_s);
+  return io::poses_in_scene(io::parse_trajectory_csv(text, "built-in sample '" + kind + "'"), physics);
+}
+
 int sample_trajectory(const SampleArgs& args) {
   return run_guarded([&] {
-    const auto duration_ns = static_cast<TimeNs>(std::llround(args.duration_s * 1e9));
-    const auto period_ns = static_cast<TimeNs>(std::llround(args.period_s * 1e9));
-    std::string text;
-    auto line = [&](TimeNs t, const Vec3& p, const attitude::HeadingPitchRoll& hpr) {
-      text += io::format_decimal_seconds(t);
-      for (double v : {p.x(), p.y(), p.z(), hpr.heading_rad * kRadToDeg, hpr.pitch_rad * kRadToDeg,
-                       hpr.roll_rad * kRadToDeg}) {
-        text += ',';
-        text += number(v);
-      }
-      text += '\n';
-    };
-    if (args.kind == "circle") {
-      const reference::Circle motion(500.0, 50.0, 0, duration_ns);
-      text = "# imuemu sample: horizontal circle, radius 500 m at 50 m/s, local NED frame\n"
-             "time_s,north_m,east_m,down_m,heading_deg,pitch_deg,roll_deg\n";
-      for (const Pose& p : reference::sample_knots(motion, period_ns))
-        line(p.t_ns, p.position_m, attitude::hpr_from_rotation(p.attitude));
-    } else {
-      std::unique_ptr<reference::Motion> motion;
-      if (args.kind == "static")
-        motion = std::make_unique<reference::Static>(reference::AircraftFlight::default_origin(),
-                                                     attitude::HeadingPitchRoll{0.5, 0.02, -0.01}, Physics::ecef, 0,
-                                                     duration_ns);
-      else
-        motion = std::make_unique<reference::AircraftFlight>(Physics::ecef, reference::AircraftFlight::default_origin(),
-                                                             0, duration_ns);
-      text = "# imuemu sample: " + args.kind +
-             " near Barcelona, WGS84 geodetic position, attitude body FRD to local NED\n"
-             "time_s,lat_deg,lon_deg,h_m,heading_deg,pitch_deg,roll_deg\n";
-      for (const Pose& p : reference::sample_knots(*motion, period_ns)) {
-        const earth::Geodetic g = earth::geodetic_from_ecef(p.position_m);
-        const Mat3 R_b_l = attitude::ned_to_ecef(g.latitude_rad, g.longitude_rad).transpose() * p.attitude;
-        line(p.t_ns, Vec3(g.latitude_rad * kRadToDeg, g.longitude_rad * kRadToDeg, g.height_m),
-             attitude::hpr_from_rotation(R_b_l));
-      }
-    }
-    io::write_file_atomically(args.out_path, text);
+    io::write_file_atomically(args.out_path, sample_trajectory_csv(args.kind, args.duration_s, args.period_s));
     return static_cast<int>(kOk);
   });
 }

@@ -3,6 +3,7 @@
 
 #include <cstdint>
 #include <string>
+#include <vector>
 
 #include "io/pose_source.hpp"
 
@@ -68,6 +69,13 @@ struct SampleArgs {
   double period_s = 1.0;
 };
 int sample_trajectory(const SampleArgs& args);
+// The CSV text `imuemu sample-trajectory` writes, and the poses parsed from
+// that same text in a scene's physics: emit and imuemud take their built-in
+// samples from here, so they see exactly the poses of sample-trajectory +
+// generate, without a temporary file.
+std::string sample_trajectory_csv(const std::string& kind, double duration_s, double period_s);
+std::vector<Pose> sample_trajectory_poses(const std::string& kind, double duration_s, double period_s,
+                                          Physics physics);
 
 // Live streaming (docs/streaming.md): poses from a source, IMU CSV lines out
 // (with a status column) in real time on the monotonic clock.

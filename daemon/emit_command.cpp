@@ -92,21 +92,6 @@ std::pair<std::string, unsigned> gpio_of(const std::string& spec) {
   return {spec.substr(0, colon), line};
 }
 
-// Poses of a built-in sample, through the same CSV `imuemu sample-trajectory` writes.
-std::vector<Pose> sample_poses(const EmitArgs& a, Physics physics) {
-  char path[] = "/tmp/imuemu-emit-sample-XXXXXX";
-  const int fd = mkstemp(path);
-  if (fd < 0) throw std::runtime_error("cannot create a temporary file for the sample trajectory");
-  ::close(fd);
-  struct Remove {
-    const char* p;
-    ~Remove() { std::remove(p); }
-  } remove{path};
-  if (sample_trajectory({path, a.sample_kind, a.sample_duration_s, a.sample_period_s}) != kOk)
-    throw std::runtime_error("the built-in sample trajectory could not be written");
-  return io::poses_in_scene(io::read_trajectory_csv(path), physics);
-}
-
 void print_summary(const emission::EngineStats& s) {
   for (const emission::DeviceStats& d : s.devices) {
     std::cerr << "imuemu emit: " << d.name << " (" << d.output << ", " << d.rate_hz << " Hz): " << d.emitted
@@ -160,7 +145,7 @@ int emit(const EmitArgs& a) {
       eo.emit_delay_ns = StreamPipeline::lookahead_ns(dev.pipeline, static_cast<TimeNs>(std::llround(a.knot_interval_s * 1e9))) +
                          static_cast<TimeNs>(std::llround(a.margin_s * 1e9));
     } else {
-      eo.trajectory = a.trajectory_path.empty() ? sample_poses(a, scene.physics)
+      eo.trajectory = a.trajectory_path.empty() ? sample_trajectory_poses(a.sample_kind, a.sample_duration_s, a.sample_period_s, scene.physics)
                                                 : io::poses_in_scene(io::read_trajectory_csv(a.trajectory_path), scene.physics);
       dev.pipeline.kernel.delta = a.delta > 0 ? a.delta : median_interval_delta(eo.trajectory, a.rate_hz);
     }

@@ -34,23 +34,6 @@ const char* sample_kind_name(SampleMotion m) {
 // The built-in sample through the CSV `imuemu sample-trajectory` writes, so
 // the daemon's poses are exactly those of `imuemu sample-trajectory` +
 // `imuemu generate` (the batch reference the loopback tests compare with).
-std::vector<Pose> sample_poses(const SceneConfig& scene) {
-  std::string dir = "/tmp";
-  if (const char* t = std::getenv("TMPDIR"); t != nullptr && *t != '\0') dir = t;
-  std::string path = dir + "/imuemud-sample-XXXXXX";
-  const int fd = ::mkstemp(path.data());
-  if (fd < 0) throw std::runtime_error("cannot create a temporary file in " + dir + " for the built-in sample trajectory");
-  ::close(fd);
-  struct Remove {
-    const std::string& p;
-    ~Remove() { std::remove(p.c_str()); }
-  } remove{path};
-  const cli::SampleArgs args{path, sample_kind_name(scene.trajectory.sample), scene.trajectory.duration_s,
-                        scene.trajectory.knot_interval_s};
-  if (cli::sample_trajectory(args) != 0) throw std::runtime_error("the built-in sample trajectory could not be written");
-  return io::poses_in_scene(io::read_trajectory_csv(path), scene.physics.physics);
-}
-
 drivers::GpioSyncOptions gpio_options(const SyncConfig& s, const ImuConfig& imu, const RunnerOptions& options) {
   drivers::GpioSyncOptions g;
   g.chip = s.chip;
@@ -76,7 +59,9 @@ std::vector<Pose> scene_trajectory(const SceneConfig& scene) {
     case SourceKind::file:
       return io::poses_in_scene(io::read_trajectory_csv(scene.trajectory.file_path), scene.physics.physics);
     case SourceKind::sample:
-      return sample_poses(scene);
+      return cli::sample_trajectory_poses(std::string(sample_kind_name(scene.trajectory.sample)),
+                                          scene.trajectory.duration_s, scene.trajectory.knot_interval_s,
+                                          scene.physics.physics);
     default:
       throw std::invalid_argument("scene " + scene.name + ": source " + scene.trajectory.source +
                                   " is a live stream, not a trajectory");

@@ -3,9 +3,11 @@
 #include <sys/stat.h>
 #include <grp.h>
 
+#include <algorithm>
 #include <cerrno>
 #include <cmath>
 #include <iostream>
+#include <ostream>
 
 #include <CLI/CLI.hpp>
 #include <boost/asio/buffers_iterator.hpp>
@@ -53,7 +55,67 @@ std::string group_name_of(const std::string& path) {
   throw ControlClientError("cannot connect to control socket " + path + ": " + ec.message());
 }
 
+double number_or_zero(const nlohmann::json& j, const char* key) {
+  const auto it = j.find(key);
+  return it != j.end() && it->is_number() ? it->get<double>() : 0.0;
+}
+
+std::uint64_t count_of(const nlohmann::json& j, const char* key) {
+  const auto it = j.find(key);
+  // Counters are unsigned, but the pid and rates are written as int64.
+  if (it == j.end() || !it->is_number_integer()) return 0u;
+  return it->is_number_unsigned() ? it->get<std::uint64_t>()
+                                  : static_cast<std::uint64_t>(std::max<std::int64_t>(0, it->get<std::int64_t>()));
+}
+
+std::string text_of(const nlohmann::json& j, const char* key) {
+  const auto it = j.find(key);
+  return it != j.end() && it->is_string() ? it->get<std::string>() : std::string();
+}
+
+std::string microseconds(double ns) { return std::to_string(std::llround(ns / 1000.0)) + " us"; }
+
 }  // namespace
+
+void print_status_summary(const nlohmann::json& status, std::ostream& out) {
+  out << "scene " << text_of(status, "scene") << " (pid " << count_of(status, "pid") << ", up "
+      << std::llround(number_or_zero(status, "uptime_s")) << " s): " << count_of(status, "samples_emitted")
+      << " samples emitted, emitter "
+      << (status.value("emitter_progressing", false) ? "progressing" : "NOT progressing") << "\n";
+  const auto engine = status.find("engine");
+  if (engine == status.end() || !engine->is_object()) {
+    out << "  no emission engine running"
+        << (status.value("waiting_for_device", false) ? " (waiting for a device to appear)" : "") << "\n";
+    return;
+  }
+  out << "  emission delay " << number_or_zero(*engine, "emit_delay_ns") / 1e9
+      << " s (trajectory time to wire time: the smoother's look-ahead plus margin for live input)\n";
+  for (const nlohmann::json& d : engine->value("devices", nlohmann::json::array())) {
+    const nlohmann::json samples = d.value("samples", nlohmann::json::object());
+    const nlohmann::json lateness = d.value("lateness", nlohmann::json::object());
+    const nlohmann::json transport = d.value("transport", nlohmann::json::object());
+    out << "  " << text_of(d, "name") << " (" << text_of(d, "output") << ", " << count_of(d, "rate_hz")
+        << " Hz): " << count_of(d, "emitted") << " of " << count_of(d, "ticks") << " ticks emitted ("
+        << count_of(samples, "exact") << " exact, " << count_of(samples, "extrapolated") << " extrapolated, "
+        << count_of(samples, "blending") << " blending back); " << count_of(d, "underruns")
+        << " underruns (no sample ready at the deadline), " << count_of(d, "deadline_misses")
+        << " deadline misses (woken more than one period late; " << count_of(d, "dropped_late") << " not sent)\n";
+    out << "    lateness of the wake-up p50 " << microseconds(number_or_zero(lateness, "p50_ns")) << ", p99 "
+        << microseconds(number_or_zero(lateness, "p99_ns")) << ", max "
+        << microseconds(number_or_zero(lateness, "max_ns")) << "; smoother running "
+        << number_or_zero(d, "engine_lag_ns") / 1e9 << " s ahead (newest knot minus newest sample ready)\n";
+    out << "    transport: " << count_of(transport, "frames_sent") << " frames sent, "
+        << count_of(transport, "queued") << " queued; not taken: " << count_of(d, "write_errors")
+        << " packets (link down " << count_of(transport, "dropped_link_down")
+        << ": e.g. no reader on the pty; queue full " << count_of(transport, "dropped_queue_full")
+        << "; refused by the kernel or invalid " << count_of(transport, "write_errors") << ")\n";
+  }
+  if (const auto source = engine->find("pose_source"); source != engine->end() && source->is_object())
+    out << "  pose source " << text_of(*source, "name") << ": " << count_of(*source, "accepted") << " accepted of "
+        << count_of(*source, "received") << " received, " << count_of(*source, "lost") << " lost, "
+        << count_of(*source, "out_of_order") << " out of order, " << count_of(*source, "duplicate")
+        << " duplicates, " << count_of(*source, "rejected") << " rejected\n";
+}
 
 nlohmann::json query_control_socket(const std::string& socket_path, const std::string& command,
                                     std::chrono::milliseconds timeout) {
@@ -111,7 +173,8 @@ int run_status(const StatusArgs& args) {
   const auto timeout = std::chrono::milliseconds(static_cast<std::int64_t>(std::llround(args.timeout_s * 1000.0)));
   try {
     const nlohmann::json reply = query_control_socket(path, args.command, timeout);
-    std::cout << reply.dump(args.compact ? -1 : 2) << '\n';
+    if (args.summary && reply.is_object() && !reply.contains("error")) print_status_summary(reply, std::cout);
+    else std::cout << reply.dump(args.compact ? -1 : 2) << '\n';
     if (reply.is_object() && reply.contains("error")) {
       std::cerr << "imuemu status: the daemon at " << path << " answered with an error: "
                 << reply["error"].dump() << '\n';
@@ -132,7 +195,9 @@ void add_status_command(CLI::App& app, int& exit_code) {
   cmd->add_option("--command", args->command,
                   "Command to send: status, help (lists what the daemon offers)")->capture_default_str();
   cmd->add_option("--timeout-s", args->timeout_s, "Give up when no reply comes within this")->capture_default_str();
-  cmd->add_flag("--compact", args->compact, "One-line JSON");
+  auto* compact = cmd->add_flag("--compact", args->compact, "One-line JSON");
+  cmd->add_flag("--summary", args->summary, "A few lines for a person (each counter explained) instead of the JSON")
+      ->excludes(compact);
   cmd->callback([args, &exit_code] { exit_code = run_status(*args); });
 }
 

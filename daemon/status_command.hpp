@@ -7,6 +7,7 @@
 #pragma once
 
 #include <chrono>
+#include <iosfwd>
 #include <stdexcept>
 #include <string>
 
@@ -34,7 +35,12 @@ struct StatusArgs {
   std::string command = "status";
   double timeout_s = 2.0;
   bool compact = false;  // one line instead of pretty JSON
+  bool summary = false;  // a few explained lines for a person instead of JSON
 };
+
+// The status reply of imuemud (daemon/imuemud_main.cpp status_json) as a few
+// lines, each counter named with what it means. Missing fields print as 0.
+void print_status_summary(const nlohmann::json& status, std::ostream& out);
 
 // Prints the reply to stdout, errors to stderr. Exit code (daemon/commands.hpp):
 // 0 with a reply, kCannotProcess when the daemon cannot be reached or the

@@ -1,22 +1,37 @@
 #!/usr/bin/env bash
-# Installs every Debian bookworm package imuemu needs to build, test, benchmark
-# and plot. Run as root on a fresh machine; safe to run again.
+# Installs the Debian bookworm packages imuemu needs. Run as root; safe to run
+# again (only what is missing is installed).
+#   scripts/setup.sh build   what building and running imuemu and imuemud needs
+#                            (toolchain, libraries): scripts/demo.sh
+#   scripts/setup.sh test    that plus the test stack (GoogleTest, Benchmark,
+#                            libFuzzer, plotting, the hardware-in-the-loop
+#                            fixtures' QEMU, user-mode Linux, kernel headers,
+#                            systemd): scripts/test.sh. The default.
+# apt's own output goes to a log (IMUEMU_SETUP_LOG, default
+# /tmp/imuemu-setup.log); its last lines are shown if it fails.
 set -euo pipefail
 export DEBIAN_FRONTEND=noninteractive
+what=${1:-test}
 
-packages=(
+build_packages=(
   # toolchain
-  build-essential cmake ninja-build pkg-config git ca-certificates
+  build-essential cmake ninja-build pkg-config
   # core maths and geodesy
   libeigen3-dev libgeographiclib-dev
   # transports
   libserialport-dev libgpiod-dev linux-libc-dev libboost-dev libsystemd-dev
   # configuration and command line
   libtomlplusplus-dev libcli11-dev nlohmann-json3-dev
+)
+test_packages=(
+  git ca-certificates
   # tests, benchmarks, and libFuzzer (clang's runtime) for the parsers
   libgtest-dev libgmock-dev libbenchmark-dev clang libclang-rt-14-dev
-  # plots (run under Debian's /usr/bin/python3)
+  # plots and the Python test peers (run under Debian's /usr/bin/python3)
   python3 python3-numpy python3-matplotlib
+  # systemd-analyze (tests/systemd unit checks) and /lib/systemd/systemd (the
+  # unit under systemd as PID 1): a minbase system has no systemd at all
+  systemd
   # hardware-in-the-loop fixtures (tests/hil): user-mode Linux with vcan; QEMU
   # booting Debian's kernel (fetched by apt-get download) with a busybox
   # initramfs, the UART, vcan and the gpio_recorder module built against the
@@ -25,14 +40,26 @@ packages=(
   linux-headers-amd64 can-utils gpiod python3-can
 )
 
+case "$what" in
+  build) packages=("${build_packages[@]}") ;;
+  test) packages=("${build_packages[@]}" "${test_packages[@]}") ;;
+  *) echo "usage: $0 [build|test]" >&2; exit 2 ;;
+esac
+
 missing=()
 for p in "${packages[@]}"; do
   dpkg-query -W -f='${Status}' "$p" 2>/dev/null | grep -q "install ok installed" || missing+=("$p")
 done
-if ((${#missing[@]})); then
-  echo "setup: installing ${missing[*]}"
-  apt-get update -qq
-  apt-get install -y -qq --no-install-recommends "${missing[@]}"
-else
-  echo "setup: all ${#packages[@]} packages already installed"
+if ((${#missing[@]} == 0)); then
+  echo "setup ($what): all ${#packages[@]} packages already installed"
+  exit 0
 fi
+log=${IMUEMU_SETUP_LOG:-/tmp/imuemu-setup.log}
+echo "setup ($what): installing ${#missing[@]} Debian packages (apt's output: $log; a few minutes on a fresh system)"
+start=$SECONDS
+if ! { apt-get update -q && apt-get install -y -q --no-install-recommends "${missing[@]}"; } >"$log" 2>&1; then
+  echo "setup ($what): apt-get failed; the last lines of $log:" >&2
+  tail -n 30 "$log" >&2
+  exit 1
+fi
+echo "setup ($what): done in $((SECONDS - start)) s"

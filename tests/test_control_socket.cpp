@@ -20,6 +20,8 @@
 #include <fstream>
 #include <optional>
 #include <string>
+#include <iostream>
+#include <sstream>
 #include <thread>
 
 #include <boost/asio/executor_work_guard.hpp>
@@ -28,10 +30,14 @@
 #include <nlohmann/json.hpp>
 
 #include "daemon/control_socket.hpp"
+#include "daemon/emission.hpp"
 #include "daemon/log.hpp"
+#include "tests/support/io_thread.hpp"
 #include "daemon/status_command.hpp"
 
 namespace svc = imuemu::service;
+using imuemu::test::IoThread;
+using imuemu::test::TempDir;
 using imuemu::cli::ControlClientError;
 using imuemu::cli::query_control_socket;
 using nlohmann::json;
@@ -39,39 +45,7 @@ using namespace std::chrono_literals;
 
 namespace {
 
-class TempDir {
- public:
-  TempDir() {
-    char dir_template[] = "/tmp/imuemu_ctl_XXXXXX";
-    path = ::mkdtemp(dir_template);
-  }
-  ~TempDir() { std::filesystem::remove_all(path); }
-  std::string path;
-};
 
-class IoThread {
- public:
-  IoThread() : work_(io.get_executor()), thread_([this] { io.run(); }) {}
-  ~IoThread() {
-    work_.reset();
-    io.stop();
-    thread_.join();
-  }
-  template <class F>
-  void run(F f) {
-    std::atomic<bool> done{false};
-    boost::asio::post(io, [&] {
-      f();
-      done = true;
-    });
-    while (!done) std::this_thread::sleep_for(1ms);
-  }
-  boost::asio::io_context io;
-
- private:
-  boost::asio::executor_work_guard<boost::asio::io_context::executor_type> work_;
-  std::thread thread_;
-};
 
 // A daemon with a status counter, served on its own io thread.
 struct Daemon {
@@ -347,4 +321,55 @@ TEST(StatusCommand, PrintsPrettyJsonAndExitCodes) {
   EXPECT_NE(r.out.find("/run/imuemu/no-such-scene-xyz.sock"), std::string::npos) << r.out;
   r = run_shell(cli + " status --socket " + path + " --timeout-s 0 2>&1");
   EXPECT_EQ(r.exit_code, 2);
+}
+
+// `imuemu status --summary`: the lines a person reads, from the JSON the
+// daemon's own serialiser (emission::to_json) writes, each number where its
+// explanation says.
+TEST(StatusSummary, NamesEachCounterFromTheDaemonsJson) {
+  imuemu::emission::EngineStats s;
+  imuemu::emission::DeviceStats d;
+  d.name = "imu0";
+  d.output = "native on pty:/tmp/x";
+  d.rate_hz = 400;
+  d.ticks = 2017;
+  d.emitted = 2003;
+  d.exact = 1990;
+  d.extrapolated = 9;
+  d.blending = 4;
+  d.producer_late = 11;
+  d.deadline_misses = 3;
+  d.dropped_late = 3;
+  d.write_errors = 8;
+  d.transport.frames_sent = 1995;
+  d.transport.dropped_link_down = 8;
+  d.engine_lag_ns = 8'500'000'000;
+  d.lateness.p50_ns = 67'000;
+  d.lateness.p99_ns = 220'000;
+  d.lateness.max_ns = 96'330'000;
+  s.devices.push_back(d);
+  s.emit_delay_ns = 328'000'000;
+  const json status{{"scene", "default"},           {"pid", 42},
+                    {"uptime_s", 5.04},             {"samples_emitted", 2003},
+                    {"emitter_progressing", true},  {"engine", imuemu::emission::to_json(s)}};
+  std::ostringstream out;
+  imuemu::cli::print_status_summary(status, out);
+  const std::string text = out.str();
+  std::cout << text;
+  EXPECT_NE(text.find("scene default (pid 42, up 5 s): 2003 samples emitted, emitter progressing"), std::string::npos);
+  EXPECT_NE(text.find("emission delay 0.328 s"), std::string::npos);
+  EXPECT_NE(text.find("imu0 (native on pty:/tmp/x, 400 Hz): 2003 of 2017 ticks emitted (1990 exact, 9 extrapolated, 4 blending back); 11 underruns"), std::string::npos);
+  EXPECT_NE(text.find("3 deadline misses (woken more than one period late; 3 not sent)"), std::string::npos);
+  EXPECT_NE(text.find("p50 67 us, p99 220 us, max 96330 us; smoother running 8.5 s ahead"), std::string::npos);
+  EXPECT_NE(text.find("1995 frames sent, 0 queued; not taken: 8 packets (link down 8: e.g. no reader on the pty"), std::string::npos);
+  EXPECT_EQ(text.find("pose source"), std::string::npos);  // a trajectory scene has none
+}
+
+TEST(StatusSummary, AnEngineNotRunningIsSaidSo) {
+  const json status{{"scene", "bench"}, {"pid", 7}, {"uptime_s", 1.0}, {"samples_emitted", 0},
+                    {"emitter_progressing", false}, {"engine", nullptr}, {"waiting_for_device", true}};
+  std::ostringstream out;
+  imuemu::cli::print_status_summary(status, out);
+  EXPECT_NE(out.str().find("emitter NOT progressing"), std::string::npos);
+  EXPECT_NE(out.str().find("no emission engine running (waiting for a device to appear)"), std::string::npos);
 }

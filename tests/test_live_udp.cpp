@@ -3,8 +3,9 @@
 // format.md) in real time x20, with 1% of the datagrams dropped at random and
 // 1% sent after their successor. The receiver (io::make_udp_pose_source)
 // feeds the streaming engine (core/stream.hpp) whose samples the live emitter
-// (core/live_emitter.hpp) sends at every tick of the output grid, on the
-// monotonic clock (core/time_mapping.hpp), extrapolating through underruns.
+// (core/live_emitter.hpp) sends at every tick of the output grid, each tick
+// seeing exactly the poses due by its deadline on the sender's clock
+// (core/time_mapping.hpp), extrapolating through underruns.
 //
 // Asserted: the emitted stream is continuous at the exact rate (one sample per
 // grid tick from the first to the last), exactly the samples flagged exact
@@ -19,6 +20,10 @@
 
 #include <algorithm>
 #include <atomic>
+#include <chrono>
+#include <deque>
+#include <limits>
+#include <optional>
 #include <iostream>
 #include <random>
 #include <set>
@@ -111,9 +116,15 @@ TEST(LiveUdp, DroppedAndReorderedDatagramsGiveAContinuousFlaggedStream) {
   lo.blend_ns = 100'000'000;
   live::LiveEmitter emitter(lo);
 
-  // Real time x20. The sender sends pose t at T(t); the emitter sends tick t
-  // at T(t + look-ahead): exactly the engine's worst-case look-ahead, no
-  // margin, so a lost knot (one more knot interval to wait) is an underrun.
+  // The sender replays in real time x20 (pose t leaves at T(t)). The emission
+  // loop does not race it on the wall clock: for each tick it releases to the
+  // engine exactly the poses a punctual receiver would have had by the tick's
+  // deadline T(tick + look-ahead), the engine's worst-case look-ahead with no
+  // margin, and waits for the datagrams themselves, not for a time. So a lost
+  // knot (one more knot interval to wait) is an underrun whatever the host's
+  // speed (ASan, a loaded machine): the verdict asserts what the engine
+  // guarantees, not what a fast machine happens to produce. Delivery at the
+  // exact rate in real time is the loopback tests' job (tests/loopback/).
   const live::SpeedFactor speed = live::make_speed_factor(20, 1);
   const TimeNs lookahead_ns = StreamPipeline::lookahead_ns(po, kNsPerSecond / 10);
   const live::TimeMapping sender_clock =
@@ -150,16 +161,39 @@ TEST(LiveUdp, DroppedAndReorderedDatagramsGiveAContinuousFlaggedStream) {
   const std::vector<TimeNs> grid = output_grid(knots.front().t_ns, knots.back().t_ns, po.rate_hz);
   bool finished = false;
   std::vector<io::SourcedPose> batch;
+  std::deque<io::SourcedPose> received;  // arrived, not yet due at the engine
+  TimeNs newest_received_ns = std::numeric_limits<TimeNs>::min();
+  const auto all_accounted = [&] {
+    const io::PoseSourceCounters c = source->counters();
+    return sender_done && c.accepted + c.out_of_order == send_order.size() && source->queue().size() == 0;
+  };
+  const TimeNs give_up_at_ns = io::monotonic_now_ns() + 120 * kNsPerSecond;  // a broken receiver fails, not hangs
+  std::optional<TimeNs> timed_out_at_tick;
   for (const TimeNs tick : grid) {
-    sleep_until_monotonic(sender_clock.monotonic_at(tick + lookahead_ns));
-    batch.clear();
-    source->queue().drain(batch);
-    for (const io::SourcedPose& p : batch) {
-      engine.push(p.pose);  // the source already refused duplicates and out-of-order poses
-      accepted.push_back(p.pose);
+    const TimeNs due_ns = tick + lookahead_ns;
+    // Wait until every datagram due by this tick's deadline has arrived: one
+    // newer than the deadline was received, or the sender is done.
+    for (;;) {
+      batch.clear();
+      source->queue().drain(batch);
+      for (const io::SourcedPose& p : batch) {
+        newest_received_ns = std::max(newest_received_ns, p.pose.t_ns);
+        received.push_back(p);
+      }
+      if (newest_received_ns > due_ns || all_accounted()) break;
+      if (io::monotonic_now_ns() > give_up_at_ns) break;
+      std::this_thread::sleep_for(std::chrono::microseconds(200));
     }
-    if (!finished && sender_done && source->counters().accepted + source->counters().out_of_order ==
-                                        send_order.size() && source->queue().size() == 0) {
+    if (io::monotonic_now_ns() > give_up_at_ns) {
+      timed_out_at_tick = tick;
+      break;
+    }
+    while (!received.empty() && received.front().pose.t_ns <= due_ns) {
+      engine.push(received.front().pose);  // the source already refused duplicates and out-of-order poses
+      accepted.push_back(received.front().pose);
+      received.pop_front();
+    }
+    if (!finished && received.empty() && all_accounted()) {
       engine.finish();  // end of input: the last look-ahead's worth comes out
       finished = true;
     }
@@ -171,6 +205,7 @@ TEST(LiveUdp, DroppedAndReorderedDatagramsGiveAContinuousFlaggedStream) {
   }
   sender.join();
   source->stop();
+  ASSERT_FALSE(timed_out_at_tick) << "the datagrams due by tick " << *timed_out_at_tick << " ns never arrived";
 
   // Reference: the batch result over exactly the poses the engine accepted.
   const BatchResult reference = run_batch(accepted, po);

@@ -25,10 +25,12 @@
 #include <boost/asio/post.hpp>
 
 #include "daemon/log.hpp"
+#include "tests/support/io_thread.hpp"
 #include "daemon/service_notify.hpp"
 #include "daemon/service_signals.hpp"
 
 namespace svc = imuemu::service;
+using imuemu::test::IoThread;
 using namespace std::chrono_literals;
 
 namespace {
@@ -79,30 +81,6 @@ class FakeNotifySocket {
   int fd_ = -1;
 };
 
-class IoThread {
- public:
-  IoThread() : work_(io.get_executor()), thread_([this] { io.run(); }) {}
-  ~IoThread() {
-    work_.reset();
-    io.stop();
-    thread_.join();
-  }
-  // Runs f on the io thread and waits for it.
-  template <class F>
-  void run(F f) {
-    std::atomic<bool> done{false};
-    boost::asio::post(io, [&] {
-      f();
-      done = true;
-    });
-    while (!done) std::this_thread::sleep_for(1ms);
-  }
-  boost::asio::io_context io;
-
- private:
-  boost::asio::executor_work_guard<boost::asio::io_context::executor_type> work_;
-  std::thread thread_;
-};
 
 // Stderr captured through a pipe while alive.
 class StderrCapture {

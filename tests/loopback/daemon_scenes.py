@@ -40,7 +40,7 @@ import multiprocessing
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from pty_loopback import FLOAT32_REL, memory_dir, read_listened, read_reference  # noqa: E402
+from loopback_checks import compare_with_reference, memory_dir, read_listened, read_reference  # noqa: E402
 
 # scene name -> (scene file or None for the built-in, imu name, protocol, rate, pty link name, listen extra args)
 SCENES = {
@@ -87,52 +87,6 @@ def send_poses(csv_path, stop):
             time.sleep(delay)
         body = b"IMUP" + bytes([1, 0, 0, 0]) + struct.pack("<Qq7d", seq, t, *(float(x) for x in r[1:7]), 0.0)
         sock.sendto(body + struct.pack("<I", crc32c(body)), ("127.0.0.1", LIVE_PORT))
-
-
-def compare(name, protocol, rate, rows, ref, summary, failures):
-    for key in ("checksum_errors", "resync_bytes", "sequence_gaps", "other_errors"):
-        if summary.get(key, 0) != 0:
-            failures.append(f"{name}: listen {key} = {summary[key]}")
-    times = [int(r["t_ns"]) for r in rows]
-    grid = sorted(ref)
-    index = {t: i for i, t in enumerate(grid)}
-    matched = []
-    for t in times:
-        k = index.get(t)
-        if k is None:  # MAVLink carries microseconds: the nearest tick within 1 us
-            lo = matched[-1] if matched else 0
-            j = min(range(lo, min(len(grid), lo + 4 * rate + 10)), key=lambda i: abs(grid[i] - t), default=None)
-            k = j if j is not None and abs(grid[j] - t) <= 1000 else None
-        if k is None:
-            failures.append(f"{name}: decoded time {t} is not on the {rate} Hz grid of the batch reference")
-            return {}
-        matched.append(k)
-    if not matched:
-        failures.append(f"{name}: nothing received")
-        return {}
-    if matched != list(range(matched[0], matched[0] + len(matched))):
-        failures.append(f"{name}: received ticks are not consecutive")
-    if abs(summary["rate_from_sample_time_hz"] - rate) > 1e-6 * rate:
-        failures.append(f"{name}: sample-time rate {summary['rate_from_sample_time_hz']} != {rate}")
-    if abs(summary["rate_from_arrival_hz"] - rate) > 0.01 * rate:
-        failures.append(f"{name}: arrival rate {summary['rate_from_arrival_hz']} not within 1% of {rate}")
-    names = ["gyro_x_rad_s", "gyro_y_rad_s", "gyro_z_rad_s", "accel_x_m_s2", "accel_y_m_s2", "accel_z_m_s2"]
-    worst_rel = 0.0
-    worst_abs = 0.0
-    for r, k in zip(rows, matched):
-        want = ref[grid[k]]
-        for i, n in enumerate(names):
-            d = abs(float(r[n]) - want[i])
-            worst_abs = max(worst_abs, d)
-            worst_rel = max(worst_rel, d / max(abs(want[i]), 1e-30))
-    allowed = {"native": 0.0, "mavlink2": FLOAT32_REL * 1.0001, "mip": 3.0 * FLOAT32_REL}[protocol]
-    if worst_rel > allowed:
-        failures.append(f"{name}: worst relative difference {worst_rel:.3e} > {allowed:.3e}")
-    return {"received": len(rows), "first_tick": matched[0], "worst_relative_difference": worst_rel,
-            "worst_absolute_difference": worst_abs, "allowed_relative": allowed,
-            "rate_sample_time_hz": summary["rate_from_sample_time_hz"],
-            "rate_arrival_hz": round(summary["rate_from_arrival_hz"], 3),
-            "arrival_jitter_p99_us": summary["arrival_jitter_us"]["p99"]}
 
 
 def main():
@@ -206,7 +160,8 @@ def main():
                 failures.append(f"{name}: imuemud exited {run['daemon'].returncode}: {d_err.strip()[-2000:]}")
                 continue
             summary = json.loads(l_out.strip().splitlines()[-1])
-            figures = compare(name, protocol, rate, read_listened(run["csv"]), run["ref"], summary, failures)
+            f, figures = compare_with_reference(name, protocol, rate, read_listened(run["csv"]), run["ref"], summary)
+            failures += f
             with open(os.path.join(run["dir"], "stats.json")) as f:
                 dev = json.load(f)["devices"][0]
             if summary["samples"] < 0.95 * rate * a.seconds:

@@ -1,0 +1,92 @@
+"""What every loopback run checks of a decoded capture, in one place.
+
+Used by pty_loopback.py (imuemu emit -> pty -> imuemu listen) and
+daemon_scenes.py (imuemud on the example scenes): the listener's error
+counters, the received samples against the batch pipeline's grid (consecutive
+ticks, exact sample rate, arrival rate within 1 %), and the values within the
+protocol's resolution.
+"""
+import csv
+import os
+
+FLOAT32_REL = 2.0 ** -24  # round-to-nearest float32: half an ulp, relative
+IMU_COLUMNS = ["gyro_x_rad_s", "gyro_y_rad_s", "gyro_z_rad_s", "accel_x_m_s2", "accel_y_m_s2", "accel_z_m_s2"]
+# native: doubles end to end; MAVLink 2: one float32 rounding; MIP sends accel
+# in g (float32 of a/g, then x g back): at most 1.5 float32 roundings.
+ALLOWED_RELATIVE = {"native": 0.0, "mavlink2": FLOAT32_REL * 1.0001, "mip": 3.0 * FLOAT32_REL}
+
+
+def memory_dir():
+    """A tmpfs for the work files: the readers write a CSV per sample, and on a
+    disk under write-back pressure (a build in parallel) write() can block for
+    seconds in dirty-page throttling, long enough to overflow the pty queue."""
+    return "/dev/shm" if os.access("/dev/shm", os.W_OK) else None
+
+
+def read_reference(path):
+    """imuemu generate's IMU CSV -> (header, {t_ns: (gyro xyz, accel xyz)})."""
+    ref = {}
+    with open(path) as f:
+        rows = csv.reader(line for line in f if not line.startswith("#"))
+        header = next(rows)
+        for r in rows:
+            ref[int(r[0])] = tuple(float(x) for x in r[1:7])
+    return header, ref
+
+
+def read_listened(path):
+    """imuemu listen --out CSV -> list of dict rows."""
+    with open(path) as f:
+        return list(csv.DictReader(line for line in f if not line.startswith("#")))
+
+
+def compare_with_reference(label, protocol, rate, rows, ref, summary):
+    """(failures, figures) for a capture `rows` with listen's JSON `summary`
+    against the batch reference `ref` ({t_ns: values}) at `rate` Hz."""
+    failures = []
+    for key in ("checksum_errors", "resync_bytes", "sequence_gaps", "other_errors", "own_sequence_gaps"):
+        if summary.get(key, 0) not in (None, 0):
+            failures.append(f"{label}: listen {key} = {summary[key]}")
+    if len(rows) != summary["samples"]:
+        failures.append(f"{label}: CSV has {len(rows)} rows, listen's summary says {summary['samples']}")
+    grid = sorted(ref)
+    index = {t: i for i, t in enumerate(grid)}
+    matched = []
+    for r in rows:
+        t = int(r["t_ns"])
+        k = index.get(t)
+        if k is None:  # a protocol whose time field is coarser than 1 ns (MAVLink: us): nearest tick within 1 us
+            lo = matched[-1] if matched else 0
+            j = min(range(lo, min(len(grid), lo + 4 * rate + 10)), key=lambda i: abs(grid[i] - t), default=None)
+            k = j if j is not None and abs(grid[j] - t) <= 1000 else None
+        if k is None:
+            failures.append(f"{label}: decoded time {t} is not on the {rate} Hz grid of the batch reference")
+            return failures, {}
+        matched.append(k)
+    if not matched:
+        failures.append(f"{label}: nothing received")
+        return failures, {}
+    if matched != list(range(matched[0], matched[0] + len(matched))):
+        failures.append(f"{label}: received ticks are not consecutive")
+    if abs(summary["rate_from_sample_time_hz"] - rate) > 1e-6 * rate:
+        failures.append(f"{label}: sample-time rate {summary['rate_from_sample_time_hz']} != {rate}")
+    if abs(summary["rate_from_arrival_hz"] - rate) > 0.01 * rate:
+        failures.append(f"{label}: arrival rate {summary['rate_from_arrival_hz']} not within 1% of {rate}")
+    worst_rel = 0.0
+    worst_abs = 0.0
+    for r, k in zip(rows, matched):
+        want = ref[grid[k]]
+        for i, n in enumerate(IMU_COLUMNS):
+            d = abs(float(r[n]) - want[i])
+            worst_abs = max(worst_abs, d)
+            worst_rel = max(worst_rel, d / max(abs(want[i]), 1e-30))
+    allowed = ALLOWED_RELATIVE[protocol]
+    if worst_rel > allowed:
+        failures.append(f"{label}: worst relative difference {worst_rel:.3e} > {allowed:.3e}")
+    figures = {"received": len(rows), "first_tick": matched[0], "worst_relative_difference": worst_rel,
+               "worst_absolute_difference": worst_abs, "allowed_relative": allowed,
+               "checksum_errors": summary["checksum_errors"], "sequence_gaps": summary["sequence_gaps"],
+               "rate_sample_time_hz": summary["rate_from_sample_time_hz"],
+               "rate_arrival_hz": round(summary["rate_from_arrival_hz"], 3),
+               "arrival_jitter_p99_us": summary["arrival_jitter_us"]["p99"]}
+    return failures, figures
