@@ -48,6 +48,7 @@ std::string to_string(EmissionStatus status) {
     case EmissionStatus::blending: return "blending";
     case EmissionStatus::paused: return "paused";
     case EmissionStatus::waiting: return "waiting";
+    case EmissionStatus::gap: return "gap";
   }
   return "unknown";
 }
@@ -60,6 +61,7 @@ LiveEmitter::LiveEmitter(const LiveEmitterOptions& options) : options_(options) 
 }
 
 std::optional<ExactSample> LiveEmitter::exact_for(TimeNs tick_ns, ExactSampleSource& source) {
+  tick_sample_invalid_ = false;
   while (true) {
     std::optional<ExactSample> sample;
     if (ahead_) {
@@ -70,6 +72,7 @@ std::optional<ExactSample> LiveEmitter::exact_for(TimeNs tick_ns, ExactSampleSou
       if (!sample) return std::nullopt;  // the smoother has not got this far yet
       if (!valid(*sample)) {
         ++counters_.invalid_discarded;
+        if (sample->kinematics.t_ns == tick_ns) tick_sample_invalid_ = true;
         continue;
       }
     }
@@ -126,7 +129,8 @@ Emission LiveEmitter::send(EmissionStatus status, const Kinematics& k, const Imu
     case EmissionStatus::extrapolated: ++counters_.extrapolated; break;
     case EmissionStatus::blending: ++counters_.blending; break;
     case EmissionStatus::paused:
-    case EmissionStatus::waiting: break;  // not sent through here
+    case EmissionStatus::waiting:
+    case EmissionStatus::gap: break;  // not sent through here
   }
   last_sent_ = k;
   return out;
@@ -135,6 +139,8 @@ Emission LiveEmitter::send(EmissionStatus status, const Kinematics& k, const Imu
 Emission LiveEmitter::withhold(EmissionStatus status) {
   if (status == EmissionStatus::waiting) {
     ++counters_.waiting;
+  } else if (status == EmissionStatus::gap) {
+    ++counters_.gap;
   } else {
     ++counters_.paused;
   }
@@ -152,6 +158,7 @@ Emission LiveEmitter::emit(TimeNs tick_ns, ExactSampleSource& source) {
   const std::optional<ExactSample> exact = exact_for(tick_ns, source);
   Emission out;
   if (exact) {
+    if (mode_ == Mode::gap) mode_ = Mode::tracking;  // a new stretch of trajectory: nothing to blend from
     if (mode_ == Mode::extrapolating) {
       // Rejoin: the blend starts at the last extrapolated tick, where the
       // output was the extrapolation itself (s = 0), so it is continuous there.
@@ -166,6 +173,14 @@ Emission LiveEmitter::emit(TimeNs tick_ns, ExactSampleSource& source) {
       mode_ = Mode::tracking;  // also resumes after a pause, at this tick
       out = send(EmissionStatus::exact, exact->kinematics, &exact->imu);
     }
+  } else if (ahead_ && !tick_sample_invalid_ && mode_ != Mode::waiting) {
+    // The smoother is past this tick without a sample for it: not late, the
+    // trajectory has a gap here (its output grid is contiguous otherwise; an
+    // invalid sample for this tick is a fault, bridged as an underrun). Also
+    // ends an extrapolation begun before the gap was known (live input).
+    if (mode_ != Mode::gap) ++counters_.gap_events;
+    mode_ = Mode::gap;
+    out = withhold(EmissionStatus::gap);
   } else {
     if (mode_ == Mode::tracking || mode_ == Mode::blending) {
       ++counters_.underrun_events;

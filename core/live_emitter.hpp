@@ -106,7 +106,12 @@ struct LiveEmitterOptions {
   TimeNs blend_ns = 200'000'000;
 };
 
-enum class EmissionStatus { exact, extrapolated, blending, paused, waiting };
+// gap: the trajectory itself has no sample at this tick (the smoother's
+// output goes on after it: a gap split by gap_policy split, a loop seam), so
+// nothing is sent, as from a device that is off; output resumes exact at the
+// first tick after the gap, without extrapolating into it or blending out of
+// it (what lies across a gap is not one motion).
+enum class EmissionStatus { exact, extrapolated, blending, paused, waiting, gap };
 std::string to_string(EmissionStatus status);
 
 struct Emission {
@@ -125,7 +130,7 @@ struct Emission {
 };
 
 // Counters since construction. Every tick is counted in exactly one of
-// exact/extrapolated/blending/paused/waiting, so they sum to ticks.
+// exact/extrapolated/blending/paused/waiting/gap, so they sum to ticks.
 struct LiveCounters {
   std::uint64_t ticks = 0;         // emit() calls
   std::uint64_t exact = 0;         // ticks sent with the smoother's sample
@@ -133,6 +138,8 @@ struct LiveCounters {
   std::uint64_t blending = 0;      // ticks sent blended (rejoin)
   std::uint64_t paused = 0;        // ticks sent nothing after a first sample (pause policy, withheld output)
   std::uint64_t waiting = 0;       // ticks before the first exact sample (nothing sent)
+  std::uint64_t gap = 0;           // ticks inside a gap of the trajectory (nothing sent)
+  std::uint64_t gap_events = 0;    // gaps entered
   // Transitions into underrun: a tick without an exact sample right after a
   // tick that was exact or blending (a run of missing ticks counts once).
   std::uint64_t underrun_events = 0;
@@ -154,7 +161,7 @@ class LiveEmitter {
   const LiveEmitterOptions& options() const { return options_; }
 
  private:
-  enum class Mode { waiting, tracking, extrapolating, blending, paused };
+  enum class Mode { waiting, tracking, extrapolating, blending, paused, gap };
 
   // The exact sample for tick_ns if the source has it; discards stale and
   // invalid samples on the way and keeps one future sample in ahead_.
@@ -172,6 +179,7 @@ class LiveEmitter {
   Kinematics anchor_;                // extrapolation start (valid while extrapolating/blending)
   TimeNs blend_start_ns_ = 0;        // t_b: last extrapolated tick
   std::optional<ExactSample> ahead_; // a pulled sample for a later tick
+  bool tick_sample_invalid_ = false;  // exact_for discarded an invalid sample for its tick
 };
 
 }  // namespace imuemu::live

@@ -782,6 +782,8 @@ nlohmann::json to_json(const EngineStats& s) {
                        {"blending", d.live.blending},
                        {"paused", d.live.paused},
                        {"waiting", d.live.waiting},
+                       {"gap", d.live.gap},
+                       {"gap_events", d.live.gap_events},
                        {"underrun_events", d.live.underrun_events},
                        {"stale_discarded", d.live.stale_discarded}}},
                      {"lateness", lateness_json(d.lateness)},

@@ -14,6 +14,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <iostream>
 #include <nlohmann/json.hpp>
 #include <sstream>
 #include <string>
@@ -222,6 +223,38 @@ TEST_F(Imuemud, TheEndOfTheTrajectoryStopsTheDaemonWithSuccess) {
   EXPECT_EQ(s["devices"][0]["ticks"], 401u);
   EXPECT_EQ(s["devices"][0]["emitted"].get<std::uint64_t>() + s["devices"][0]["dropped_late"].get<std::uint64_t>(), 401u);
   EXPECT_EQ(s["devices"][0]["transport"]["frames_sent"], s["devices"][0]["emitted"]);
+}
+
+// A looped trajectory (the built-in scenes loop) crosses its seam as a silent
+// gap: the copies are a gap longer than max_gap_s apart, and the ticks between
+// them are not sent, neither extrapolated into nor blended out of (issue 13
+// W1: before, ~11 s extrapolated then a 0.2 s blend reaching 4.8e5 m/s^2).
+// A 20 s flight at 10x replay speed for 7 s crosses three seams.
+TEST_F(Imuemud, LoopSeamsAreSilentGapsWithoutExtrapolation) {
+  const fs::path scene = write("loop.toml",
+                               "[scene]\nname = \"loop\"\nphysics = \"ecef\"\n[trajectory]\nsource = \"sample:flight\"\n"
+                               "duration_s = 20\nknot_interval_s = 1.0\nloop = true\nspeed = 10\n"
+                               "[smoothing]\nmax_gap_s = 2\n[[imu]]\nname = \"n\"\nrate_hz = 200\nprotocol = \"native\"\n"
+                               "[imu.transport]\ntype = \"null\"\n");
+  const ProcessResult r = run_imuemud("--scene " + scene.string() + " --control-socket " + (dir_ / "c.sock").string() +
+                                      " --seconds 7 --late-ticks send --stats-json " + (dir_ / "stats.json").string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  std::ifstream in(dir_ / "stats.json");
+  const nlohmann::json s = nlohmann::json::parse(in);
+  const nlohmann::json& d = s["devices"][0];
+  const nlohmann::json& live = d["live"];
+  std::cout << d.dump() << "\n";
+  // Copies 20 s + 3 s (max_gap_s + one knot interval) apart: seams at 20, 43, 66 s.
+  EXPECT_GE(live["gap_events"].get<std::uint64_t>(), 3u);
+  EXPECT_GE(live["gap"].get<std::uint64_t>(), 3u * (3 * 200 - 1));
+  EXPECT_EQ(live["extrapolated"], 0u);
+  EXPECT_EQ(live["blending"], 0u);
+  EXPECT_EQ(live["underrun_events"], 0u);
+  EXPECT_EQ(d["samples"]["extrapolated"], 0u);
+  EXPECT_EQ(d["samples"]["blending"], 0u);
+  EXPECT_GT(d["samples"]["exact"].get<std::uint64_t>(), 3u * 20 * 200);
+  EXPECT_EQ(d["ticks"].get<std::uint64_t>(), d["emitted"].get<std::uint64_t>() + d["not_sent"].get<std::uint64_t>() +
+                                                 d["underruns"].get<std::uint64_t>() + d["dropped_late"].get<std::uint64_t>());
 }
 
 }  // namespace

@@ -14,6 +14,7 @@
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
+#include <algorithm>
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
@@ -575,7 +576,10 @@ TEST(LiveEmitter, InvalidSamplesAreMissingAndNothingNonFiniteIsSent) {
   EXPECT_EQ(emitter.counters().stale_discarded, 0u);
 }
 
-TEST(LiveEmitter, SkippedSampleIsMissingAndTheEmitterPullsAtMostOneAhead) {
+// A tick the smoother skipped (it has produced the next one) is a gap of the
+// trajectory, not lateness: nothing is sent, and the next tick is exact, with
+// no extrapolation into the gap and no blend out of it.
+TEST(LiveEmitter, SkippedSampleIsAGapAndTheEmitterPullsAtMostOneAhead) {
   const RejoinCase rc;
   live::LiveEmitter emitter({rc.scene, live::UnderrunPolicy::extrapolate, 5 * kMs});
   QueueSource source;
@@ -586,17 +590,78 @@ TEST(LiveEmitter, SkippedSampleIsMissingAndTheEmitterPullsAtMostOneAhead) {
   }
   for (std::size_t j = 0; j < ticks.size(); ++j) {
     const live::Emission e = emitter.emit(ticks[j], source);
-    const EmissionStatus want = j == 30   ? EmissionStatus::extrapolated
-                                : j > 30 && j < 35 ? EmissionStatus::blending
-                                                   : EmissionStatus::exact;
-    ASSERT_EQ(e.status, want) << j;
+    ASSERT_EQ(e.status, j == 30 ? EmissionStatus::gap : EmissionStatus::exact) << j;
+    ASSERT_EQ(e.has_sample(), j != 30) << j;
     // Samples with t <= tick, plus one ahead at most (bounded memory; the rest
     // stays with the smoother).
     const std::size_t samples_due = j < 30 ? j + 1 : j;
     ASSERT_LE(source.pulled(), samples_due + 1) << j;
   }
   EXPECT_EQ(emitter.counters().stale_discarded, 0u);
+  EXPECT_EQ(emitter.counters().underrun_events, 0u);
+  EXPECT_EQ(emitter.counters().gap, 1u);
+  EXPECT_EQ(emitter.counters().gap_events, 1u);
+}
+
+// Two stretches of trajectory far apart (a loop seam: the end of a flight,
+// then its start again): the ticks between them are a silent gap, the second
+// stretch is sent exact from its first tick. Before the gap was a mechanism,
+// the emitter extrapolated through it and blended across kilometres (W1 of
+// issue 13: 4.8e5 m/s^2 on the wire).
+TEST(LiveEmitter, LoopSeamIsASilentGapWithNoExtrapolationOrBlend) {
+  const RejoinCase rc;
+  live::LiveEmitter emitter({rc.scene, live::UnderrunPolicy::extrapolate, rc.blend_ns});
+  QueueSource source;
+  const std::vector<TimeNs> ticks = grid(rc.ticks[0], kMs, 3000);
+  const TimeNs shift_ns = 500 * kNsPerSecond;  // the second stretch is the motion 500 s later
+  const std::size_t gap_from = 1000, gap_to = 2000;  // ticks without a sample
+  for (std::size_t j = 0; j < ticks.size(); ++j) {
+    if (j >= gap_from && j < gap_to) continue;
+    live::ExactSample s = exact_sample(rc.motion, rc.scene, j < gap_from ? ticks[j] : ticks[j] + shift_ns);
+    s.kinematics.t_ns = s.imu.t_ns = ticks[j];
+    source.push(s);
+  }
+  double max_accel_m_s2 = 0.0;
+  for (std::size_t j = 0; j < ticks.size(); ++j) {
+    const live::Emission e = emitter.emit(ticks[j], source);
+    const bool in_gap = j >= gap_from && j < gap_to;
+    ASSERT_EQ(e.status, in_gap ? EmissionStatus::gap : EmissionStatus::exact) << j;
+    if (e.has_sample()) max_accel_m_s2 = std::max(max_accel_m_s2, e.imu.accel_m_s2.norm());
+  }
+  const live::LiveCounters& c = emitter.counters();
+  EXPECT_EQ(c.gap, gap_to - gap_from);
+  EXPECT_EQ(c.gap_events, 1u);
+  EXPECT_EQ(c.extrapolated + c.blending + c.underrun_events, 0u);
+  EXPECT_EQ(c.exact + c.gap, ticks.size());
+  // The circle's own specific force: sqrt(g^2 + (v^2/r)^2) = 9.9 m/s^2, plus roll.
+  EXPECT_LT(max_accel_m_s2, 12.0);
+}
+
+// Live input: the emitter extrapolates while no sample comes; once the
+// smoother's next sample is past the current tick (the sender resumed after a
+// gap longer than max_gap_s), the extrapolation ends in silence and output
+// resumes exact, never blending across the gap.
+TEST(LiveEmitter, ExtrapolationThatRunsIntoAGapStopsThere) {
+  const RejoinCase rc;
+  live::LiveEmitter emitter({rc.scene, live::UnderrunPolicy::extrapolate, rc.blend_ns});
+  QueueSource source;
+  const std::vector<TimeNs> ticks = grid(rc.ticks[0], kMs, 400);
+  for (std::size_t j = 0; j < 100; ++j) source.push(exact_sample(rc.motion, rc.scene, ticks[j]));
+  std::vector<EmissionStatus> got;
+  for (std::size_t j = 0; j < 150; ++j) got.push_back(emitter.emit(ticks[j], source).status);
+  // The sender is back: samples from tick 300 on.
+  for (std::size_t j = 300; j < ticks.size(); ++j) source.push(exact_sample(rc.motion, rc.scene, ticks[j]));
+  for (std::size_t j = 150; j < ticks.size(); ++j) got.push_back(emitter.emit(ticks[j], source).status);
+  for (std::size_t j = 0; j < ticks.size(); ++j) {
+    const EmissionStatus want = j < 100   ? EmissionStatus::exact
+                                : j < 150 ? EmissionStatus::extrapolated
+                                : j < 300 ? EmissionStatus::gap
+                                          : EmissionStatus::exact;
+    ASSERT_EQ(got[j], want) << j;
+  }
   EXPECT_EQ(emitter.counters().underrun_events, 1u);
+  EXPECT_EQ(emitter.counters().gap_events, 1u);
+  EXPECT_EQ(emitter.counters().blending, 0u);
 }
 
 TEST(LiveEmitter, ZeroBlendRejoinsWithTheExactSample) {
