@@ -68,11 +68,11 @@ double true_avar(const Synthetic& c, std::int64_t m) {
 // Direct definition: averages of m samples, differences of adjacent averages
 // at every start (IEEE Std 1139-2008 overlapping form), without the
 // cumulative sum.
-double direct_avar(const std::vector<double>& y, std::int64_t m) {
+double direct_avar(const std::vector<double>& y, std::int64_t m, std::size_t stride = 1) {
   const auto mu = static_cast<std::size_t>(m);
   double sum = 0.0;
   std::size_t count = 0;
-  for (std::size_t i = 0; i + 2 * mu <= y.size(); ++i) {
+  for (std::size_t i = 0; i + 2 * mu <= y.size(); i += stride) {
     double a = 0.0, b = 0.0;
     for (std::size_t j = 0; j < mu; ++j) {
       a += y[i + j];
@@ -123,7 +123,14 @@ TEST(AllanEstimate, CumulativeSumFormEqualsTheDirectDefinition) {
     // 1e-9: the direct sums of m biased values (12.5 + noise) lose about
     // eps * 12.5 m / |difference| of their own, up to ~1e-11 here.
     EXPECT_NEAR(allan::overlapping_allan_variance(theta, m), direct, 1e-9 * direct) << "m " << m;
+    for (std::int64_t stride : {2, 7, 64}) {
+      const double strided = direct_avar(y, m, static_cast<std::size_t>(stride));
+      EXPECT_NEAR(allan::overlapping_allan_variance(theta, m, stride), strided, 1e-9 * strided) << "m " << m;
+    }
   }
+  EXPECT_EQ(allan::stride_for(127, 64), 1);
+  EXPECT_EQ(allan::stride_for(4096, 64), 64);
+  EXPECT_EQ(allan::stride_for(4096, 0), 1);
   EXPECT_THROW(allan::overlapping_allan_variance(theta, 1501), std::invalid_argument);
   EXPECT_THROW(allan::overlapping_allan_variance(theta, 0), std::invalid_argument);
 }

@@ -195,12 +195,27 @@ std::vector<double> integrate_rate(std::span<const double> rate, double offset) 
   return theta;
 }
 
-double overlapping_allan_variance(std::span<const double> theta, std::int64_t m) {
+std::int64_t stride_for(std::int64_t m, std::int64_t ratio) { return ratio <= 0 ? 1 : std::max<std::int64_t>(1, m / ratio); }
+
+double overlapping_allan_variance(std::span<const double> theta, std::int64_t m, std::int64_t stride) {
   if (m < 1 || 2 * m >= static_cast<std::int64_t>(theta.size()))
     throw std::invalid_argument("allan: averaging factor " + std::to_string(m) + " needs more than " +
                                 std::to_string(2 * m) + " integrated points, have " + std::to_string(theta.size()));
+  if (stride < 1) throw std::invalid_argument("allan: the stride must be at least 1");
   const auto mu = static_cast<std::size_t>(m);
-  const std::size_t terms = theta.size() - 2 * mu;
+  const std::size_t starts = theta.size() - 2 * mu;
+  if (stride > 1) {
+    const auto su = static_cast<std::size_t>(stride);
+    double sum = 0.0;
+    std::size_t terms = 0;
+    for (std::size_t i = 0; i < starts; i += su, ++terms) {
+      const double d = theta[i + 2 * mu] - 2.0 * theta[i + mu] + theta[i];
+      sum += d * d;
+    }
+    const double md = to_double(m);
+    return sum / (2.0 * md * md * static_cast<double>(terms));
+  }
+  const std::size_t terms = starts;
   const double* x0 = theta.data();
   const double* x1 = theta.data() + mu;
   const double* x2 = theta.data() + 2 * mu;
@@ -362,7 +377,7 @@ Analysis analyse(std::span<const double> rate, double tau0_s, const AnalysisOpti
     Point& pt = out.points[j];
     pt.m = factors[j];
     pt.tau_s = to_double(pt.m) * tau0_s;
-    s2[j] = overlapping_allan_variance(theta, pt.m);
+    s2[j] = overlapping_allan_variance(theta, pt.m, stride_for(pt.m, options.overlap_ratio));
     pt.adev = std::sqrt(s2[j]);
     pt.in_fit = (options.fit_min_tau_s <= 0.0 || pt.tau_s >= options.fit_min_tau_s * (1.0 - 1e-12)) &&
                 (options.fit_max_tau_s <= 0.0 || pt.tau_s <= options.fit_max_tau_s * (1.0 + 1e-12));
@@ -395,9 +410,25 @@ Analysis analyse(std::span<const double> rate, double tau0_s, const AnalysisOpti
     }
     // A model variance below this is treated as this (weights stay finite).
     const double floor_s2 = max_s2 * 1e-24;
+    std::vector<std::size_t> fit_row(count, count);  // point -> row of est (count: not fitted)
+    for (std::size_t i = 0; i < index.size(); ++i) fit_row[index[i]] = i;
+    const auto exact_where_white_pm = [&] {
+      for (std::size_t j = 0; j < count; ++j) {
+        Point& pt = out.points[j];
+        if (pt.noise != NoiseType::white_pm || stride_for(pt.m, options.overlap_ratio) == 1) continue;
+        s2[j] = overlapping_allan_variance(theta, pt.m, 1);
+        pt.adev = std::sqrt(s2[j]);
+        if (fit_row[j] < count) est[fit_row[j]] = s2[j];
+      }
+    };
     // Two passes: fit with the slope-identified EDF, re-identify the noise
-    // from the fitted model, fit again with those EDF.
+    // from the fitted model, fit again with those EDF. Between them, points
+    // where white PM dominates are recomputed at stride 1: its differences
+    // are correlated only at lags 0, m and 2m, so a stride would throw away
+    // nearly independent terms (stride_for's argument needs the smooth
+    // correlation of the redder noises).
     for (int pass = 0; pass < 2 && !index.empty(); ++pass) {
+      if (pass == 1) exact_where_white_pm();
       std::vector<double> reference(est);
       for (double& r : reference) r = std::max(r, floor_s2);
       for (int iteration = 0; iteration < 30; ++iteration) {
@@ -435,6 +466,7 @@ Analysis analyse(std::span<const double> rate, double tau0_s, const AnalysisOpti
         }
       }
     }
+    exact_where_white_pm();  // a point the last identification made white PM
   }
 
   for (Point& pt : out.points) {
