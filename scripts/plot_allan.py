@@ -101,16 +101,18 @@ def plot(json_path, png_path):
 
 
 def flicker(rng, n, tau0, b):
-    """Rate noise with one-sided PSD B^2 / (2 pi f), whose Allan deviation is
-    flat at sqrt(2 ln2 / pi) B = 0.664 B (IEEE Std 952-1997 C.1.4), by shaping
-    white noise in the frequency domain over [1/(n tau0), 1/(2 tau0)]."""
+    """Rate noise with two-sided PSD B^2 / (2 pi |f|) (IEEE Std 952-1997 C.1.4;
+    Annex C's PSDs are two-sided: its white term S = N^2 gives sigma^2 = N^2/tau),
+    i.e. one-sided B^2 / (pi f), whose Allan variance is 2 ln2 h_-1 = (2 ln2/pi) B^2,
+    flat at 0.664 B; white noise shaped in the frequency domain over
+    [1/(2 n tau0), 1/(2 tau0)]."""
     import numpy as np
 
     m = 2 * n  # twice the length: the periodic FFT noise is cut to its first half
     f = np.fft.rfftfreq(m, tau0)
     spectrum = np.zeros(f.size, dtype=complex)
     psd = np.zeros(f.size)
-    psd[1:] = b * b / (2.0 * math.pi * f[1:])
+    psd[1:] = b * b / (math.pi * f[1:])  # one-sided
     # One-sided PSD S: a real series x = irfft(X) with E|X_k|^2 = S_k m / (2 tau0)
     # has that PSD (Parseval with numpy's unnormalised forward transform).
     amplitude = np.sqrt(psd * m / (2.0 * tau0) / 2.0)
@@ -127,17 +129,17 @@ def synth(out_path, hours, rate_hz, seed):
     rng = np.random.default_rng(seed)
     n = int(round(hours * 3600.0 * rate_hz))
     tau0 = 1.0 / rate_hz
-    # A tactical-grade-like gyro and accelerometer (coefficients in SI; see
-    # the truth file for datasheet units).
+    # An industrial-MEMS-like gyro and accelerometer (coefficients in SI;
+    # comments in datasheet units), each term dominant over part of 0.01 s .. 1 h.
     truth = {
-        "gyro": {"white": 0.15 * DEG / 60.0,                 # 0.15 deg/sqrt(h)
-                 "bias_instability": 0.5 * DEG / 3600.0,     # 0.5 deg/h
-                 "rate_random_walk": 0.1 * DEG / 3600.0 / 60.0,  # 0.1 deg/h/sqrt(h)
-                 "quantization_lsb": 2e-6},                  # angle LSB (rad): Q = LSB / sqrt(12)
+        "gyro": {"white": 0.3 * DEG / 60.0,                  # 0.3 deg/sqrt(h)
+                 "bias_instability": 5.0 * DEG / 3600.0,     # 5 deg/h
+                 "rate_random_walk": 10.0 * DEG / 3600.0 / 60.0,  # 10 deg/h/sqrt(h)
+                 "quantization_lsb": 2.5e-5},                # angle LSB (rad): Q = LSB / sqrt(12)
         "accel": {"white": 0.06 / 60.0,                      # 0.06 m/s/sqrt(h)
                   "bias_instability": 50e-6 * G,             # 50 ug
-                  "rate_random_walk": 30e-6 * G / 60.0,      # 30 ug/sqrt(h)
-                  "quantization_lsb": 1e-5},                 # velocity LSB (m/s)
+                  "rate_random_walk": 100e-6 * G / 60.0,     # 100 ug/sqrt(h)
+                  "quantization_lsb": 2e-4},                 # velocity LSB (m/s)
     }
     columns = []
     for sensor, gravity in (("gyro", 0.0), ("accel", -G)):
@@ -153,7 +155,6 @@ def synth(out_path, hours, rate_hz, seed):
             theta = np.round(theta / lsb) * lsb
             columns.append(np.diff(theta) / tau0 + gravity * (sensor == "accel"))
         c["quantization"] = c.pop("quantization_lsb") / math.sqrt(12.0)
-        gravity = gravity
     t_ns = (np.arange(n, dtype=np.int64) * int(round(1e9 / rate_hz))).astype(np.int64)
     with open(out_path, "w") as f:
         f.write("time_ns,gyro_x_rad_s,gyro_y_rad_s,gyro_z_rad_s,accel_x_m_s2,accel_y_m_s2,accel_z_m_s2\n")
