@@ -361,7 +361,8 @@ void print_table(std::ostream& out, const AllanInput& in, const std::vector<alla
       out << line;
     }
     out << "  fit: sigma^2 = 3Q^2/tau^2 + N^2/tau + (2 ln2/pi) B^2 + K^2 tau/3 + R^2 tau^2/2 (IEEE Std 952-1997 "
-           "Annex C), weighted NNLS; +- formal 1-sigma, [" << fmt(args.confidence * 100.0, 3) << " % interval]\n";
+           "Annex C), weighted NNLS; +- 1-sigma (formal x correlation inflation), [" << fmt(args.confidence * 100.0, 3)
+        << " % interval]\n";
     for (int k = 0; k < allan::kTermCount; ++k) {
       const allan::FittedTerm& t = a.terms[static_cast<std::size_t>(k)];
       out << "    " << term_symbol(k) << "  " << term_label(series.kind, k) << ": ";
@@ -482,6 +483,7 @@ nlohmann::json allan_json(const AllanInput& in, const std::vector<allan::Analysi
       tj["enabled"] = t.enabled;
       tj["value"] = t.value;
       tj["sigma"] = t.sigma;
+      tj["formal_sigma"] = t.formal_sigma;
       tj["low"] = t.low;
       tj["high"] = t.high;
       nlohmann::json units = nlohmann::json::object();

@@ -18,6 +18,7 @@ Needs Debian's python3 (numpy, matplotlib), not the pyenv one first on PATH.
 """
 import json
 import math
+import os
 import sys
 
 DEG = math.pi / 180.0
@@ -95,7 +96,7 @@ def plot(json_path, png_path):
     for j in range(len(axes_data), rows * cols):
         axs[j // cols][j % cols].axis("off")
     hours = data["duration_s"] / 3600.0
-    fig.suptitle(f"{data['file']}: {data['samples']} samples at {1.0 / data['tau0_s']:.6g} Hz ({hours:.3g} h)", fontsize=10)
+    fig.suptitle(f"{os.path.basename(data['file'])}: {data['samples']} samples at {1.0 / data['tau0_s']:.6g} Hz ({hours:.3g} h)", fontsize=10)
     fig.tight_layout()
     fig.savefig(png_path, dpi=110)
 

@@ -475,14 +475,18 @@ Analysis analyse(std::span<const double> rate, double tau0_s, const AnalysisOpti
     pt.ci_high = ci.high;
   }
   const double z = std::sqrt(chi_squared_quantile(options.confidence, 1.0));  // two-sided normal quantile
+  const double inflation = options.correlation_inflation > 0.0
+                               ? options.correlation_inflation
+                               : std::sqrt(static_cast<double>(options.points_per_decade) / 2.5);
   for (int k = 0; k < kTermCount; ++k) {
     const auto ku = static_cast<std::size_t>(k);
     FittedTerm& t = out.terms[ku];
     t.enabled = options.terms[ku];
     const double c = coefficient[ku];
     if (c <= 0.0) continue;
-    const double sigma_c = std::sqrt(variance[ku]);
+    const double sigma_c = inflation * std::sqrt(variance[ku]);
     t.value = std::sqrt(c);
+    t.formal_sigma = std::sqrt(variance[ku]) / (2.0 * t.value);
     t.sigma = sigma_c / (2.0 * t.value);
     t.low = std::sqrt(std::max(0.0, c - z * sigma_c));
     t.high = std::sqrt(c + z * sigma_c);

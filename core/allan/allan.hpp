@@ -128,13 +128,17 @@ struct FittedTerm {
   // The coefficient (Q, N, B, K or R, input units as in the header comment),
   // >= 0; 0 when the non-negative fit drops the term.
   double value = 0.0;
-  // Formal 1-sigma uncertainty of `value` from the weighted least-squares
-  // covariance of the squared coefficient (neglects the correlation between
-  // neighbouring tau of the overlapping estimate, so it is optimistic; see
+  // 1-sigma uncertainty of `value`: the formal one from the weighted
+  // least-squares covariance of the squared coefficient (formal_sigma), times
+  // the correlation inflation of AnalysisOptions. The formal covariance
+  // treats every tau as independent; the overlapping estimates at 10 points
+  // per decade are not, and the scatter of fitted coefficients over seeds is
+  // 1.5-2.2x the formal sigma (bench/bench_allan.cpp BM_allan_fit_scatter,
   // docs/allan.md). 0 for a dropped term.
   double sigma = 0.0;
-  // Interval of `value` at the analysis' confidence from that covariance
-  // (normal on the squared coefficient, clipped at 0).
+  double formal_sigma = 0.0;
+  // Interval of `value` at the analysis' confidence from that (inflated)
+  // variance, normal on the squared coefficient, clipped at 0.
   double low = 0.0, high = 0.0;
 };
 
@@ -148,6 +152,11 @@ struct AnalysisOptions {
   double fit_min_tau_s = 0.0, fit_max_tau_s = 0.0;
   // See stride_for: 0 computes every overlapping difference.
   std::int64_t overlap_ratio = 64;
+  // Factor on the formal uncertainty of the fitted coefficients; <= 0:
+  // sqrt(points_per_decade / 2.5), i.e. as if 2.5 tau per decade were
+  // independent (2.0 at 10 per decade; calibrated by simulation, see
+  // FittedTerm::sigma).
+  double correlation_inflation = 0.0;
 };
 
 struct Analysis {
