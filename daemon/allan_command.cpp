@@ -7,6 +7,9 @@
 #include <unistd.h>
 
 #include <array>
+#include <atomic>
+#include <exception>
+#include <thread>
 #include <cerrno>
 #include <cmath>
 #include <cstdio>
@@ -50,6 +53,97 @@ const std::vector<std::string_view> kListenColumns{
   throw io::SampleFormatError(io::CsvLocation{file, line, std::move(column), column_index}, std::move(expected),
                               std::move(detail));
 }
+
+// Powers of ten exact in long double (x86 80-bit: 64-bit significand;
+// 10^27 = 2^27 5^27 and 5^27 < 2^63).
+constexpr int kExactPow10 = 27;
+long double pow10_exact(int e) {
+  static const auto table = [] {
+    std::array<long double, kExactPow10 + 1> t{};
+    t[0] = 1.0L;
+    for (int i = 1; i <= kExactPow10; ++i) t[static_cast<std::size_t>(i)] = t[static_cast<std::size_t>(i - 1)] * 10.0L;
+    return t;
+  }();
+  return table[static_cast<std::size_t>(e)];
+}
+
+}  // namespace
+
+bool parse_plain_decimal(std::string_view text, double& out) noexcept {
+  const char* p = text.data();
+  const char* const end = p + text.size();
+  bool negative = false;
+  if (p != end && (*p == '-' || *p == '+')) negative = *p++ == '-';
+  std::uint64_t mantissa = 0;
+  int digits = 0;          // significant digits kept in mantissa (at most 19)
+  int exponent10 = 0;      // value = mantissa * 10^exponent10
+  bool any_digit = false;
+  for (; p != end && *p >= '0' && *p <= '9'; ++p) {
+    any_digit = true;
+    if (mantissa == 0 && *p == '0') continue;
+    if (digits == 19) {  // beyond 19 significant digits: dropped (< 1e-18 relative)
+      ++exponent10;
+      continue;
+    }
+    mantissa = mantissa * 10 + static_cast<std::uint64_t>(*p - '0');
+    ++digits;
+  }
+  if (p != end && *p == '.') {
+    for (++p; p != end && *p >= '0' && *p <= '9'; ++p) {
+      any_digit = true;
+      if (mantissa == 0 && *p == '0') {
+        --exponent10;
+        continue;
+      }
+      if (digits == 19) continue;  // dropped, as above
+      mantissa = mantissa * 10 + static_cast<std::uint64_t>(*p - '0');
+      ++digits;
+      --exponent10;
+    }
+  }
+  if (!any_digit) return false;
+  if (p != end && (*p == 'e' || *p == 'E')) {
+    ++p;
+    bool exp_negative = false;
+    if (p != end && (*p == '-' || *p == '+')) exp_negative = *p++ == '-';
+    if (p == end) return false;
+    int e = 0;
+    for (; p != end && *p >= '0' && *p <= '9'; ++p) {
+      if (e > 10000) return false;
+      e = e * 10 + (*p - '0');
+    }
+    exponent10 += exp_negative ? -e : e;
+  }
+  if (p != end) return false;  // anything else: the exact reader decides (and names the problem)
+  if (mantissa == 0) {
+    out = negative ? -0.0 : 0.0;
+    return true;
+  }
+  // Far beyond the magnitudes of IMU data (and near subnormals or overflow):
+  // the exact reader.
+  if (exponent10 + digits < -290 || exponent10 + digits > 290) return false;
+  double v = 0.0;
+  if (mantissa < (std::uint64_t{1} << 53) && exponent10 >= -22 && exponent10 <= 22) {
+    // Clinger's fast path: both operands exact in double, one rounding.
+    static constexpr double kPow10[] = {1e0,  1e1,  1e2,  1e3,  1e4,  1e5,  1e6,  1e7,  1e8,  1e9,  1e10, 1e11,
+                                        1e12, 1e13, 1e14, 1e15, 1e16, 1e17, 1e18, 1e19, 1e20, 1e21, 1e22};
+    const auto m = static_cast<double>(mantissa);
+    v = exponent10 >= 0 ? m * kPow10[exponent10] : m / kPow10[-exponent10];
+  } else {
+    // Both operands exact in long double, one rounding there, one to double.
+    const auto m = static_cast<long double>(mantissa);
+    const int e = exponent10 >= 0 ? exponent10 : -exponent10;
+    // 10^e exact up to 10^27, else powl (within an ulp of long double, 2^-63
+    // relative, far below the final rounding to double).
+    const long double scale = e <= kExactPow10 ? pow10_exact(e) : std::pow(10.0L, static_cast<long double>(e));
+    const long double r = exponent10 >= 0 ? m * scale : m / scale;
+    v = static_cast<double>(r);
+  }
+  out = negative ? -v : v;
+  return true;
+}
+
+namespace {
 
 enum class Role { ignore, time, sequence, axis };
 
@@ -189,6 +283,11 @@ class Reader {
         case Role::sequence: sequence(f, i); break;
         case Role::axis: {
           if (!keep_[static_cast<std::size_t>(c.axis)]) break;
+          double fast = 0.0;
+          if (parse_plain_decimal(f, fast)) {
+            values_[static_cast<std::size_t>(c.axis)].push_back(fast);
+            break;
+          }
           const io::DoubleParse v = io::try_parse_double(f);
           if (v.status != io::NumberStatus::ok)
             fail(path_, line_, std::string(c.name), i + 1, "a finite number",
@@ -530,15 +629,43 @@ int run_allan(const AllanArgs& args, std::ostream& out, std::ostream& err) {
     err << "imuemu allan: " << args.path << ": not enough memory to hold the samples (try --axes gyro or accel)\n";
     return kCannotProcess;
   }
-  std::vector<allan::Analysis> analyses;
-  try {
-    for (AllanSeries& s : in.series) {
-      analyses.push_back(allan::analyse(s.values, in.tau0_s, opt));
-      std::vector<double>().swap(s.values);  // free as we go
+  // The axes are independent: two workers (the machine's cores), each
+  // freeing an axis' samples once analysed. Exceptions are carried out of
+  // the threads and reported here.
+  std::vector<allan::Analysis> analyses(in.series.size());
+  std::vector<std::exception_ptr> failures(in.series.size());
+  std::atomic<std::size_t> next{0};
+  const auto work = [&] {
+    for (std::size_t k = next++; k < in.series.size(); k = next++) {
+      try {
+        analyses[k] = allan::analyse(in.series[k].values, in.tau0_s, opt);
+      } catch (...) {
+        failures[k] = std::current_exception();
+      }
+      std::vector<double>().swap(in.series[k].values);
     }
-  } catch (const std::invalid_argument& e) {
-    err << "imuemu allan: " << args.path << ": " << e.what() << "\n";
-    return kCannotProcess;
+  };
+  {
+    std::thread helper;
+    try {
+      if (in.series.size() > 1) helper = std::thread(work);
+    } catch (const std::system_error&) {
+      // no second thread: the calling thread does it all
+    }
+    work();
+    if (helper.joinable()) helper.join();
+  }
+  for (const std::exception_ptr& f : failures) {
+    if (!f) continue;
+    try {
+      std::rethrow_exception(f);
+    } catch (const std::invalid_argument& e) {
+      err << "imuemu allan: " << args.path << ": " << e.what() << "\n";
+      return kCannotProcess;
+    } catch (const std::exception& e) {
+      err << "imuemu allan: internal error: " << e.what() << "\n";
+      return kInternalError;
+    }
   }
   const nlohmann::json j = allan_json(in, analyses, args);
   if (args.json) {

@@ -4,6 +4,7 @@
 // against the noise put in, and every refusal naming file:line.
 #include <gtest/gtest.h>
 
+#include <charconv>
 #include <cmath>
 #include <filesystem>
 #include <fstream>
@@ -249,4 +250,53 @@ TEST_F(AllanCommand, PngThroughThePlotScript) {
   EXPECT_EQ(std::string(magic + 1, 3), "PNG");
   args.plot_script = path("no_such_script.py");
   EXPECT_EQ(run(args), cli::kOutputError);
+}
+
+// The reader's fast number parser against std::from_chars (the exact
+// reference): within one ulp for shortest round-trip, %.17g and %.6e forms of
+// values over 80 decades, exact where Clinger's fast path applies, and
+// declining (so the exact reader refuses and names it) everything else.
+TEST(AllanFastParser, WithinOneUlpOfFromCharsAndDeclinesTheRest) {
+  std::mt19937_64 rng(11);
+  std::uniform_real_distribution<double> mant(-1.0, 1.0);
+  std::uniform_int_distribution<int> expo(-40, 40);
+  int exact = 0, one_ulp = 0, declined = 0;
+  for (int i = 0; i < 300'000; ++i) {
+    const double x = mant(rng) * std::pow(10.0, expo(rng));
+    char buffers[3][64];
+    const auto r = std::to_chars(buffers[0], buffers[0] + 64, x);
+    *r.ptr = '\0';
+    std::snprintf(buffers[1], 64, "%.17g", x);
+    std::snprintf(buffers[2], 64, "%.6e", x);
+    for (const char* b : buffers) {
+      const std::string_view text(b);
+      double reference = 0.0;
+      std::from_chars(text.data(), text.data() + text.size(), reference);
+      double fast = 0.0;
+      if (!cli::parse_plain_decimal(text, fast)) {
+        if (++declined < 5) ADD_FAILURE() << "declined " << text;
+        continue;
+      }
+      if (fast == reference) {
+        ++exact;
+      } else {
+        ++one_ulp;
+        EXPECT_TRUE(std::nextafter(reference, fast) == fast) << text << " fast " << fast << " exact " << reference;
+      }
+    }
+  }
+  EXPECT_EQ(declined, 0);
+  EXPECT_LT(one_ulp, exact / 100);      // double rounding is rare
+  double v = 0.0;
+  EXPECT_TRUE(cli::parse_plain_decimal("9.80665", v));
+  EXPECT_EQ(v, 9.80665);
+  EXPECT_TRUE(cli::parse_plain_decimal("-0", v));
+  EXPECT_TRUE(std::signbit(v));
+  EXPECT_TRUE(cli::parse_plain_decimal("12345678901234567890123.5", v));
+  EXPECT_EQ(v, 12345678901234567890123.5);
+  EXPECT_TRUE(cli::parse_plain_decimal("+.5e1", v));
+  EXPECT_EQ(v, 5.0);
+  for (const char* bad : {"", "-", "+", ".", "e5", "1e", "1e+", "1.2.3", "nan", "inf", "-Infinity", "0x1p3", "1,5",
+                          " 1", "1 ", "1e99999", "1e-300"})
+    EXPECT_FALSE(cli::parse_plain_decimal(bad, v)) << bad;
 }
