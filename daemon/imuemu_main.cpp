@@ -1,6 +1,7 @@
 // imuemu: offline trajectory-to-IMU generation and verification.
 #include <CLI/CLI.hpp>
 
+#include "daemon/allan_command.hpp"
 #include "daemon/commands.hpp"
 #include "daemon/ports_command.hpp"
 #include "daemon/listen_command.hpp"
@@ -102,6 +103,7 @@ int main(int argc, char** argv) {
   add_emit_command(app, exit_code);
   add_bench_timing_command(app, exit_code);
   add_status_command(app, exit_code);
+  add_allan_command(app, exit_code);
 
   try {
     app.parse(argc, argv);
