@@ -5,7 +5,16 @@
 // option changes them, and each documented default is the real default.
 #include <gtest/gtest.h>
 
+#include <fcntl.h>
+#include <signal.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <algorithm>
+#include <chrono>
 #include <cstdio>
+#include <cstdlib>
+#include <thread>
 #include <map>
 #include <set>
 #include <stdexcept>
@@ -13,6 +22,7 @@
 #include <vector>
 
 #include "daemon/scene_config.hpp"
+#include "drivers/byte_stream_reader.hpp"
 #include "drivers/protocols/protocol_options.hpp"
 
 using namespace imuemu;
@@ -247,4 +257,85 @@ TEST(ProtocolOptionTable, CommandLineTextIsCheckedByTheTable) {
   EXPECT_EQ(says(row("dronecan", "node_status_period_s"), "0"),
             "'0' is out of range; expected a number in (0, 1]");
   EXPECT_EQ(says(row("mip", "time_base"), "tai"), "'tai' is not allowed; expected one of unknown, gps or utc");
+}
+
+// `imuemu emit` end to end: the table's flags reach the encoder. MAVLink 2
+// with system 7, component 9, HIGHRES_IMU instead of HIL_SENSOR, read from
+// the pty: every packet's header carries 7 / 9 (MAVLink 2 header bytes 5, 6)
+// and the messages are #105 and #0 only.
+TEST(ProtocolOptionTable, EmitFlagsReachTheWire) {
+  char tmpl[] = "/tmp/imuemu-test-options-XXXXXX";
+  ASSERT_NE(::mkdtemp(tmpl), nullptr);
+  const std::string dir = tmpl;
+  const std::string tty = dir + "/tty", log_path = dir + "/emit.log";
+  const std::vector<std::string> args = {"emit", "--sample", "static", "--scene", "flat", "--rate", "50",
+                                         "--protocol", "mavlink2", "--mavlink-system-id", "7",
+                                         "--mavlink-component-id", "9", "--mavlink-hil-sensor", "false",
+                                         "--mavlink-highres-imu", "true", "--device", "pty:" + tty};
+  std::vector<char*> argv;
+  argv.push_back(const_cast<char*>(IMUEMU_CLI_PATH));
+  for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
+  argv.push_back(nullptr);
+  const pid_t pid = ::fork();
+  if (pid == 0) {
+    const int log = ::open(log_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
+    ::dup2(log, 1);
+    ::dup2(log, 2);
+    ::execv(IMUEMU_CLI_PATH, argv.data());
+    ::_exit(127);
+  }
+  ASSERT_GT(pid, 0);
+  using namespace std::chrono_literals;
+  for (int i = 0; i < 3000 && ::access(tty.c_str(), F_OK) != 0; ++i) std::this_thread::sleep_for(10ms);
+  std::vector<std::uint8_t> wire;
+  StreamEncoderOptions o;
+  o.mavlink_hil_sensor = false;
+  o.mavlink_highres_imu = true;
+  auto decoder = make_stream_decoder("mavlink2", o);
+  std::uint64_t samples = 0;
+  {
+    ByteStreamReader reader(tty);
+    std::vector<std::uint8_t> buffer(4096);
+    // Until a few samples are in (a slow host only takes longer).
+    const auto until = std::chrono::steady_clock::now() + 60s;
+    while (samples < 5 && std::chrono::steady_clock::now() < until) {
+      const ReadResult r = reader.read_some(buffer, 100ms);
+      if (r.end_of_stream) break;
+      wire.insert(wire.end(), buffer.begin(), buffer.begin() + static_cast<std::ptrdiff_t>(r.bytes));
+      decoder->feed(std::span<const std::uint8_t>(buffer.data(), r.bytes), [&](const DecodedSample&) { ++samples; });
+    }
+  }
+  ::kill(pid, SIGTERM);
+  int status = 0;
+  ::waitpid(pid, &status, 0);
+  std::system(("rm -rf " + dir).c_str());
+  EXPECT_GE(samples, 5u);
+  EXPECT_EQ(decoder->counters().checksum_errors, 0u);
+  // Walk the packets (the decoder has checked their CRCs): magic FD, len,
+  // flags, seq, sysid, compid, msgid[3], payload, CRC. From the first FD that
+  // starts a chain of packets (the stream may begin inside one).
+  std::size_t packets = 0;
+  for (std::size_t start = 0; start < std::min<std::size_t>(wire.size(), 300) && packets < 5; ++start) {
+    packets = 0;
+    for (std::size_t at = start; at + 12 <= wire.size() && wire[at] == 0xFD; at += 12 + wire[at + 1]) ++packets;
+    if (packets < 5) continue;
+    for (std::size_t at = start; at + 12 <= wire.size() && wire[at] == 0xFD; at += 12 + wire[at + 1]) {
+      EXPECT_EQ(wire[at + 5], 7) << "system id";
+      EXPECT_EQ(wire[at + 6], 9) << "component id";
+      const std::uint32_t msgid = wire[at + 7] | wire[at + 8] << 8 | wire[at + 9] << 16;
+      EXPECT_TRUE(msgid == 105 || msgid == 0) << "message " << msgid;
+    }
+  }
+  EXPECT_GE(packets, 5u);
+
+  // A flag of another protocol is a usage error naming it.
+  const std::string wrong = std::string(IMUEMU_CLI_PATH) +
+                            " emit --sample static --protocol mip --mavlink-system-id 3 --device pty:/tmp/unused 2>&1";
+  FILE* p = ::popen(wrong.c_str(), "r");
+  ASSERT_NE(p, nullptr);
+  std::string out;
+  char line[512];
+  while (std::fgets(line, sizeof line, p) != nullptr) out += line;
+  EXPECT_EQ(WEXITSTATUS(::pclose(p)), 2);
+  EXPECT_NE(out.find("--mavlink-system-id: applies to --protocol mavlink2, not mip"), std::string::npos) << out;
 }
