@@ -56,7 +56,7 @@ std::string protocol_option_table_name(const std::string& protocol);
 std::string command_line_flag(const ProtocolOption& option);
 
 // What the option allows, for messages: "an integer in 1..255", "true or
-// false", "one of iso8855, sae-j670e or j1939da", "a number in (0, 1]".
+// false", "one of j1939da, iso8855 or sae-j670e", "a number in (0, 1]".
 std::string allowed_text(const ProtocolOption& option);
 
 // Command-line text as the option's type (true/false/1/0/yes/no for
