@@ -62,6 +62,35 @@ int median_interval_delta(const std::vector<Pose>& knots, std::int64_t rate_hz) 
 }
 
 
+// The encoder options from the --<table>-<key> flags, through the protocol
+// option table (the one the scene parser reads too). Throws
+// std::invalid_argument naming the flag and what it allows.
+drivers::ProtocolOptions protocol_options_of(const EmitArgs& a) {
+  drivers::ProtocolOptions options = drivers::default_protocol_options(static_cast<double>(a.rate_hz));
+  std::set<std::string> given;
+  for (const auto& [flag, text] : a.protocol_options) {
+    const drivers::ProtocolOption* row = nullptr;
+    for (const drivers::ProtocolOption& o : drivers::protocol_option_table())
+      if (drivers::command_line_flag(o) == flag) row = &o;
+    if (row == nullptr) throw std::invalid_argument(flag + ": not a protocol option");
+    if (row->protocol != a.protocol)
+      throw std::invalid_argument(flag + ": applies to --protocol " + row->protocol + ", not " + a.protocol);
+    try {
+      row->apply(options, drivers::parse_option_text(*row, text));
+    } catch (const std::invalid_argument& e) {
+      throw std::invalid_argument(flag + " " + e.what());
+    }
+    given.insert(row->key);
+  }
+  if (const auto problem = drivers::finish_protocol_options(a.protocol, options, given)) {
+    std::string flag = problem->key;
+    for (const drivers::ProtocolOption* o : drivers::protocol_options_of(a.protocol))
+      if (o->key == problem->key) flag = drivers::command_line_flag(*o);
+    throw std::invalid_argument(flag + ": " + problem->message);
+  }
+  return options;
+}
+
 // "serial:/dev/ttyUSB0,baud=921600" -> port and settings.
 drivers::SerialTransportOptions serial_options_of(const std::string& spec) {
   drivers::SerialTransportOptions o;
@@ -108,35 +137,6 @@ std::vector<Pose> sample_poses(const EmitArgs& a, Physics physics) {
   if (sample_trajectory({path, a.sample_kind, a.sample_duration_s, a.sample_period_s}) != kOk)
     throw std::runtime_error("the built-in sample trajectory could not be written");
   return io::poses_in_scene(io::read_trajectory_csv(path), physics);
-}
-
-// The encoder options from the --<table>-<key> flags, through the protocol
-// option table (the one the scene parser reads too). Throws
-// std::invalid_argument naming the flag and what it allows.
-drivers::ProtocolOptions protocol_options_of(const EmitArgs& a) {
-  drivers::ProtocolOptions options = drivers::default_protocol_options(static_cast<double>(a.rate_hz));
-  std::set<std::string> given;
-  for (const auto& [flag, text] : a.protocol_options) {
-    const drivers::ProtocolOption* row = nullptr;
-    for (const drivers::ProtocolOption& o : drivers::protocol_option_table())
-      if (drivers::command_line_flag(o) == flag) row = &o;
-    if (row == nullptr) throw std::invalid_argument(flag + ": not a protocol option");
-    if (row->protocol != a.protocol)
-      throw std::invalid_argument(flag + ": applies to --protocol " + row->protocol + ", not " + a.protocol);
-    try {
-      row->apply(options, drivers::parse_option_text(*row, text));
-    } catch (const std::invalid_argument& e) {
-      throw std::invalid_argument(flag + " " + e.what());
-    }
-    given.insert(row->key);
-  }
-  if (const auto problem = drivers::finish_protocol_options(a.protocol, options, given)) {
-    std::string flag = problem->key;
-    for (const drivers::ProtocolOption* o : drivers::protocol_options_of(a.protocol))
-      if (o->key == problem->key) flag = drivers::command_line_flag(*o);
-    throw std::invalid_argument(flag + ": " + problem->message);
-  }
-  return options;
 }
 
 void print_summary(const emission::EngineStats& s) {
