@@ -22,6 +22,8 @@
 #include <boost/lockfree/spsc_queue.hpp>
 #include <nlohmann/json.hpp>
 
+#include "core/attitude.hpp"
+#include "core/earth.hpp"
 #include "core/stream.hpp"
 #include "drivers/socketcan.hpp"
 #include "io/pose_source.hpp"
@@ -51,6 +53,21 @@ TimeNs thread_cpu_ns() noexcept {
   timespec ts{};
   clock_gettime(CLOCK_THREAD_CPUTIME_ID, &ts);
   return static_cast<TimeNs>(ts.tv_sec) * kNsPerSecond + ts.tv_nsec;
+}
+
+// Pitch and roll of the sensor axes relative to local level (NED), Eq. 1.2,
+// from the sample's attitude in the scene frame (flat: R_s^n; ecef: R_s^e,
+// turned into NED at the sample's own position, Eq. 1.5).
+void set_level_attitude(const Kinematics& k, Physics physics, drivers::ImuFrameInput& f) {
+  Mat3 sensor_to_ned = k.attitude;
+  if (physics == Physics::ecef) {
+    const earth::Geodetic g = earth::geodetic_from_ecef(k.position_m);
+    sensor_to_ned = attitude::ned_to_ecef(g.latitude_rad, g.longitude_rad).transpose() * k.attitude;
+  }
+  const attitude::HeadingPitchRoll hpr = attitude::hpr_from_rotation(sensor_to_ned);
+  f.has_level_attitude = true;
+  f.pitch_rad = hpr.pitch_rad;
+  f.roll_rad = hpr.roll_rad;
 }
 
 void sleep_until_monotonic(TimeNs due_ns) noexcept {
@@ -338,6 +355,8 @@ void EmissionEngine::Impl::produce(Device& d, bool time_gated) {
         f.delta_velocity_m_s = e.imu.accel_m_s2 * dt_s;
       }
       if (!e.exact()) f.status |= drivers::kStatusExtrapolated;
+      if (d.options.can_encoder && d.options.can_encoder->needs_level_attitude())
+        set_level_attitude(e.kinematics, d.options.pipeline.scene.physics, f);
       d.previous_imu.emplace(k, e.imu);
     } else {
       d.previous_imu.reset();

@@ -19,7 +19,9 @@
 #include <filesystem>
 #include <fstream>
 #include <iostream>
+#include <map>
 #include <memory>
+#include <set>
 #include <nlohmann/json.hpp>
 #include <stdexcept>
 #include <string>
@@ -29,6 +31,7 @@
 #include "daemon/commands.hpp"
 #include "daemon/emission.hpp"
 #include "drivers/protocols/can_protocols.hpp"
+#include "drivers/protocols/protocol_options.hpp"
 #include "drivers/protocols/stream_protocols.hpp"
 #include "drivers/pty_transport.hpp"
 #include "drivers/serial_transport.hpp"
@@ -58,6 +61,35 @@ int median_interval_delta(const std::vector<Pose>& knots, std::int64_t rate_hz) 
   return std::max(1, static_cast<int>(std::lround(median_s * static_cast<double>(rate_hz))));
 }
 
+
+// The encoder options from the --<table>-<key> flags, through the protocol
+// option table (the one the scene parser reads too). Throws
+// std::invalid_argument naming the flag and what it allows.
+drivers::ProtocolOptions protocol_options_of(const EmitArgs& a) {
+  drivers::ProtocolOptions options = drivers::default_protocol_options(static_cast<double>(a.rate_hz));
+  std::set<std::string> given;
+  for (const auto& [flag, text] : a.protocol_options) {
+    const drivers::ProtocolOption* row = nullptr;
+    for (const drivers::ProtocolOption& o : drivers::protocol_option_table())
+      if (drivers::command_line_flag(o) == flag) row = &o;
+    if (row == nullptr) throw std::invalid_argument(flag + ": not a protocol option");
+    if (row->protocol != a.protocol)
+      throw std::invalid_argument(flag + ": applies to --protocol " + row->protocol + ", not " + a.protocol);
+    try {
+      row->apply(options, drivers::parse_option_text(*row, text));
+    } catch (const std::invalid_argument& e) {
+      throw std::invalid_argument(flag + " " + e.what());
+    }
+    given.insert(row->key);
+  }
+  if (const auto problem = drivers::finish_protocol_options(a.protocol, options, given)) {
+    std::string flag = problem->key;
+    for (const drivers::ProtocolOption* o : drivers::protocol_options_of(a.protocol))
+      if (o->key == problem->key) flag = drivers::command_line_flag(*o);
+    throw std::invalid_argument(flag + ": " + problem->message);
+  }
+  return options;
+}
 
 // "serial:/dev/ttyUSB0,baud=921600" -> port and settings.
 drivers::SerialTransportOptions serial_options_of(const std::string& spec) {
@@ -159,16 +191,15 @@ int emit(const EmitArgs& a) {
 
   // Encoder and device.
   try {
+    const drivers::ProtocolOptions protocol_options = protocol_options_of(a);
     if (can) {
       if (a.device.rfind("can:", 0) != 0)
         throw std::invalid_argument("--device " + a.device + ": protocol " + a.protocol + " needs can:IFACE");
-      dev.can_encoder = drivers::make_can_encoder(a.protocol);
+      dev.can_encoder = drivers::make_can_encoder(a.protocol, protocol_options.can);
     } else {
       if (!member(drivers::stream_protocol_names(), a.protocol))
         throw std::invalid_argument("--protocol " + a.protocol + ": expected native, mavlink2, mip, dronecan or j1939");
-      drivers::StreamEncoderOptions so;
-      so.nominal_sample_rate_hz = static_cast<double>(a.rate_hz);
-      dev.stream_encoder = drivers::make_stream_encoder(a.protocol, so);
+      dev.stream_encoder = drivers::make_stream_encoder(a.protocol, protocol_options.stream);
       if (a.device.rfind("can:", 0) == 0)
         throw std::invalid_argument("--device " + a.device + ": protocol " + a.protocol + " is a byte stream (pty: or serial:)");
     }
@@ -305,12 +336,29 @@ void add_emit_command(CLI::App& app, int& exit_code) {
   c->add_flag("--require-realtime", a.require_realtime, "Fail instead of running without the priority or the memory lock");
   c->add_option("--stats-json", a.stats_json_path, "Write the final statistics (JSON) here");
   c->add_option("--late-ticks", a.late_ticks,
-                "A tick whose wake-up missed its deadline by more than a period: drop (the receiver sees a gap, "
-                "as from a real IMU that skipped a sample) or send (late, no gap)")
+                "A tick whose wake-up missed its deadline by more than a period: drop (as a real IMU that skips a "
+                "sample: the sample time jumps; a sequence gap only in native) or send (late)")
       ->capture_default_str()->check(CLI::IsMember({"drop", "send"}));
   c->add_option("--start", a.start, "now, or next-second (the next whole second of CLOCK_REALTIME)")->capture_default_str()
       ->check(CLI::IsMember({"now", "next-second"}));
-  c->callback([args, &exit_code] { exit_code = emit(*args); });
+  // Protocol options: one flag per row of the protocol option table (the
+  // scene file's [imu.<table>] keys), checked by the table when emit runs.
+  auto texts = std::make_shared<std::map<std::string, std::string>>();
+  std::vector<std::pair<std::string, CLI::Option*>> protocol_flags;
+  for (const drivers::ProtocolOption& o : drivers::protocol_option_table()) {
+    const std::string flag = drivers::command_line_flag(o);
+    std::string help = o.protocol + ": " + o.help + " (" + drivers::allowed_text(o) + "; default " + o.default_text + ")";
+    const std::string type = o.type == drivers::OptionType::boolean   ? "BOOL"
+                             : o.type == drivers::OptionType::integer ? "INT"
+                             : o.type == drivers::OptionType::number  ? "NUMBER"
+                                                                      : "CHOICE";
+    protocol_flags.emplace_back(flag, c->add_option(flag, (*texts)[flag], help)->type_name(type)->group("Protocol options"));
+  }
+  c->callback([args, texts, protocol_flags, &exit_code] {
+    for (const auto& [flag, option] : protocol_flags)
+      if (option->count() > 0) args->protocol_options[flag] = texts->at(flag);
+    exit_code = emit(*args);
+  });
 }
 
 }  // namespace imuemu::cli

@@ -3,6 +3,7 @@
 #pragma once
 
 #include <cstdint>
+#include <map>
 #include <string>
 
 namespace CLI {
@@ -39,6 +40,9 @@ struct EmitArgs {
   std::string stats_json_path;
   std::string late_ticks = "drop"; // drop | send: a tick woken more than a period late (EngineOptions::drop_late_ticks)
   std::string start = "now";    // now | next-second
+  // Protocol options as given on the command line: flag (--mavlink-system-id,
+  // from drivers/protocols/protocol_options.hpp) -> its text.
+  std::map<std::string, std::string> protocol_options;
 };
 
 int emit(const EmitArgs& args);

@@ -469,7 +469,7 @@ int run_listen(const ListenArgs& args) {
 void add_listen_command(CLI::App& app, int& exit_code) {
   struct Options {
     ListenArgs args;
-    std::string parity = "none", flow_control = "none", mavlink_message = "hil_sensor", j1939_axes = "iso8855";
+    std::string parity = "none", flow_control = "none", mavlink_message = "hil_sensor", j1939_axes = "j1939da", mip_time_base;
     int dronecan_node_id = -1, j1939_source_address = -1;
     std::int64_t mip_gps_time_at_t0_ns = 0, dronecan_timestamp_offset_ns = 0;
   };
@@ -500,11 +500,17 @@ void add_listen_command(CLI::App& app, int& exit_code) {
       ->capture_default_str()->check(CLI::IsMember({"hil_sensor", "highres_imu"}));
   c->add_option("--mip-gps-time-at-t0-ns", options->mip_gps_time_at_t0_ns, "mip: GPS time (ns since 1980-01-06) of trajectory time 0, as the encoder was given")
       ->capture_default_str();
+  c->add_option("--mip-time-base", options->mip_time_base,
+                "mip: the encoder's time_base: unknown (internal clock), gps or utc (default gps with "
+                "--mip-gps-time-at-t0-ns, else unknown)")
+      ->check(CLI::IsMember({"unknown", "gps", "utc"}));
   c->add_option("--dronecan-node-id", options->dronecan_node_id, "dronecan: only frames from this node id (1..127)")->check(CLI::Range(1, 127));
   c->add_option("--dronecan-timestamp-offset-ns", options->dronecan_timestamp_offset_ns, "dronecan: the encoder's timestamp offset")->capture_default_str();
   c->add_option("--j1939-source-address", options->j1939_source_address, "j1939: only frames from this source address (0..253)")->check(CLI::Range(0, 253));
-  c->add_option("--j1939-axes", options->j1939_axes, "j1939: vehicle axes the encoder used: iso8855 (z up) or sae-j670e (z down)")
-      ->capture_default_str()->check(CLI::IsMember({"iso8855", "sae-j670e"}));
+  c->add_option("--j1939-axes", options->j1939_axes,
+                "j1939: vehicle axes the encoder used: j1939da (the SPN definitions), iso8855 (all z up) or sae-j670e "
+                "(all z down)")
+      ->capture_default_str()->check(CLI::IsMember({"j1939da", "iso8855", "sae-j670e"}));
 
   c->callback([options, &exit_code] {
     ListenArgs args = options->args;
@@ -519,9 +525,15 @@ void add_listen_command(CLI::App& app, int& exit_code) {
     args.stream_options.mavlink_hil_sensor = options->mavlink_message == "hil_sensor";
     args.stream_options.mavlink_highres_imu = !args.stream_options.mavlink_hil_sensor;
     args.stream_options.mip_gps_time_at_t0_ns = options->mip_gps_time_at_t0_ns;
+    const std::string& base =
+        options->mip_time_base.empty() ? (options->mip_gps_time_at_t0_ns != 0 ? "gps" : "unknown") : options->mip_time_base;
+    args.stream_options.mip_time_base = base == "gps"   ? drivers::MipTimeBase::gps
+                                        : base == "utc" ? drivers::MipTimeBase::utc
+                                                        : drivers::MipTimeBase::unknown;
     args.can_options.dronecan.timestamp_offset_ns = options->dronecan_timestamp_offset_ns;
-    args.can_options.j1939.axes = options->j1939_axes == "iso8855" ? drivers::j1939::VehicleAxes::kIso8855ZUp
-                                                                   : drivers::j1939::VehicleAxes::kSaeJ670eZDown;
+    args.can_options.j1939.axes = options->j1939_axes == "iso8855"     ? drivers::j1939::VehicleAxes::kIso8855ZUp
+                                  : options->j1939_axes == "sae-j670e" ? drivers::j1939::VehicleAxes::kSaeJ670eZDown
+                                                                       : drivers::j1939::VehicleAxes::kJ1939da;
     if (args.protocol == "dronecan" && options->dronecan_node_id >= 0) {
       args.can_options.dronecan.node_id = static_cast<std::uint8_t>(options->dronecan_node_id);
       args.can_source = args.can_options.dronecan.node_id;

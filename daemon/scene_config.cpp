@@ -18,6 +18,7 @@
 
 #include "core/attitude.hpp"
 #include "core/stream.hpp"
+#include "drivers/protocols/protocol_options.hpp"
 #include "drivers/transport.hpp"
 
 namespace imuemu::scene {
@@ -439,8 +440,12 @@ void parse_mounting(const Table& t, Mounting& out) {
 
 const std::vector<std::string> kProtocols = {"native", "mavlink2", "mip", "dronecan", "j1939"};
 // The option table each protocol takes (named as the protocol is).
-std::string option_table_of(const std::string& protocol) { return protocol == "mavlink2" ? "mavlink" : protocol; }
+std::string option_table_of(const std::string& protocol) { return drivers::protocol_option_table_name(protocol); }
 
+// The device's protocol table, read by the one protocol option table
+// (drivers/protocols/protocol_options.hpp) that `imuemu emit` also uses:
+// keys, types and ranges come from there, the TOML reading and its
+// file:line:column errors from here.
 void parse_protocol_options(const Table& imu, ImuConfig& out) {
   for (const std::string& p : kProtocols) {
     const std::string table = option_table_of(p);
@@ -448,56 +453,38 @@ void parse_protocol_options(const Table& imu, ImuConfig& out) {
       imu.fail_at(table, "options for protocol " + p + ", but this device's protocol is " + out.protocol +
                              " (its options go in " + imu.key_path(option_table_of(out.protocol)) + ")");
   }
-  drivers::StreamEncoderOptions& so = out.stream_options;
-  so.nominal_sample_rate_hz = static_cast<double>(out.rate_hz);
-  const std::optional<Table> t = imu.subtable(option_table_of(out.protocol));
-  if (!t) return;
-  if (out.protocol == "native") {
-    t->allow_only({"include_deltas"});
-    so.include_deltas = t->boolean("include_deltas", so.include_deltas);
-  } else if (out.protocol == "mip") {
-    t->allow_only({"include_deltas", "gps_time_at_t0_ns", "overrange_status"});
-    so.include_deltas = t->boolean("include_deltas", so.include_deltas);
-    so.mip_gps_time_at_t0_ns = t->integer("gps_time_at_t0_ns", 0, 0, INT64_MAX / 2);
-    so.mip_overrange_status = t->boolean("overrange_status", so.mip_overrange_status);
-  } else if (out.protocol == "mavlink2") {
-    t->allow_only({"system_id", "component_id", "heartbeat", "hil_sensor", "highres_imu", "sensor_id", "temperature_degC"});
-    so.mavlink_system_id = static_cast<std::uint8_t>(t->integer("system_id", so.mavlink_system_id, 1, 255));
-    so.mavlink_component_id = static_cast<std::uint8_t>(t->integer("component_id", so.mavlink_component_id, 1, 255));
-    so.mavlink_heartbeat = t->boolean("heartbeat", so.mavlink_heartbeat);
-    so.mavlink_hil_sensor = t->boolean("hil_sensor", so.mavlink_hil_sensor);
-    so.mavlink_highres_imu = t->boolean("highres_imu", so.mavlink_highres_imu);
-    if (!so.mavlink_hil_sensor && !so.mavlink_highres_imu)
-      t->fail_at(t->has("hil_sensor") ? "hil_sensor" : "highres_imu",
-                 "with hil_sensor and highres_imu both false no sample is sent; enable at least one");
-    so.mavlink_sensor_id = static_cast<std::uint8_t>(t->integer("sensor_id", so.mavlink_sensor_id, 0, 255));
-    if (const auto c = t->opt_number("temperature_degC", -273.15, 1000.0)) so.mavlink_temperature_degC = *c;
-  } else if (out.protocol == "dronecan") {
-    drivers::dronecan::DroneCanOptions& o = out.can_options.dronecan;
-    t->allow_only({"node_id", "raw_imu_priority", "node_status_priority", "node_status_period_s", "timestamp_offset_ns",
-                   "send_integrals"});
-    o.node_id = static_cast<std::uint8_t>(t->integer("node_id", o.node_id, 1, 127));
-    o.raw_imu_priority = static_cast<std::uint8_t>(t->integer("raw_imu_priority", o.raw_imu_priority, 0, 31));
-    o.node_status_priority = static_cast<std::uint8_t>(t->integer("node_status_priority", o.node_status_priority, 0, 31));
-    // NodeStatus DSDL: MAX_BROADCASTING_PERIOD_MS = 1000.
-    if (const auto p = t->opt_number("node_status_period_s", 0.0, 1.0, true)) o.node_status_period_ns = ns_from_seconds(*p);
-    o.timestamp_offset_ns = t->integer("timestamp_offset_ns", 0, INT64_MIN / 2, INT64_MAX / 2);
-    o.send_integrals = t->boolean("send_integrals", o.send_integrals);
-  } else if (out.protocol == "j1939") {
-    drivers::j1939::J1939Options& o = out.can_options.j1939;
-    t->allow_only({"source_address", "priority", "send_angular_rate", "send_acceleration", "send_slope",
-                   "measurement_latency_ms", "axes"});
-    o.source_address = static_cast<std::uint8_t>(t->integer("source_address", o.source_address, 0, 253));
-    o.priority = static_cast<std::uint8_t>(t->integer("priority", o.priority, 0, 7));
-    o.send_angular_rate = t->boolean("send_angular_rate", o.send_angular_rate);
-    o.send_acceleration = t->boolean("send_acceleration", o.send_acceleration);
-    o.send_slope = t->boolean("send_slope", o.send_slope);
-    if (!o.send_angular_rate && !o.send_acceleration && !o.send_slope)
-      t->fail_at("send_angular_rate", "send_angular_rate, send_acceleration and send_slope are all false; nothing would be sent");
-    if (const auto l = t->opt_number("measurement_latency_ms", 0.0, 125.0)) o.measurement_latency_ms = *l;
-    o.axes = t->choice("axes", "iso8855", {"iso8855", "sae-j670e"}) == "iso8855" ? drivers::j1939::VehicleAxes::kIso8855ZUp
-                                                                             : drivers::j1939::VehicleAxes::kSaeJ670eZDown;
+  drivers::ProtocolOptions options = drivers::default_protocol_options(static_cast<double>(out.rate_hz));
+  if (const std::optional<Table> t = imu.subtable(option_table_of(out.protocol))) {
+    const std::vector<const drivers::ProtocolOption*> rows = drivers::protocol_options_of(out.protocol);
+    std::vector<std::string> keys;
+    for (const drivers::ProtocolOption* row : rows) keys.push_back(row->key);
+    t->allow_only(keys);
+    std::set<std::string> given;
+    for (const drivers::ProtocolOption* row : rows) {
+      if (!t->has(row->key)) continue;
+      given.insert(row->key);
+      drivers::OptionValue value;
+      switch (row->type) {
+        case drivers::OptionType::boolean:
+          value = *t->opt_bool(row->key);
+          break;
+        case drivers::OptionType::integer:
+          value = *t->opt_int(row->key, row->integer_min, row->integer_max);
+          break;
+        case drivers::OptionType::number:
+          value = *t->opt_number(row->key, row->number_min, row->number_max, row->number_min_open);
+          break;
+        case drivers::OptionType::choice:
+          value = t->choice(row->key, row->default_text, row->choices);
+          break;
+      }
+      row->apply(options, value);
+    }
+    if (const auto problem = drivers::finish_protocol_options(out.protocol, options, given))
+      t->fail_at(problem->key, problem->message);
   }
+  out.stream_options = options.stream;
+  out.can_options = options.can;
 }
 
 void parse_transport(const Table& t, const ImuConfig& imu, TransportConfig& out) {

@@ -106,8 +106,9 @@ struct DaemonConfig {
   double status_interval_s = 1.0;   // status line / JSON every this many seconds
   bool watchdog = true;             // sd_notify WATCHDOG=1 when systemd set WatchdogSec=
   // A tick whose wake-up missed its deadline by more than one period: dropped
-  // (the receiver sees a sequence gap, as from an IMU that skipped a sample)
-  // or sent late. emission::EngineOptions::drop_late_ticks.
+  // (the receiver sees the sample time jump, as from an IMU that skipped a
+  // sample; a sequence gap only in native, docs/emission.md) or sent late.
+  // emission::EngineOptions::drop_late_ticks.
   bool drop_late_ticks = true;      // late_ticks = "drop" | "send"
   DeviceMissingPolicy device_missing = DeviceMissingPolicy::fail;
   double device_retry_initial_s = 0.1;  // wait: first retry, doubling up to device_retry_max_s

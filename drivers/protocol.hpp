@@ -38,6 +38,13 @@ struct ImuFrameInput {
   Vec3 delta_velocity_m_s = Vec3::Zero();
   TimeNs period_ns = 0;                  // the output period
   std::uint32_t status = 0;              // SampleStatus bits
+  // Inclination of the sensor axes at t_ns: aerospace pitch (nose up
+  // positive) and roll (right side down positive) of the sensor FRD axes
+  // relative to the local level frame (NED), Eq. 1.2. Filled only for an
+  // encoder whose needs_level_attitude() is true (J1939 SSI2).
+  bool has_level_attitude = false;
+  double pitch_rad = 0.0;
+  double roll_rad = 0.0;
 };
 
 // A classic CAN or CAN FD frame (SocketCAN's struct can_frame / canfd_frame
@@ -72,6 +79,9 @@ class CanEncoder {
   virtual std::string name() const = 0;
   virtual void encode(const ImuFrameInput& sample, std::vector<CanFrame>& out) = 0;
   virtual void periodic(TimeNs now_ns, std::vector<CanFrame>& out) { (void)now_ns; (void)out; }
+  // The encoder sends the attitude (ImuFrameInput::pitch_rad / roll_rad):
+  // the producer computes it only then.
+  virtual bool needs_level_attitude() const { return false; }
 };
 
 // What a decoder recovered from a frame: the fields the protocol carries

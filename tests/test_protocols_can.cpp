@@ -10,13 +10,18 @@
 #include <bit>
 #include <cmath>
 #include <cstdint>
+#include <chrono>
 #include <limits>
+#include <mutex>
 #include <numbers>
 #include <random>
 #include <stdexcept>
 #include <string>
 #include <vector>
 
+#include "core/attitude.hpp"
+#include "core/earth.hpp"
+#include "daemon/emission.hpp"
 #include "drivers/protocols/can_protocols.hpp"
 #include "drivers/protocols/dronecan.hpp"
 #include "drivers/protocols/j1939.hpp"
@@ -301,10 +306,6 @@ TEST(DroneCanEncoder, IntegralsNotAvailableGiveNonPositiveInterval) {
     EXPECT_EQ(std::vector<std::uint8_t>(bytes.begin() + static_cast<std::ptrdiff_t>(i),
                                         bytes.begin() + static_cast<std::ptrdiff_t>(i) + 4),
               f32_bytes(0.0f));
-  // Negative time -> timestamp 0 (UNKNOWN).
-  s.t_ns = -5;
-  const std::vector<std::uint8_t> early = dc::serialize_raw_imu(s, options).bytes;
-  EXPECT_EQ(std::vector<std::uint8_t>(early.begin(), early.begin() + 7), std::vector<std::uint8_t>(7, 0));
 }
 
 TEST(DroneCanEncoder, NodeStatusOncePerSecondWithUptimeHealthAndStatusBits) {
@@ -734,9 +735,11 @@ TEST(J1939Encoder, ResolutionLimitsAndClamping) {
   options.measurement_latency_ms = 2.5;  // 5 * 0.5 ms
   jj::J1939Encoder encoder(options);
   std::vector<CanFrame> frames;
-  // gyro FRD: w_x (roll) = +1 LSB, w_y = -1 LSB (ISO pitch about y-left = +1 LSB),
-  // w_z = -(251.9921875) deg/s (ISO yaw = +max valid).
-  ImuFrameInput s = make_sample(0, Vec3(1.0 / 128.0, -1.0 / 128.0, -251.9921875) * kDegToRad,
+  // gyro FRD: w_x (roll) = +1 LSB, w_y (J1939DA pitch, Z-down) = +1 LSB,
+  // w_z (yaw, Z-down) = +251.9921875 deg/s (the largest valid code). (Before
+  // issue 12 the inputs were w_y = -1 LSB, w_z = -251.99: the old ISO 8855
+  // default negated pitch and yaw rates; the expected bytes are unchanged.)
+  ImuFrameInput s = make_sample(0, Vec3(1.0 / 128.0, 1.0 / 128.0, 251.9921875) * kDegToRad,
                                 // f_x = 322.55 (max), f_y = +1 (right: ISO lateral -1), f_z = 0
                                 Vec3(322.55, 1.0, 0.0));
   encoder.encode(s, frames);
@@ -764,9 +767,9 @@ TEST(J1939Encoder, ResolutionLimitsAndClamping) {
 
   // Out of range: clamped to the valid ends (never into 0xFB00..0xFFFF), figure of merit "degraded".
   frames.clear();
-  encoder.encode(make_sample(0, Vec3(300.0, 300.0, 0.0) * kDegToRad, Vec3(-400.0, 0.0, 1000.0)), frames);
+  encoder.encode(make_sample(0, Vec3(300.0, -300.0, 0.0) * kDegToRad, Vec3(-400.0, 0.0, 1000.0)), frames);
   EXPECT_EQ(frame_bytes(frames[0]),
-            (std::vector<std::uint8_t>{0x00, 0x00,   // pitch = -w_y = -300 -> 0
+            (std::vector<std::uint8_t>{0x00, 0x00,   // pitch = w_y = -300 -> 0
                                        0xFF, 0xFA,   // roll = +300 -> 0xFAFF
                                        0x00, 0x7D,
                                        0xC5,         // 11 00 01 01: yaw ok, roll and pitch degraded
@@ -795,78 +798,118 @@ TEST(J1939Encoder, FaultAndNonFiniteValuesUseErrorCodes) {
   EXPECT_EQ(frames[0].data[6], 0xD5);  // 11 01 01 01
 }
 
-TEST(J1939Encoder, SlopeSensor2FromTheAttitudeSourceOrNotAvailable) {
+TEST(J1939Encoder, SlopeSensor2FromTheSampleAttitudeOrNotAvailable) {
   jj::J1939Options options = honeywell_like();
   options.send_angular_rate = false;
   options.send_acceleration = false;
   options.send_slope = true;
-  jj::J1939Encoder without(options);
+  options.measurement_latency_ms = 10.0;
+  jj::J1939Encoder encoder(options);
+  EXPECT_TRUE(encoder.needs_level_attitude());
+  EXPECT_FALSE(jj::J1939Encoder(honeywell_like()).needs_level_attitude());
   std::vector<CanFrame> frames;
-  without.encode(make_sample(0, Vec3::Zero(), Vec3(0, 0, -9.8)), frames);
+  // A sample without an attitude: everything "not available" but the latency.
+  encoder.encode(make_sample(0, Vec3::Zero(), Vec3(0, 0, -9.8)), frames);
   ASSERT_EQ(frames.size(), 1u);
   EXPECT_EQ(frames[0].id, 0x0CF029E2u);
-  EXPECT_EQ(frame_bytes(frames[0]), std::vector<std::uint8_t>(8, 0xFF));
-
-  TimeNs asked = -1;
-  options.attitude_source = [&asked](TimeNs t) -> std::optional<jj::PitchRoll> {
-    asked = t;
-    return jj::PitchRoll{10.0 * kDegToRad, 5.0 * kDegToRad};  // nose up 10 deg, right side down 5 deg
-  };
-  options.measurement_latency_ms = 10.0;
-  jj::J1939Encoder with(options);
-  frames.clear();
-  with.encode(make_sample(123'000, Vec3::Zero(), Vec3(0, 0, -9.8)), frames);
-  EXPECT_EQ(asked, 123'000);
-  // ISO 8855 pitch (about y left) = -10 deg: (-10 + 250) * 32768 = 7864320 = 0x780000;
-  // roll 5 deg: 255 * 32768 = 8355840 = 0x7F8000.
   EXPECT_EQ(frame_bytes(frames[0]),
-            (std::vector<std::uint8_t>{0x00, 0x00, 0x78, 0x00, 0x80, 0x7F,
-                                       0x11,    // roll FoM 00, roll comp 01, pitch FoM 00, pitch comp 01
-                                       0x14})); // 10 ms / 0.5
-  // SAE J670e axes (z down): pitch is the aerospace pitch, +10 deg.
-  options.axes = jj::VehicleAxes::kSaeJ670eZDown;
-  jj::J1939Encoder j670(options);
+            (std::vector<std::uint8_t>{0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0xFF, 0x14}));
+
+  // Nose up 10 deg, right side down 5 deg. J1939DA SPN 4976: "The pitch angle
+  // for an angle of ascent is reported with a positive value" (Z-down, right
+  // hand rule): (10 + 250) * 32768 = 8519680 = 0x820000; SPN 4977 "roll to
+  // the right ... positive": (5 + 250) * 32768 = 8355840 = 0x7F8000.
+  // Byte 7: SPN 4978 pitch compensation 00 (On), 4979 FoM 00, 4980 roll
+  // compensation 00 (On), 4981 FoM 00 = 0x00. Before issue 12 a daemon never
+  // filled the attitude, so every SSI2 frame was the "not available" one
+  // above; and with an attitude the bytes were 00 00 78 00 80 7F 11 14
+  // (pitch -10 deg under the old ISO default, compensation 01 = "Off" by
+  // J1939DA).
+  ImuFrameInput level = make_sample(123'000, Vec3::Zero(), Vec3(0, 0, -9.8));
+  level.has_level_attitude = true;
+  level.pitch_rad = 10.0 * kDegToRad;
+  level.roll_rad = 5.0 * kDegToRad;
   frames.clear();
-  j670.encode(make_sample(0, Vec3::Zero(), Vec3::Zero()), frames);
-  EXPECT_EQ(jj::encode_value(10.0, jj::kSlopeAngleScaling).raw, 260u * 32768u);
-  EXPECT_EQ(frames[0].data[0] | frames[0].data[1] << 8 | frames[0].data[2] << 16, 260 * 32768);
+  encoder.encode(level, frames);
+  EXPECT_EQ(frame_bytes(frames[0]),
+            (std::vector<std::uint8_t>{0x00, 0x00, 0x82, 0x00, 0x80, 0x7F, 0x00, 0x14}));
+  // Figures of merit follow the sample status; compensation stays On.
+  level.status = imuemu::drivers::kStatusExtrapolated;
+  frames.clear();
+  encoder.encode(level, frames);
+  EXPECT_EQ(frames[0].data[6], 0x44);  // 01 00 01 00: roll FoM degraded, roll comp on, pitch FoM degraded, on
+  // The all-Z-Up alternative sends minus the aerospace pitch: (-10 + 250) * 32768 = 0x780000.
+  options.axes = jj::VehicleAxes::kIso8855ZUp;
+  jj::J1939Encoder z_up(options);
+  frames.clear();
+  level.status = 0;
+  z_up.encode(level, frames);
+  EXPECT_EQ(frames[0].data[0] | frames[0].data[1] << 8 | frames[0].data[2] << 16, 0x780000);
 }
 
-TEST(J1939Encoder, AxisSignsFollowTheVehicleAxes) {
-  jj::J1939Encoder encoder(honeywell_like());
+// Independent reference: the J1939DA SPN definitions applied by hand to a
+// motion whose signs are known without any axis algebra: a vehicle pitching
+// nose up, rolling right and turning clockwise seen from above (a right
+// turn), while speeding up, pushed to the right and at rest vertically.
+TEST(J1939Encoder, AxisSignsFollowTheJ1939daSpnDefinitions) {
   auto ari_value = [](const CanFrame& f, int field) {
     return (f.data[2 * field] | f.data[2 * field + 1] << 8) / 128.0 - 250.0;
   };
   auto accs_value = [](const CanFrame& f, int field) {
     return (f.data[2 * field] | f.data[2 * field + 1] << 8) * 0.01 - 320.0;
   };
+  // Body FRD: nose rising = rotation about +y (right) by the right-hand rule;
+  // rolling right = about +x; clockwise from above = about +z (down).
+  const Vec3 gyro_frd = Vec3(10.0, 20.0, 30.0) * kDegToRad;
+  // Specific force: speeding up forward f_x = +2; the vehicle accelerated to
+  // the RIGHT has f_y = +3; level at rest f_z = -9 (gravity reaction up).
+  const Vec3 f_frd(2.0, 3.0, -9.0);
   std::vector<CanFrame> frames;
-  // Turning left: in FRD (z down) the rate about z is negative; ISO 8855 yaw
-  // (about z up) is positive. Nose rising: FRD w_y > 0, ISO pitch (about y
-  // left) < 0. Right wing dropping: w_x > 0 in both.
-  encoder.encode(make_sample(0, Vec3(10.0, 20.0, -30.0) * kDegToRad, Vec3(2.0, 3.0, -9.0)), frames);
-  EXPECT_DOUBLE_EQ(ari_value(frames[0], 0), -20.0);  // pitch
-  EXPECT_DOUBLE_EQ(ari_value(frames[0], 1), 10.0);   // roll
-  EXPECT_DOUBLE_EQ(ari_value(frames[0], 2), 30.0);   // yaw
-  // Forward acceleration positive, force to the right = negative lateral (y left), up positive.
+  jj::J1939Encoder da(honeywell_like());  // default axes = J1939DA
+  da.encode(make_sample(0, gyro_frd, f_frd), frames);
+  // SPN 4983 "pitch rate for increasing ascent ... positive": +20.
+  EXPECT_DOUBLE_EQ(ari_value(frames[0], 0), 20.0);
+  // SPN 4984 "roll rate for increasing roll to the right ... positive": +10.
+  EXPECT_DOUBLE_EQ(ari_value(frames[0], 1), 10.0);
+  // SPN 4985 "A positive yaw rate signal results when the object turns clockwise": +30.
+  EXPECT_DOUBLE_EQ(ari_value(frames[0], 2), 30.0);
+  // SPN 5347 "positive lateral acceleration ... when the vehicle is accelerated to the left": -3.
   EXPECT_NEAR(accs_value(frames[1], 0), -3.0, 1e-9);
+  // SPN 5348 "positive ... when the vehicle speed increases in the forward direction": +2.
   EXPECT_NEAR(accs_value(frames[1], 1), 2.0, 1e-9);
+  // SPN 5349 "positive vertical acceleration signal of 1 gravity ... stationary on a horizontal surface": +9.
   EXPECT_NEAR(accs_value(frames[1], 2), 9.0, 1e-9);
+  // The raw codes, for the record: pitch (20 + 250) * 128 = 34560 = 0x8700,
+  // roll 260 * 128 = 0x8200, yaw 280 * 128 = 0x8C00. Before issue 12 (ISO
+  // 8855 default) pitch and yaw went out negated: 0x7300 and 0x6E00.
+  EXPECT_EQ(frame_bytes(frames[0]),
+            (std::vector<std::uint8_t>{0x00, 0x87, 0x00, 0x82, 0x00, 0x8C, 0xC0, 0xFF}));
 
+  // The alternatives: all Z-up (imuemu's old default) and all Z-down.
+  jj::J1939Options iso = honeywell_like();
+  iso.axes = jj::VehicleAxes::kIso8855ZUp;
+  jj::J1939Encoder z_up(iso);
+  frames.clear();
+  z_up.encode(make_sample(0, gyro_frd, f_frd), frames);
+  EXPECT_DOUBLE_EQ(ari_value(frames[0], 0), -20.0);
+  EXPECT_DOUBLE_EQ(ari_value(frames[0], 1), 10.0);
+  EXPECT_DOUBLE_EQ(ari_value(frames[0], 2), -30.0);
+  EXPECT_NEAR(accs_value(frames[1], 0), -3.0, 1e-9);
+  EXPECT_NEAR(accs_value(frames[1], 2), 9.0, 1e-9);
   jj::J1939Options j670 = honeywell_like();
   j670.axes = jj::VehicleAxes::kSaeJ670eZDown;
   jj::J1939Encoder z_down(j670);
   frames.clear();
-  z_down.encode(make_sample(0, Vec3(10.0, 20.0, -30.0) * kDegToRad, Vec3(2.0, 3.0, -9.0)), frames);
+  z_down.encode(make_sample(0, gyro_frd, f_frd), frames);
   EXPECT_DOUBLE_EQ(ari_value(frames[0], 0), 20.0);
   EXPECT_DOUBLE_EQ(ari_value(frames[0], 1), 10.0);
-  EXPECT_DOUBLE_EQ(ari_value(frames[0], 2), -30.0);
+  EXPECT_DOUBLE_EQ(ari_value(frames[0], 2), 30.0);
   EXPECT_NEAR(accs_value(frames[1], 0), 3.0, 1e-9);
   EXPECT_NEAR(accs_value(frames[1], 2), -9.0, 1e-9);
 }
 
 TEST(J1939Decoder, RoundTripOverTheRangesIncludingSaturation) {
-  for (jj::VehicleAxes axes : {jj::VehicleAxes::kIso8855ZUp, jj::VehicleAxes::kSaeJ670eZDown}) {
+  for (jj::VehicleAxes axes : {jj::VehicleAxes::kJ1939da, jj::VehicleAxes::kIso8855ZUp, jj::VehicleAxes::kSaeJ670eZDown}) {
     jj::J1939Options options;
     options.axes = axes;
     options.send_slope = true;
@@ -875,7 +918,6 @@ TEST(J1939Decoder, RoundTripOverTheRangesIncludingSaturation) {
     std::uniform_real_distribution<double> accel(-400.0, 400.0);
     std::uniform_real_distribution<double> angle_deg(-260.0, 260.0);
     jj::PitchRoll attitude;
-    options.attitude_source = [&attitude](TimeNs) { return std::optional<jj::PitchRoll>(attitude); };
     jj::J1939Encoder encoder(options);
     jj::J1939Decoder decoder(options);
     Collected out;
@@ -887,6 +929,9 @@ TEST(J1939Decoder, RoundTripOverTheRangesIncludingSaturation) {
       const Vec3 f(accel(rng), accel(rng), accel(rng));
       attitude = {angle_deg(rng) * kDegToRad, angle_deg(rng) * kDegToRad};
       ImuFrameInput s = make_sample(i, gyro_deg_s * kDegToRad, f);
+      s.has_level_attitude = true;
+      s.pitch_rad = attitude.pitch_rad;
+      s.roll_rad = attitude.roll_rad;
       if (i % 7 == 0) s.status = imuemu::drivers::kStatusExtrapolated;
       std::vector<CanFrame> frames;
       encoder.encode(s, frames);
@@ -898,7 +943,9 @@ TEST(J1939Decoder, RoundTripOverTheRangesIncludingSaturation) {
       EXPECT_FALSE(d.has_time);
       // Each body axis maps to one vehicle axis with a sign. Expected code:
       // round((v - offset) / resolution), clamped into 0..max_valid_raw.
-      const Vec3 sign = axes == jj::VehicleAxes::kIso8855ZUp ? Vec3(1, -1, -1) : Vec3(1, 1, 1);
+      // (gyro: Z-down but for all-Z-up; accel: Z-up but for all-Z-down)
+      const Vec3 gyro_sign = axes == jj::VehicleAxes::kIso8855ZUp ? Vec3(1, -1, -1) : Vec3(1, 1, 1);
+      const Vec3 accel_sign = axes == jj::VehicleAxes::kSaeJ670eZDown ? Vec3(1, 1, 1) : Vec3(1, -1, -1);
       std::uint32_t expected_status = 0;
       auto check = [&](double vehicle_in, double vehicle_got, const jj::Scaling& sc, bool in_sample) {
         const double steps = std::round((vehicle_in - sc.offset) / sc.resolution);
@@ -913,8 +960,8 @@ TEST(J1939Decoder, RoundTripOverTheRangesIncludingSaturation) {
           expected_status |= at_limit ? imuemu::drivers::kStatusSaturated : imuemu::drivers::kStatusExtrapolated;
       };
       for (int k = 0; k < 3; ++k) {
-        check(sign[k] * gyro_deg_s[k], sign[k] * d.gyro_rad_s[k] / kDegToRad, r, true);
-        check(sign[k] * f[k], sign[k] * d.accel_m_s2[k], a, true);
+        check(gyro_sign[k] * gyro_deg_s[k], gyro_sign[k] * d.gyro_rad_s[k] / kDegToRad, r, true);
+        check(accel_sign[k] * f[k], accel_sign[k] * d.accel_m_s2[k], a, true);
       }
       EXPECT_EQ(d.status, expected_status);
       const auto slope = decoder.last_slope(options.source_address);
@@ -1053,3 +1100,171 @@ TEST(CanProtocols, FactoryByNameAndErrors) {
 }
 
 }  // namespace
+
+// A tick the emission engine does not send is not a lost transfer
+// (docs/emission.md): ticks 0, 1, 3 of a 100 Hz grid, tick 2 skipped.
+TEST(SkippedTick, DroneCanTransferIdsCountTransfersSentSoOnlyTheTimestampJumps) {
+  dc::DroneCanEncoder encoder;
+  dc::DroneCanDecoder decoder;
+  Collected out;
+  for (TimeNs k : {0, 1, 3}) {
+    std::vector<CanFrame> frames;
+    encoder.encode(make_sample(k * 10'000'000, Vec3::Zero(), Vec3(0, 0, -9.8)), frames);
+    for (const CanFrame& f : frames) decoder.feed(f, out.callback());
+  }
+  ASSERT_EQ(out.samples.size(), 3u);
+  // DroneCAN 4.1: the transfer id is incremented per transfer of a data type
+  // from a node, i.e. per message sent: 0, 1, 2 on the wire.
+  EXPECT_EQ(decoder.counters().sequence_gaps, 0u);
+  EXPECT_EQ(out.samples[2].sequence - out.samples[1].sequence, 1u);
+  EXPECT_EQ(out.samples[2].t_ns - out.samples[1].t_ns, 20'000'000);  // usec 10000 -> 30000
+}
+
+TEST(SkippedTick, J1939HasNeitherCounterNorTime) {
+  jj::J1939Encoder encoder;
+  jj::J1939Decoder decoder;
+  Collected out;
+  for (TimeNs k : {0, 1, 3}) {
+    std::vector<CanFrame> frames;
+    encoder.encode(make_sample(k * 10'000'000, Vec3::Zero(), Vec3(0, 0, -9.8)), frames);
+    for (const CanFrame& f : frames) decoder.feed(f, out.callback());
+  }
+  ASSERT_EQ(out.samples.size(), 3u);
+  EXPECT_EQ(decoder.counters().sequence_gaps, 0u);
+  for (const DecodedSample& d : out.samples) EXPECT_FALSE(d.has_sequence || d.has_time);
+}
+
+// uavcan.Timestamp DSDL: "uint56 UNKNOWN = 0". The emulator always knows the
+// sample time, so it never sends 0. Before issue 12 the first RawIMU of every
+// run that starts at trajectory time 0 (all built-in samples) carried usec 0
+// = UNKNOWN, and so did any time below 1 us or negative.
+TEST(DroneCanEncoder, KnownSampleTimesAreNeverSentAsUnknownZero) {
+  const dc::DroneCanOptions options;
+  auto usec_bytes = [&options](TimeNs t_ns) {
+    const std::vector<std::uint8_t> b =
+        dc::serialize_raw_imu(make_sample(t_ns, Vec3::Zero(), Vec3(0, 0, -9.8)), options).bytes;
+    return std::vector<std::uint8_t>(b.begin(), b.begin() + 7);  // uint56, little-endian, byte aligned
+  };
+  const std::vector<std::uint8_t> one_us{0x01, 0, 0, 0, 0, 0, 0};
+  EXPECT_EQ(usec_bytes(0), one_us);      // was 00 00 00 00 00 00 00
+  EXPECT_EQ(usec_bytes(999), one_us);    // was 0 (floor to the microsecond)
+  EXPECT_EQ(usec_bytes(-5), one_us);     // was 0
+  EXPECT_EQ(usec_bytes(1000), one_us);   // unchanged
+  EXPECT_EQ(usec_bytes(2'500), (std::vector<std::uint8_t>{0x02, 0, 0, 0, 0, 0, 0}));
+  EXPECT_EQ(usec_bytes(1'234'567'000), (std::vector<std::uint8_t>{0x87, 0xD6, 0x12, 0, 0, 0, 0}));
+  EXPECT_EQ(dc::raw_imu_timestamp_usec(0, -10'000), dc::kRawImuEarliestKnownUsec);
+  EXPECT_EQ(dc::raw_imu_timestamp_usec(0, 5'000), 5u);
+  EXPECT_EQ(dc::raw_imu_timestamp_usec(std::numeric_limits<TimeNs>::max(), 0),
+            static_cast<std::uint64_t>(std::numeric_limits<TimeNs>::max() / 1000));
+
+  // Through the encoder, frames as a receiver reassembles them: the first
+  // transfer's first frame is CRC (2 bytes) then usec bytes 0..4.
+  dc::DroneCanEncoder encoder(options);
+  std::vector<CanFrame> frames;
+  encoder.encode(make_sample(0, Vec3::Zero(), Vec3(0, 0, -9.8)), frames);
+  ASSERT_EQ(frames.size(), 7u);
+  EXPECT_EQ(std::vector<std::uint8_t>(frames[0].data.begin() + 2, frames[0].data.begin() + 7),
+            (std::vector<std::uint8_t>{0x01, 0, 0, 0, 0}));
+  EXPECT_EQ(frames[1].data[0], 0);
+  EXPECT_EQ(frames[1].data[1], 0);
+  dc::DroneCanDecoder decoder(options);
+  Collected out;
+  for (const CanFrame& f : frames) decoder.feed(f, out.callback());
+  ASSERT_EQ(out.samples.size(), 1u);
+  EXPECT_TRUE(out.samples[0].has_time);
+  EXPECT_EQ(out.samples[0].t_ns, 1000);
+}
+
+
+// End to end through the emission engine: the SSI2 angles are the sensor's
+// attitude that the engine knows. Before issue 12 nothing filled them, so
+// every SSI2 frame the daemon sent was "not available" (FF FF FF FF FF FF FF,
+// latency). A body held at heading 30, pitch 10, roll 5 deg (Eq. 1.2), in the
+// flat scene and in the ecef scene near Barcelona.
+namespace {
+class CapturingCanOutput final : public imuemu::emission::CanOutput {
+ public:
+  bool send(const CanFrame& frame) override {
+    std::lock_guard lock(mutex_);
+    frames_.push_back(frame);
+    return true;
+  }
+  std::string describe() const override { return "capture"; }
+  imuemu::drivers::TransportCounters counters() const override { return {}; }
+  std::vector<CanFrame> frames() const {
+    std::lock_guard lock(mutex_);
+    return frames_;
+  }
+
+ private:
+  mutable std::mutex mutex_;
+  std::vector<CanFrame> frames_;
+};
+}  // namespace
+
+TEST(J1939Emission, SlopeSensor2CarriesTheSensorAttitudeFromTheEngine) {
+  using namespace std::chrono_literals;
+  namespace em = imuemu::emission;
+  for (const imuemu::Physics physics : {imuemu::Physics::flat, imuemu::Physics::ecef}) {
+    SCOPED_TRACE(physics == imuemu::Physics::flat ? "flat" : "ecef");
+    imuemu::attitude::HeadingPitchRoll hpr;
+    hpr.heading_rad = 30.0 * kDegToRad;
+    hpr.pitch_rad = 10.0 * kDegToRad;
+    hpr.roll_rad = 5.0 * kDegToRad;
+    const imuemu::Mat3 body_to_ned = imuemu::attitude::rotation_from_hpr(hpr);
+    std::vector<imuemu::Pose> knots;
+    for (int i = 0; i <= 8; ++i) {
+      imuemu::Pose p;
+      p.t_ns = TimeNs{i} * 1'000'000'000;
+      if (physics == imuemu::Physics::flat) {
+        p.attitude = body_to_ned;
+      } else {
+        imuemu::earth::Geodetic g;
+        g.latitude_rad = 41.4 * kDegToRad;
+        g.longitude_rad = 2.2 * kDegToRad;
+        g.height_m = 100.0;
+        p.position_m = imuemu::earth::ecef_from_geodetic(g);
+        p.attitude = imuemu::attitude::ned_to_ecef(g.latitude_rad, g.longitude_rad) * body_to_ned;
+      }
+      knots.push_back(p);
+    }
+    jj::J1939Options options;
+    options.send_slope = true;
+    em::DeviceOptions d;
+    d.name = "j1939";
+    d.rate_hz = 50;
+    d.pipeline.scene.physics = physics;
+    d.pipeline.rate_hz = 50;
+    d.pipeline.kernel.delta = 50;
+    d.can_encoder = std::make_unique<jj::J1939Encoder>(options);
+    auto out = std::make_unique<CapturingCanOutput>();
+    CapturingCanOutput* capture = out.get();
+    d.can_output = std::move(out);
+    std::vector<em::DeviceOptions> devices;
+    devices.push_back(std::move(d));
+    em::EngineOptions eo;
+    eo.trajectory = knots;
+    eo.max_ticks_per_device = 100;
+    eo.drop_late_ticks = false;
+    eo.ring_capacity = 128;
+    em::EmissionEngine engine(std::move(eo), std::move(devices));
+    engine.start();
+    ASSERT_TRUE(engine.wait(60s));
+    engine.stop();
+
+    int slope_frames = 0;
+    for (const CanFrame& f : capture->frames()) {
+      if (jj::parse_can_id(f.id).pgn != jj::kPgnSlopeSensorInformation2) continue;
+      ++slope_frames;
+      const double pitch_deg = (f.data[0] | f.data[1] << 8 | f.data[2] << 16) / 32768.0 - 250.0;
+      const double roll_deg = (f.data[3] | f.data[4] << 8 | f.data[5] << 16) / 32768.0 - 250.0;
+      EXPECT_NEAR(pitch_deg, 10.0, 1.0 / 32768.0);  // SPN 4976, within one resolution step
+      EXPECT_NEAR(roll_deg, 5.0, 1.0 / 32768.0);    // SPN 4977
+      EXPECT_EQ(f.data[6], 0x00);  // compensation On, figures of merit fully functional
+    }
+    // One SSI2 per sample sent (a tick the engine could not send in time on a
+    // slow host is simply absent; it does not change what is checked).
+    EXPECT_GT(slope_frames, 0);
+    EXPECT_EQ(static_cast<std::uint64_t>(slope_frames), engine.stats().devices[0].emitted);
+  }
+}

@@ -24,6 +24,7 @@
 #include <vector>
 
 #include "drivers/protocols/mavlink2.hpp"
+#include "drivers/protocols/gps_time.hpp"
 #include "drivers/protocols/mip.hpp"
 #include "drivers/protocols/native.hpp"
 #include "drivers/protocols/stream_protocols.hpp"
@@ -389,7 +390,9 @@ TEST(NativeProtocol, SequenceWrapsAroundTwoToTheSixtyFourWithoutGaps) {
 // ============================================================ MAVLink 2
 
 namespace {
-const char* kHeartbeatHex = "FD 09 00 00 00 01 C8 00 00 00 00 00 00 00 00 08 00 04 03 C8 CC";
+// Before issue 12 byte 14 (type) was 00 (MAV_TYPE_GENERIC), CRC C8 CC; now
+// 28 = MAV_TYPE_IMU (40), as minimal.xml asks of a non-autopilot component.
+const char* kHeartbeatHex = "FD 09 00 00 00 01 C8 00 00 00 00 00 00 00 28 08 00 04 03 F0 68";
 const char* kHilSensorSeq7Hex =
     "FD 3D 00 00 07 01 C8 6B 00 00 87 D6 12 00 00 00 00 00 00 00 00 3F 00 00 80 BE 00 00 1C C1 00 00 00 3E 00 00 "
     "80 BD 00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 00 3F 80 "
@@ -428,6 +431,12 @@ TEST(Mavlink2Protocol, FirstHeartbeatMatchesIndependentReference) {
   EXPECT_EQ(out, hex(kHeartbeatHex));
   const Decoded d = decode("mavlink2", {}, out);
   expect_counters(d.counters, 1, 0, 0, 0, 0, 0);
+  // The fields by their minimal.xml offsets (custom_mode u32 first, then the
+  // u8 fields in XML order): type, autopilot, base_mode, system_status.
+  ASSERT_EQ(out.size(), 21u);
+  EXPECT_EQ(out[10 + 4], 40) << "type must be MAV_TYPE_IMU (minimal.xml MAV_TYPE 40)";
+  EXPECT_EQ(out[10 + 5], 8) << "autopilot must be MAV_AUTOPILOT_INVALID for a non-autopilot component";
+  EXPECT_EQ(out[10 + 7], 4) << "system_status MAV_STATE_ACTIVE";
 }
 
 TEST(Mavlink2Protocol, HilSensorMatchesIndependentReferenceIncludingTruncation) {
@@ -647,10 +656,24 @@ const char* kMipReferenceHex =
     "75 65 80 2A 0E 04 3F 00 00 00 BE 80 00 00 BF 80 00 00 0E 05 3E 00 00 00 BD 80 00 00 00 00 00 00 0E 12 41 15 "
     "18 01 00 00 00 00 08 FC 00 1C 8F 18";
 
+// (Since issue 12 the GPS offset needs time_base = gps to be GPS time; the
+// reference bytes below are unchanged.)
 StreamEncoderOptions mip_week_2300() {
   StreamEncoderOptions o;
+  o.mip_time_base = drivers::MipTimeBase::gps;
   o.mip_gps_time_at_t0_ns = 2300 * mip::kNsPerGpsWeek;
   return o;
+}
+
+// The GPS timestamp field (0x80, 0x12) in an encoded packet: 14 bytes from
+// its length byte.
+Bytes gps_field_of(const Bytes& packet) {
+  for (std::size_t at = 4; at + 2 <= packet.size() - 2; at += packet[at]) {
+    if (packet[at + 1] == mip::kGpsTimestamp)
+      return Bytes(packet.begin() + static_cast<std::ptrdiff_t>(at), packet.begin() + static_cast<std::ptrdiff_t>(at) + 14);
+    if (packet[at] < 2) break;
+  }
+  return {};
 }
 }  // namespace
 
@@ -1144,4 +1167,132 @@ TEST(StreamProtocolFactory, LinkBudgetBoundsWhatIsActuallySent) {
   }
   StreamEncoderOptions unknown_rate;
   EXPECT_EQ(make_stream_encoder("mavlink2", unknown_rate)->max_bytes_per_sample(), 77u + 21u);
+}
+
+// ============================================================ skipped tick
+// A tick the emission engine does not send (dropped late, underrun) is not
+// a lost packet: what each receiver sees (docs/emission.md). Ticks 0, 1, 3
+// of a 100 Hz grid are encoded; tick 2 is skipped.
+namespace {
+Decoded encode_with_skipped_tick(const std::string& protocol, const StreamEncoderOptions& options) {
+  auto encoder = make_stream_encoder(protocol, options);
+  Bytes stream;
+  for (std::uint64_t k : {0u, 1u, 3u}) {
+    const ImuFrameInput s = sample_of(k, static_cast<TimeNs>(k) * 10'000'000, Vec3(0.1, 0, 0), Vec3(0, 0, -9.8));
+    encoder->encode(s, stream);
+    encoder->periodic(s.t_ns, stream);
+  }
+  return decode(protocol, options, stream);
+}
+}  // namespace
+
+TEST(SkippedTick, NativeShowsASequenceGapAndATimeJump) {
+  const Decoded d = encode_with_skipped_tick("native", {});
+  ASSERT_EQ(d.samples.size(), 3u);
+  EXPECT_EQ(d.counters.sequence_gaps, 1u);  // the sequence is the sample counter: 0, 1, 3
+  EXPECT_EQ(d.samples[2].sequence, 3u);
+  EXPECT_EQ(d.samples[2].t_ns - d.samples[1].t_ns, 20'000'000);
+}
+
+TEST(SkippedTick, MavlinkSeqCountsMessagesSentSoOnlyTheTimeJumps) {
+  // MAVLink guide: seq "Components increment value for each message sent".
+  StreamEncoderOptions o;
+  o.mavlink_heartbeat = false;
+  const Decoded d = encode_with_skipped_tick("mavlink2", o);
+  ASSERT_EQ(d.samples.size(), 3u);
+  EXPECT_EQ(d.counters.sequence_gaps, 0u);
+  EXPECT_EQ(d.samples[2].sequence - d.samples[1].sequence, 1u);  // seq 0, 1, 2 on the wire
+  EXPECT_EQ(d.samples[2].t_ns - d.samples[1].t_ns, 20'000'000);  // time_usec 0, 10000, 30000
+  // With the 1 Hz HEARTBEAT sharing the counter, still no gap.
+  const Decoded with_heartbeat = encode_with_skipped_tick("mavlink2", {});
+  EXPECT_EQ(with_heartbeat.counters.sequence_gaps, 0u);
+}
+
+TEST(SkippedTick, MipHasNoCounterTheGpsTimestampJumps) {
+  const Decoded d = encode_with_skipped_tick("mip", {});
+  ASSERT_EQ(d.samples.size(), 3u);
+  EXPECT_FALSE(d.samples[2].has_sequence);
+  EXPECT_EQ(d.counters.sequence_gaps, 0u);
+  ASSERT_TRUE(d.samples[1].has_time && d.samples[2].has_time);
+  EXPECT_EQ(d.samples[2].t_ns - d.samples[1].t_ns, 20'000'000);
+}
+
+// ============================================================ MIP time base
+// CV7 DCP (0x80,0x12): tow (double s), week (u16), valid flags (u16: pps 0,
+// time_refresh 1, time_initialized 2, tow_valid 3, week_number_valid 4);
+// "If synchronization to an external clock ... is disabled, this time is
+// equivalent to internal system time." Reference bytes from
+// tests/support/protocol_reference.py.
+
+TEST(MipTimeBase, UnknownTimeBaseSendsTheInternalClockWithTheValidFlagsClear) {
+  auto enc = make_stream_encoder("mip");  // default: nothing says trajectory time is GPS or UTC
+  const Bytes at0 = gps_field_of(encode_one(*enc, sample_of(0, 0, {0, 0, 0}, {0, 0, -kG})));
+  // Before issue 12: 0E 12 00 00 00 00 00 00 00 00 00 00 00 1C, i.e. "valid
+  // GPS time, week 0" = 1980-01-06, claimed for a trajectory starting at 0.
+  EXPECT_EQ(at0, hex("0E 12 00 00 00 00 00 00 00 00 00 00 00 00"));
+  // One and a half weeks in: week 1, tow 302400 s, still flagged not GPS time.
+  const TimeNs t = mip::kNsPerGpsWeek + mip::kNsPerGpsWeek / 2;
+  const Bytes later = encode_one(*enc, sample_of(1, t, {0, 0, 0}, {0, 0, -kG}));
+  const Bytes field = gps_field_of(later);
+  EXPECT_EQ(be<double>(field, 2), 302400.0);
+  EXPECT_EQ(be<std::uint16_t>(field, 10), 1);
+  EXPECT_EQ(be<std::uint16_t>(field, 12), 0);
+  // A decoder with the same options reads the internal clock as trajectory time.
+  const Decoded d = decode("mip", {}, later);
+  ASSERT_EQ(d.samples.size(), 1u);
+  EXPECT_TRUE(d.samples[0].has_time);
+  EXPECT_EQ(d.samples[0].t_ns, t);
+  // A GPS-based decoder does not take an unflagged field for GPS time.
+  StreamEncoderOptions gps;
+  gps.mip_time_base = drivers::MipTimeBase::gps;
+  EXPECT_FALSE(decode("mip", gps, later).samples.at(0).has_time);
+}
+
+TEST(MipTimeBase, GpsTimeBaseIsFlaggedValid) {
+  StreamEncoderOptions o;
+  o.mip_time_base = drivers::MipTimeBase::gps;  // trajectory time = GPS time since 1980-01-06
+  auto enc = make_stream_encoder("mip", o);
+  const TimeNs t = 2300 * mip::kNsPerGpsWeek + 345'600'250'000'000;
+  const Bytes field = gps_field_of(encode_one(*enc, sample_of(0, t, {0, 0, 0}, {0, 0, -kG})));
+  EXPECT_EQ(field, hex("0E 12 41 15 18 01 00 00 00 00 08 FC 00 1C"));  // the reference packet's field
+  // Before the epoch (offset + t < 0): not representable, zeros with the flags clear.
+  const Bytes early = gps_field_of(encode_one(*enc, sample_of(0, -1, {0, 0, 0}, {0, 0, -kG})));
+  EXPECT_EQ(early, hex("0E 12 00 00 00 00 00 00 00 00 00 00 00 00"));
+  EXPECT_FALSE(decode("mip", o, encode_one(*enc, sample_of(0, -1, {0, 0, 0}, {0, 0, -kG}))).samples.at(0).has_time);
+}
+
+TEST(MipTimeBase, UtcTimeBaseAddsTheLeapSecondsExplicitly) {
+  StreamEncoderOptions o;
+  o.mip_time_base = drivers::MipTimeBase::utc;  // trajectory time = POSIX UTC ns
+  auto enc = make_stream_encoder("mip", o);
+  const TimeNs utc_2024 = 1'704'067'200LL * 1'000'000'000LL;  // 2024-01-01T00:00:00Z
+  const Bytes packet = encode_one(*enc, sample_of(0, utc_2024, {0, 0, 0}, {0, 0, -kG}));
+  // protocol_reference.py (datetime + 18 s): week 2295, tow 86418 s, flags 0x1C.
+  EXPECT_EQ(gps_field_of(packet), hex("0E 12 40 F5 19 20 00 00 00 00 08 F7 00 1C"));
+  const Decoded d = decode("mip", o, packet);
+  ASSERT_EQ(d.samples.size(), 1u);
+  EXPECT_EQ(d.samples[0].t_ns, utc_2024);
+
+  // Across the leap second at the end of 2016: one POSIX second is two GPS seconds.
+  const TimeNs before = (1'483'228'800LL - 1) * 1'000'000'000LL;  // 2016-12-31T23:59:59Z, GPS - UTC = 17
+  const TimeNs after = 1'483'228'800LL * 1'000'000'000LL;         // 2017-01-01T00:00:00Z, 18
+  EXPECT_EQ(drivers::gps_time::gps_minus_utc_s(before), 17);
+  EXPECT_EQ(drivers::gps_time::gps_minus_utc_s(after), 18);
+  EXPECT_EQ(*drivers::gps_time::gps_from_utc_ns(after) - *drivers::gps_time::gps_from_utc_ns(before),
+            2'000'000'000);
+  // Both round-trip; the leap second itself (GPS second in between) maps onto 00:00:00.
+  EXPECT_EQ(*drivers::gps_time::utc_from_gps_ns(*drivers::gps_time::gps_from_utc_ns(before)), before);
+  EXPECT_EQ(*drivers::gps_time::utc_from_gps_ns(*drivers::gps_time::gps_from_utc_ns(after)), after);
+  EXPECT_EQ(*drivers::gps_time::utc_from_gps_ns(*drivers::gps_time::gps_from_utc_ns(after) - 1'000'000'000), after);
+  // The GPS epoch itself: GPS - UTC = 0, GPS time 0.
+  EXPECT_EQ(*drivers::gps_time::gps_from_utc_ns(315'964'800LL * 1'000'000'000LL), 0);
+  EXPECT_FALSE(drivers::gps_time::gps_from_utc_ns(315'964'800LL * 1'000'000'000LL - 1));
+
+  // An explicit GPS - UTC (a leap second the table does not know yet): 19 s.
+  o.mip_gps_minus_utc_s = 19;
+  auto enc19 = make_stream_encoder("mip", o);
+  const Bytes f19 = gps_field_of(encode_one(*enc19, sample_of(0, utc_2024, {0, 0, 0}, {0, 0, -kG})));
+  EXPECT_EQ(be<double>(f19, 2), 86419.0);
+  EXPECT_EQ(decode("mip", o, encode_one(*enc19, sample_of(0, utc_2024, {0, 0, 0}, {0, 0, -kG}))).samples.at(0).t_ns,
+            utc_2024);
 }

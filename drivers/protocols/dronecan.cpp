@@ -247,6 +247,16 @@ void validate(const DroneCanOptions& options) {
 
 // ---- encoder ----
 
+std::uint64_t raw_imu_timestamp_usec(TimeNs t_ns, TimeNs timestamp_offset_ns) {
+  TimeNs stamped_ns = 0;
+  if (__builtin_add_overflow(t_ns, timestamp_offset_ns, &stamped_ns))
+    stamped_ns = timestamp_offset_ns > 0 ? std::numeric_limits<TimeNs>::max() : 0;
+  const std::uint64_t usec = stamped_ns > 0 ? static_cast<std::uint64_t>(stamped_ns / 1000) : 0;
+  // truncated uint56: the low 56 bits (2^56 us is 2284 years: int64 ns
+  // never reaches it), and never the UNKNOWN value 0.
+  return std::max<std::uint64_t>(usec & ((std::uint64_t{1} << 56) - 1), kRawImuEarliestKnownUsec);
+}
+
 RawImuPayload serialize_raw_imu(const ImuFrameInput& sample, const DroneCanOptions& options) {
   RawImuPayload result;
   auto count = [&result](WireClip clip) {
@@ -255,12 +265,12 @@ RawImuPayload serialize_raw_imu(const ImuFrameInput& sample, const DroneCanOptio
   };
   BitWriter writer;
 
-  // uavcan.Timestamp: truncated uint56 usec.
-  TimeNs stamped_ns = 0;
-  if (__builtin_add_overflow(sample.t_ns, options.timestamp_offset_ns, &stamped_ns))
-    stamped_ns = options.timestamp_offset_ns > 0 ? std::numeric_limits<TimeNs>::max() : 0;
-  const std::uint64_t usec = stamped_ns > 0 ? static_cast<std::uint64_t>(stamped_ns / 1000) : 0;
-  writer.put(usec, 56);
+  // uavcan.Timestamp: truncated uint56 usec, where 0 is UNKNOWN (Timestamp
+  // DSDL "uint56 UNKNOWN = 0"). The sample time is always known, so it is
+  // never sent as 0: a time before 1 us (trajectory time 0 itself, the
+  // first sample of every built-in trajectory) goes out as 1 us, the
+  // earliest known time the field can carry.
+  writer.put(raw_imu_timestamp_usec(sample.t_ns, options.timestamp_offset_ns), 56);
 
   // float32 integration_interval, seconds; non-positive = no integrals.
   const bool integrals = options.send_integrals && sample.period_ns > 0;

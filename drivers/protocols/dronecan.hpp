@@ -93,7 +93,8 @@ struct DroneCanOptions {
   std::uint8_t node_status_priority = 24; // libcanard's PRIORITY_LOW, what nodes use for NodeStatus
   TimeNs node_status_period_ns = kNsPerSecond;  // NodeStatus MAX_BROADCASTING_PERIOD_MS = 1000
   // RawIMU timestamp.usec = (t_ns + timestamp_offset_ns) / 1000, truncated to
-  // 56 bits; a negative sum is sent as 0, which the DSDL defines as UNKNOWN.
+  // 56 bits; never 0, which the Timestamp DSDL defines as UNKNOWN: a sum
+  // below 1 us (including negative) is sent as 1 us (raw_imu_timestamp_usec).
   TimeNs timestamp_offset_ns = 0;
   // Send delta_theta / delta_velocity as rate_gyro_integral (rad) and
   // accelerometer_integral (m/s) with integration_interval = period (s);
@@ -115,6 +116,12 @@ struct RawImuPayload {
   unsigned non_finite_values = 0;
 };
 RawImuPayload serialize_raw_imu(const ImuFrameInput& sample, const DroneCanOptions& options);
+
+// The RawIMU timestamp.usec of a sample time: floor((t_ns + offset) / 1000),
+// at least kRawImuEarliestKnownUsec, since 0 means UNKNOWN (uavcan.Timestamp
+// DSDL) and the emulator always knows the sample time.
+inline constexpr std::uint64_t kRawImuEarliestKnownUsec = 1;
+std::uint64_t raw_imu_timestamp_usec(TimeNs t_ns, TimeNs timestamp_offset_ns);
 
 // One RawIMU multi-frame transfer (7 frames of 8 bytes) per sample; a
 // NodeStatus single-frame transfer from periodic() at start and every

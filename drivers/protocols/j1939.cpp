@@ -25,27 +25,37 @@ struct VehicleAccel {
   double lateral_m_s2, longitudinal_m_s2, vertical_m_s2;
 };
 
+// ARI and SSI2 are Z-Down (J670) unless all-Z-Up was asked for; ACCS is Z-Up
+// unless all-Z-Down was asked for (j1939.hpp "Axes and signs").
+bool angular_z_down(VehicleAxes axes) { return axes != VehicleAxes::kIso8855ZUp; }
+bool accel_z_up(VehicleAxes axes) { return axes != VehicleAxes::kSaeJ670eZDown; }
+
 VehicleRates rates_in_vehicle_axes(const Vec3& gyro_frd_rad_s, VehicleAxes axes) {
   const Vec3 deg_s = gyro_frd_rad_s * kDegPerRad;
-  if (axes == VehicleAxes::kSaeJ670eZDown) return {deg_s.y(), deg_s.x(), deg_s.z()};
-  // ISO 8855: rotation about y LEFT and z UP = minus rotation about y right / z down.
+  if (angular_z_down(axes)) return {deg_s.y(), deg_s.x(), deg_s.z()};
+  // Z-Up: rotation about y LEFT and z UP = minus rotation about y right / z down.
   return {-deg_s.y(), deg_s.x(), -deg_s.z()};
 }
 
 VehicleAccel accel_in_vehicle_axes(const Vec3& f_frd_m_s2, VehicleAxes axes) {
-  if (axes == VehicleAxes::kSaeJ670eZDown) return {f_frd_m_s2.y(), f_frd_m_s2.x(), f_frd_m_s2.z()};
+  if (!accel_z_up(axes)) return {f_frd_m_s2.y(), f_frd_m_s2.x(), f_frd_m_s2.z()};
   return {-f_frd_m_s2.y(), f_frd_m_s2.x(), -f_frd_m_s2.z()};
 }
 
 Vec3 gyro_from_vehicle_axes(double pitch_deg_s, double roll_deg_s, double yaw_deg_s, VehicleAxes axes) {
-  const Vec3 deg_s = axes == VehicleAxes::kSaeJ670eZDown ? Vec3(roll_deg_s, pitch_deg_s, yaw_deg_s)
-                                                         : Vec3(roll_deg_s, -pitch_deg_s, -yaw_deg_s);
+  const Vec3 deg_s = angular_z_down(axes) ? Vec3(roll_deg_s, pitch_deg_s, yaw_deg_s)
+                                          : Vec3(roll_deg_s, -pitch_deg_s, -yaw_deg_s);
   return deg_s / kDegPerRad;
 }
 
 Vec3 accel_from_vehicle_axes(double lateral, double longitudinal, double vertical, VehicleAxes axes) {
-  return axes == VehicleAxes::kSaeJ670eZDown ? Vec3(longitudinal, lateral, vertical)
-                                             : Vec3(longitudinal, -lateral, -vertical);
+  return !accel_z_up(axes) ? Vec3(longitudinal, lateral, vertical) : Vec3(longitudinal, -lateral, -vertical);
+}
+
+// SPN 4976 pitch angle: the aerospace pitch in Z-Down axes, its negative
+// about y left in Z-Up axes. Its own inverse.
+double pitch_in_vehicle_axes(double pitch_rad, VehicleAxes axes) {
+  return angular_z_down(axes) ? pitch_rad : -pitch_rad;
 }
 
 void put_le(std::array<std::uint8_t, 64>& data, std::size_t at, std::uint32_t raw, unsigned bytes) {
@@ -235,16 +245,16 @@ void J1939Encoder::encode(const ImuFrameInput& sample, std::vector<CanFrame>& ou
   }
   if (options_.send_slope) {
     CanFrame frame = new_frame(options_, kPgnSlopeSensorInformation2);
-    std::optional<PitchRoll> attitude;
-    if (options_.attitude_source) attitude = options_.attitude_source(sample.t_ns);
-    if (attitude) {
-      // Aerospace pitch (nose up) is minus the ISO 8855 pitch (about y left).
-      const double pitch_rad = options_.axes == VehicleAxes::kSaeJ670eZDown ? attitude->pitch_rad : -attitude->pitch_rad;
-      const Encoded pitch = encode_value(pitch_rad * kDegPerRad, kSlopeAngleScaling);
-      const Encoded roll = encode_value(attitude->roll_rad * kDegPerRad, kSlopeAngleScaling);
+    if (sample.has_level_attitude) {
+      const Encoded pitch =
+          encode_value(pitch_in_vehicle_axes(sample.pitch_rad, options_.axes) * kDegPerRad, kSlopeAngleScaling);
+      const Encoded roll = encode_value(sample.roll_rad * kDegPerRad, kSlopeAngleScaling);
       count(pitch);
       count(roll);
-      constexpr unsigned kCompensationOn = 1;  // true attitude: free of linear-acceleration error
+      // SPN 4978 / 4980 "Compensation is the use of multiple sensors together
+      // to enhance the output": the emulated angles are the true attitude,
+      // free of the linear-acceleration error of a bare inclinometer: On.
+      constexpr unsigned kCompensationOn = 0;  // J1939DA: 00b = On, 01b = Off
       put_le(frame.data, 0, pitch.raw, 3);
       put_le(frame.data, 3, roll.raw, 3);
       frame.data[6] = pack_two_bit_fields(kCompensationOn, static_cast<unsigned>(figure_of_merit(pitch, sample.status)),
@@ -335,9 +345,7 @@ void J1939Decoder::feed(const CanFrame& frame, const SampleCallback& on_sample) 
     Slope slope;
     slope.fault = ((pitch.status | roll.status) & kStatusFault) != 0;
     if (pitch_kind == RawKind::kValid && roll_kind == RawKind::kValid) {
-      const double pitch_rad = pitch.value / kDegPerRad;
-      slope.angles = PitchRoll{options_.axes == VehicleAxes::kSaeJ670eZDown ? pitch_rad : -pitch_rad,
-                               roll.value / kDegPerRad};
+      slope.angles = PitchRoll{pitch_in_vehicle_axes(pitch.value / kDegPerRad, options_.axes), roll.value / kDegPerRad};
     }
     slope_[id.source_address] = slope;
     ++counters_.frames;

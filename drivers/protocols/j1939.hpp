@@ -2,32 +2,37 @@
 // 0xF02A), Acceleration Sensor (ACCS, 61485 = 0xF02D), Slope Sensor
 // Information 2 (SSI2, 61481 = 0xF029). Single 8-byte frames, PDU2 broadcast.
 //
-// Layouts and scalings (SAE J1939-71 / J1939DA; quoted from device manuals and
-// firmware that reproduce them, since the SAE text is not public):
-//  ARI  bytes 1-2 pitch rate, 3-4 roll rate, 5-6 yaw rate ("Extended Range"),
-//       1/128 deg/s per bit, offset -250 deg/s; byte 7 bits 1-2 / 3-4 / 5-6
-//       pitch / roll / yaw rate figure of merit (00 fully functional, 01
-//       degraded, 10 error, 11 not available), bits 7-8 not defined (11);
-//       byte 8 angular rate measurement latency, 0.5 ms/bit.
-//       (FORKWORKS ARI_canmsg.h; tcan_can_j1939_devices AngularRateInformation;
-//       Honeywell TARS user manual section 7.4, example 0x0CF02AE2
-//       00 7D 00 7D 00 7D = 0 deg/s on all axes at priority 3, SA 0xE2.)
-//  ACCS bytes 1-2 lateral, 3-4 longitudinal, 5-6 vertical acceleration
-//       ("Extended Range"), 0.01 m/s^2 per bit, offset -320 m/s^2, range -320
-//       to +322.55; byte 7 bits 1-2 / 3-4 / 5-6 their figures of merit, bits
-//       7-8 "support variable transmission repetition rate" (sent 11, not
-//       available); byte 8 not defined (0xFF).
-//       (FORKWORKS ACCS_canmsg.h; LORD MV5-AR user manual 4.2.3; Honeywell
-//       TARS 7.5, example 00 7D 00 7D D5 80 = 0, 0, +9.81 m/s^2.)
-//  SSI2 bytes 1-3 pitch angle (SPN 4976), 4-6 roll angle (SPN 4977), 1/32768
-//       deg per bit, offset -250 deg; byte 7 bits 1-2 pitch compensation (SPN
-//       4978: 00 off, 01 on, 10 error, 11 n/a), 3-4 pitch figure of merit
-//       (4979), 5-6 roll compensation (4980), 7-8 roll figure of merit (4981);
-//       byte 8 measurement latency (4982), 0.5 ms/bit.
-//       (Axiomatic UMAX0608xx Tri-Axial J1939 manual 2.5.1.2; ifm JD-series
-//       manual 8.3, which lists the compensation codes the other way round,
-//       00 on / 01 off: this encoder follows Axiomatic's 01 = on.) Default
-//       priority 3 for all three.
+// Layouts, scalings, signs and codes: SAE J1939 Digital Annex (J1939DA,
+// the SPN/PGN table, 2018 edition as published in the canscope repository's
+// thirdparty/j1939da_2018.xlsx; read, nothing copied), cross-checked against
+// device manuals that reproduce it:
+//  ARI  (PGN 61482, "Z-Down axis system as referenced in SAE J670", default
+//       priority 3) bytes 1-2 Pitch Rate (Extended Range) SPN 4983, 3-4 Roll
+//       Rate 4984, 5-6 Yaw Rate 4985: 1/128 deg/s per bit, offset -250 deg/s;
+//       byte 7 bits 1-2 / 3-4 / 5-6 figures of merit SPN 4986 / 4987 / 4988
+//       (00 fully functional, 01 degraded, 10 error, 11 not available), bits
+//       7-8 not defined (sent 11); byte 8 Angular Rate Measurement Latency SPN
+//       4989, 0.5 ms/bit, 0..125 ms.
+//       (Honeywell TARS user manual 7.4 example 0x0CF02AE2 00 7D 00 7D 00 7D =
+//       0 deg/s on all axes at priority 3, SA 0xE2.)
+//  ACCS (PGN 61485, "Z-Up axis system as referenced in SAE J670", default
+//       priority 2) bytes 1-2 Lateral Acceleration (Extended Range) SPN 5347,
+//       3-4 Longitudinal 5348, 5-6 Vertical 5349: 0.01 m/s^2 per bit, offset
+//       -320 m/s^2; byte 7 bits 1-2 / 3-4 / 5-6 figures of merit SPN 5350 /
+//       5351 / 5352, bits 7-8 SPN 5353 "Support Variable Transmission
+//       Repetition Rate" (sent 11: only the standard 10 ms); byte 8 not
+//       defined (0xFF). (Honeywell TARS 7.5 example 00 7D 00 7D D5 80 = 0, 0,
+//       +9.81 m/s^2.)
+//  SSI2 (PGN 61481, Z-Down as ARI, default priority 3) bytes 1-3 Pitch Angle
+//       (Extended Range) SPN 4976, 4-6 Roll Angle 4977: 1/32768 deg per bit,
+//       offset -250 deg; byte 7 bits 1-2 Pitch Angle Compensation SPN 4978,
+//       3-4 Pitch Angle Figure of Merit 4979, 5-6 Roll Angle Compensation
+//       4980, 7-8 Roll Angle Figure of Merit 4981; compensation codes "00b =
+//       On, 01b = Off, 10b = Error, 11b = Not Available" (J1939DA; the ifm JD
+//       manual 8.3 agrees). The older SSI (61459) SPN 3326 "Pitch and Roll
+//       Compensated" codes them the other way round (00 off, 01 on), which
+//       is what the Axiomatic UMAX0608xx manual prints; byte 8 Roll and Pitch
+//       Measurement Latency SPN 4982, 0.5 ms/bit.
 //  Transmitted ranges (J1939-71 parameter ranges): a 1-byte value is valid in
 //  0..0xFA, 2 bytes 0..0xFAFF, 3 bytes 0..0xFAFFFF; above that the most
 //  significant byte 0xFB-0xFD is reserved, 0xFE "error indicator", 0xFF "not
@@ -35,28 +40,31 @@
 //  m/s^2 (the LORD and Honeywell figures), SSI2 -250..+251.99997 deg.
 //  29-bit identifier: priority(3) << 26 | PGN(18: EDP, DP, PF, PS) << 8 |
 //  source address; PF >= 240 (all three) means PDU2, PS is part of the PGN.
+//  One `priority` option serves the three PGNs (default 3; J1939DA gives
+//  ACCS priority 2 by default, receivers filter on the PGN, not on it).
 //
-// Axes. These PGNs are in vehicle axes, not the sensor's: the encoder takes
-// body FRD (x forward, y right, z down) and converts explicitly. Default
-// kIso8855ZUp: x forward, y LEFT, z UP, right-handed (the ISO 8855 vehicle
-// axes), as the LORD MV5-AR manual states for ACCS ("Right-handed axis
-// system, Z axis points up", lateral = Y, longitudinal = X) and as the
-// Honeywell TARS example sends +1 g vertical for a sensor at rest:
-//   longitudinal =  f_x,  lateral = -f_y,  vertical = -f_z     (specific force)
-//   roll rate    =  w_x,  pitch rate = -w_y, yaw rate = -w_z  (right-hand rule
-//   about x fwd / y left / z up: yaw rate positive turning left)
-//   roll angle   =  phi,  pitch angle = -theta  (so that d(pitch)/dt = pitch
-//   rate for level flight; phi/theta are the aerospace Euler angles)
-// kSaeJ670eZDown (SAE J670e: x forward, y right, z down) is the identity map,
-// for receivers that follow the older SAE axes (the ifm JD manual offers
-// "SAE J670" and "opposite" directions per angle). The J1939DA definitions
-// of these SPNs' signs were not available to check this against; the choice
-// is an option so a real receiver decides.
+// Axes and signs (default VehicleAxes::kJ1939da, the SPN definitions):
+//  ARI, SSI2 in SAE J670 Z-Down axes (x forward, y right, z down = body FRD),
+//  signs by the right-hand rule: SPN 4983 pitch rate positive for
+//  "increasing ascent" (nose rising: +w_y), SPN 4984 roll rate positive for
+//  "increasing roll to the right" (+w_x), SPN 4985 yaw rate positive "when
+//  the object turns clockwise" seen from above (+w_z); SPN 4976 pitch angle
+//  positive for ascent (the aerospace pitch theta), SPN 4977 roll angle
+//  positive rolled right (the aerospace roll phi):
+//    pitch rate = w_y, roll rate = w_x, yaw rate = w_z; pitch = theta, roll = phi
+//  ACCS in SAE J670 Z-Up axes (x forward, y LEFT, z UP): SPN 5347 lateral
+//  positive "accelerated to the left", SPN 5348 longitudinal positive
+//  speeding up forward, SPN 5349 vertical "+1 gravity when stationary on a
+//  horizontal surface" (specific force):
+//    lateral = -f_y, longitudinal = f_x, vertical = -f_z
+//  Two alternatives for receivers that deviate from the DA: kIso8855ZUp puts
+//  all three PGNs in Z-Up axes (pitch rate = -w_y, yaw rate = -w_z, pitch =
+//  -theta: imuemu's choice before it followed the DA), kSaeJ670eZDown all in
+//  Z-Down (lateral = f_y, vertical = f_z).
 #pragma once
 
 #include <array>
 #include <cstdint>
-#include <functional>
 #include <map>
 #include <optional>
 #include <string>
@@ -108,30 +116,28 @@ Encoded encode_value(double value, const Scaling& scaling);
 // The not-available code (all 0xFF) for the width of `scaling`.
 std::uint32_t not_available_raw(const Scaling& scaling);
 
-enum class VehicleAxes : std::uint8_t { kIso8855ZUp, kSaeJ670eZDown };
+enum class VehicleAxes : std::uint8_t { kJ1939da, kIso8855ZUp, kSaeJ670eZDown };
 
-// Aerospace Euler angles of the body (FRD) relative to the local level
+// Aerospace Euler angles of the sensor (FRD) relative to the local level
 // frame (NED): pitch positive nose up, roll positive right side down.
 struct PitchRoll {
   double pitch_rad = 0.0;
   double roll_rad = 0.0;
 };
-// Attitude at a sample time, or nothing when unknown.
-using AttitudeSource = std::function<std::optional<PitchRoll>(TimeNs t_ns)>;
 
 struct J1939Options {
   std::uint8_t source_address = 0x80;   // 0..253 (254 = null address, 255 = global)
   std::uint8_t priority = kDefaultPriority;  // 0..7
   bool send_angular_rate = true;        // ARI
   bool send_acceleration = true;        // ACCS
-  // SSI2 needs pitch and roll, which ImuFrameInput does not carry: taken from
-  // attitude_source when set and when it returns a value; otherwise SSI2 is
-  // sent with both angles "not available" (0xFFFFFF, figures of merit 11).
+  // SSI2: pitch and roll from the sample's level attitude
+  // (ImuFrameInput::has_level_attitude, which the emission engine fills
+  // because needs_level_attitude() says so); a sample without one sends both
+  // angles "not available" (0xFFFFFF, compensation and figures of merit 11).
   bool send_slope = false;
-  AttitudeSource attitude_source;
   // ARI byte 8 and SSI2 byte 8 (0.5 ms/bit, 0..125 ms); not available when unset.
   std::optional<double> measurement_latency_ms;
-  VehicleAxes axes = VehicleAxes::kIso8855ZUp;
+  VehicleAxes axes = VehicleAxes::kJ1939da;
 };
 
 // Throws std::invalid_argument naming the option that is out of range.
@@ -147,6 +153,7 @@ class J1939Encoder final : public CanEncoder {
   explicit J1939Encoder(const J1939Options& options = {});
   std::string name() const override { return "j1939"; }
   void encode(const ImuFrameInput& sample, std::vector<CanFrame>& out) override;
+  bool needs_level_attitude() const override { return options_.send_slope; }
   std::uint64_t clamped_values() const { return clamped_values_; }
 
  private:

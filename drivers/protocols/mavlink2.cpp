@@ -35,8 +35,11 @@ namespace {
 
 using X25Engine = boost::crc_optimal<16, 0x1021, 0xFFFF, 0, true, true>;
 
-// [X] minimal.xml values for a component that is not a flight controller.
-constexpr std::uint8_t kMavTypeGeneric = 0;
+// [X] minimal.xml HEARTBEAT: "type ... For other components the component
+// type" (MAV_TYPE: "All other components must report a value appropriate for
+// their type"): MAV_TYPE_IMU = 40; "autopilot ... Use MAV_AUTOPILOT_INVALID
+// for components that are not flight controllers": 8.
+constexpr std::uint8_t kMavTypeImu = 40;
 constexpr std::uint8_t kMavAutopilotInvalid = 8;
 constexpr std::uint8_t kMavStateActive = 4;
 constexpr std::uint8_t kMavlinkVersion = 3;  // the dialect <version>; "gets added by protocol"
@@ -174,7 +177,7 @@ void Encoder::periodic(TimeNs now_ns, std::vector<std::uint8_t>& out) {
   // order: type, autopilot, base_mode, system_status, mavlink_version.
   std::array<std::uint8_t, kHeartbeat.payload_bytes> p{};
   wire::put_le<std::uint32_t>(p.data(), 0);  // custom_mode
-  p[4] = kMavTypeGeneric;
+  p[4] = kMavTypeImu;
   p[5] = kMavAutopilotInvalid;
   p[6] = 0;  // base_mode
   p[7] = kMavStateActive;

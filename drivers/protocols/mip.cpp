@@ -31,6 +31,7 @@
 #include <cmath>
 #include <limits>
 
+#include "drivers/protocols/gps_time.hpp"
 #include "drivers/protocols/wire_bytes.hpp"
 
 namespace imuemu::drivers::mip {
@@ -65,7 +66,66 @@ Vec3 get_vector(const std::uint8_t* at) {
   return {wire::get_be<float>(at), wire::get_be<float>(at + 4), wire::get_be<float>(at + 8)};
 }
 
+// A time (ns, >= 0) as week number and time of week; nothing when the week
+// does not fit the u16 field. The time of week is a double on the wire [D];
+// below 604800 s a double resolves 0.12 ns, so integer ns survive the round
+// trip exactly.
+std::optional<GpsTimestamp> weeks_of(std::int64_t ns) {
+  if (ns < 0 || ns / kNsPerGpsWeek > std::numeric_limits<std::uint16_t>::max()) return std::nullopt;
+  GpsTimestamp ts;
+  ts.week = static_cast<std::uint16_t>(ns / kNsPerGpsWeek);
+  ts.tow_s = static_cast<double>(ns % kNsPerGpsWeek) / 1e9;
+  return ts;
+}
+
 }  // namespace
+
+GpsTimestamp gps_timestamp_of(TimeNs t_ns, const StreamEncoderOptions& options) {
+  std::optional<std::int64_t> gps_ns;
+  switch (options.mip_time_base) {
+    case MipTimeBase::unknown: {
+      // Internal clock: the trajectory time itself, flags clear. A time
+      // before 0 cannot be carried: zeros (as the flags say, not a time).
+      return weeks_of(t_ns).value_or(GpsTimestamp{});
+    }
+    case MipTimeBase::gps: {
+      std::int64_t sum = 0;
+      if (!__builtin_add_overflow(options.mip_gps_time_at_t0_ns, t_ns, &sum)) gps_ns = sum;
+      break;
+    }
+    case MipTimeBase::utc:
+      gps_ns = gps_time::gps_from_utc_ns(t_ns, options.mip_gps_minus_utc_s);
+      break;
+  }
+  // Times the field cannot carry (before the GPS epoch, week beyond u16)
+  // go out as zero with the valid bits clear.
+  std::optional<GpsTimestamp> ts = gps_ns ? weeks_of(*gps_ns) : std::nullopt;
+  if (!ts) return GpsTimestamp{};
+  ts->valid_flags = kGpsTimeValid;
+  return *ts;
+}
+
+std::optional<TimeNs> trajectory_time_of(double tow_s, std::uint16_t week, std::uint16_t valid_flags,
+                                         const StreamEncoderOptions& options) {
+  if (!std::isfinite(tow_s) || tow_s < 0.0 || tow_s >= 604800.0) return std::nullopt;
+  const std::int64_t ns = std::int64_t{week} * kNsPerGpsWeek + std::llround(tow_s * 1e9);
+  const std::uint16_t needed = kTowValid | kWeekNumberValid;
+  if ((valid_flags & needed) != needed) {
+    // Not GPS time: the device's internal clock.
+    if (options.mip_time_base != MipTimeBase::unknown) return std::nullopt;
+    return ns;
+  }
+  switch (options.mip_time_base) {
+    case MipTimeBase::unknown: return ns;  // GPS time from a device that has it
+    case MipTimeBase::gps: {
+      TimeNs t_ns = 0;
+      if (__builtin_sub_overflow(ns, options.mip_gps_time_at_t0_ns, &t_ns)) return std::nullopt;
+      return t_ns;
+    }
+    case MipTimeBase::utc: return gps_time::utc_from_gps_ns(ns, options.mip_gps_minus_utc_s);
+  }
+  return std::nullopt;
+}
 
 std::uint16_t fletcher_checksum(std::span<const std::uint8_t> bytes) {
   std::uint8_t sum1 = 0;
@@ -93,27 +153,14 @@ void Encoder::encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out
                                   kOverrangeAccelX);
   }
 
-  // GPS timestamp: gps = offset + t as week / time of week. The time of week
-  // is a double on the wire [D]; below 604800 s a double resolves 0.12 ns, so
-  // integer ns survive the round trip exactly. Times the field cannot carry
-  // (before the GPS epoch, beyond int64 ns, week beyond u16) go out as zero
-  // with the valid bits clear.
-  std::int64_t gps_ns = 0;
-  double tow_s = 0.0;
-  std::uint16_t week = 0;
-  std::uint16_t valid = 0;
-  if (!__builtin_add_overflow(options_.mip_gps_time_at_t0_ns, sample.t_ns, &gps_ns) && gps_ns >= 0 &&
-      gps_ns / kNsPerGpsWeek <= std::numeric_limits<std::uint16_t>::max()) {
-    week = static_cast<std::uint16_t>(gps_ns / kNsPerGpsWeek);
-    tow_s = static_cast<double>(gps_ns % kNsPerGpsWeek) / 1e9;
-    valid = kTimeInitialized | kTowValid | kWeekNumberValid;
-  }
+  // GPS timestamp (0x80,0x12): by the time base (gps_timestamp_of).
+  const GpsTimestamp ts = gps_timestamp_of(sample.t_ns, options_);
   std::array<std::uint8_t, kGpsFieldBytes> g{};
   g[0] = static_cast<std::uint8_t>(kGpsFieldBytes);
   g[1] = kGpsTimestamp;
-  wire::put_be<double>(g.data() + 2, tow_s);
-  wire::put_be<std::uint16_t>(g.data() + 10, week);
-  wire::put_be<std::uint16_t>(g.data() + 12, valid);
+  wire::put_be<double>(g.data() + 2, ts.tow_s);
+  wire::put_be<std::uint16_t>(g.data() + 10, ts.week);
+  wire::put_be<std::uint16_t>(g.data() + 12, ts.valid_flags);
   out.insert(out.end(), g.begin(), g.end());
 
   // The sensor model's saturated bit does not say which axis: every accel
@@ -192,17 +239,12 @@ void Decoder::feed(std::span<const std::uint8_t> bytes, const SampleCallback& on
             bad = true;
             break;
           }
-          const double tow_s = wire::get_be<double>(data);
-          const auto week = wire::get_be<std::uint16_t>(data + 8);
-          const auto valid = wire::get_be<std::uint16_t>(data + 10);
-          const std::uint16_t needed = kTowValid | kWeekNumberValid;
-          std::int64_t t_ns = 0;
-          if ((valid & needed) == needed && std::isfinite(tow_s) && tow_s >= 0.0 && tow_s < 604800.0) {
-            const std::int64_t gps_ns = std::int64_t{week} * kNsPerGpsWeek + std::llround(tow_s * 1e9);
-            if (!__builtin_sub_overflow(gps_ns, gps_time_at_t0_ns_, &t_ns)) {
-              s.t_ns = t_ns;
-              s.has_time = true;
-            }
+          const std::optional<TimeNs> t_ns =
+              trajectory_time_of(wire::get_be<double>(data), wire::get_be<std::uint16_t>(data + 8),
+                                 wire::get_be<std::uint16_t>(data + 10), options_);
+          if (t_ns) {
+            s.t_ns = *t_ns;
+            s.has_time = true;
           }
           break;
         }

@@ -6,6 +6,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <optional>
 #include <span>
 
 #include "drivers/protocol.hpp"
@@ -38,6 +39,7 @@ inline constexpr std::uint16_t kOverrangeAccelGyroAll = 0x0077;
 // 1 g as the MIP manuals define it (m/s^2).
 inline constexpr double kStandardGravity_m_s2 = 9.80665;
 inline constexpr std::int64_t kNsPerGpsWeek = 604'800LL * 1'000'000'000LL;
+inline constexpr std::uint16_t kGpsTimeValid = kTimeInitialized | kTowValid | kWeekNumberValid;
 
 // 16-bit Fletcher checksum of the MIP manuals (3DM-GX5 DCP manual 6.4): two
 // running 8-bit sums over every byte from sync1 to the end of the payload,
@@ -55,15 +57,30 @@ class Encoder final : public StreamEncoder {
   StreamEncoderOptions options_;
 };
 
+// The GPS timestamp field (0x80,0x12) of a sample at trajectory time t_ns,
+// as the options' time base makes it (stream_protocols.hpp mip_time_base).
+struct GpsTimestamp {
+  double tow_s = 0.0;
+  std::uint16_t week = 0;
+  std::uint16_t valid_flags = 0;
+};
+GpsTimestamp gps_timestamp_of(TimeNs t_ns, const StreamEncoderOptions& options);
+// Trajectory time from a received field, by the same options: valid GPS time
+// (tow and week flagged valid) through the time base; an unflagged field is
+// the device's internal clock, which is trajectory time when the base is
+// unknown (and no time otherwise: the encoder clears the flags only when the
+// time cannot be represented).
+std::optional<TimeNs> trajectory_time_of(double tow_s, std::uint16_t week, std::uint16_t valid_flags,
+                                         const StreamEncoderOptions& options);
+
 class Decoder final : public StreamDecoder {
  public:
-  explicit Decoder(const StreamEncoderOptions& options)
-      : gps_time_at_t0_ns_(options.mip_gps_time_at_t0_ns) {}
+  explicit Decoder(const StreamEncoderOptions& options) : options_(options) {}
   void feed(std::span<const std::uint8_t> bytes, const SampleCallback& on_sample) override;
   const DecoderCounters& counters() const override { return counters_; }
 
  private:
-  std::int64_t gps_time_at_t0_ns_;
+  StreamEncoderOptions options_;
   std::vector<std::uint8_t> buffer_;
   DecoderCounters counters_;
 };

@@ -16,6 +16,9 @@
 
 namespace imuemu::drivers {
 
+// The time base of trajectory time, for protocols that send absolute time.
+enum class MipTimeBase : std::uint8_t { unknown, gps, utc };
+
 struct StreamEncoderOptions {
   // native and mip: send delta-theta / delta-velocity as well as the rates.
   bool include_deltas = true;
@@ -32,11 +35,24 @@ struct StreamEncoderOptions {
   // set; otherwise not sent (bit clear, field zero).
   std::optional<double> mavlink_temperature_degC;
 
-  // mip. GPS time (ns since the GPS epoch 1980-01-06T00:00:00, GPS time
-  // scale, no leap seconds) that trajectory time t_ns = 0 corresponds to; the
-  // GPS timestamp field (0x80,0x12) carries gps = this + t_ns as week and
-  // time of week.
+  // mip. What trajectory time is, which decides the GPS timestamp field
+  // (0x80,0x12): tow and week of a GPS time with the valid flags set
+  // (time_initialized | tow_valid | week_number_valid), or, when nothing
+  // says the trajectory is on a GPS or UTC time base, the device's internal
+  // clock = trajectory time with the valid flags clear (CV7 DCP 0x80,0x12:
+  // without external time "this time is equivalent to internal system
+  // time"). Before issue 12 every time was flagged valid GPS time, so a
+  // trajectory starting at 0 claimed GPS week 0 (January 1980).
+  MipTimeBase mip_time_base = MipTimeBase::unknown;
+  // kGps: the GPS time (ns since the GPS epoch 1980-01-06T00:00:00, GPS time
+  // scale, no leap seconds) that trajectory time t_ns = 0 corresponds to:
+  // gps = this + t_ns (0: trajectory time is GPS time itself). Used only
+  // with MipTimeBase::gps.
   std::int64_t mip_gps_time_at_t0_ns = 0;
+  // kUtc: trajectory time is UTC as POSIX ns (since 1970-01-01T00:00:00Z);
+  // gps = t - 315964800 s + (GPS - UTC), GPS - UTC from the leap-second
+  // table (drivers/protocols/gps_time.hpp) or this fixed value when set.
+  std::optional<int> mip_gps_minus_utc_s;
   // Overrange status field (0x80,0x18): where the saturated bit goes.
   bool mip_overrange_status = true;
 

@@ -97,9 +97,10 @@ if __name__ == "__main__":
     print(f"MIP example 2 checksum = 0x{mip_fletcher(two):04X}")
 
     # HEARTBEAT from an IMU component: sys 1, comp 200 (MAV_COMP_ID_IMU), seq 0,
-    # type MAV_TYPE_GENERIC 0, autopilot MAV_AUTOPILOT_INVALID 8, base_mode 0,
+    # type MAV_TYPE_IMU 40 (minimal.xml: components report their own type),
+    # autopilot MAV_AUTOPILOT_INVALID 8 (not a flight controller), base_mode 0,
     # custom_mode 0, system_status MAV_STATE_ACTIVE 4, mavlink_version 3.
-    hb = struct.pack("<IBBBBB", 0, 0, 8, 0, 4, 3)
+    hb = struct.pack("<IBBBBB", 0, 40, 8, 0, 4, 3)
     print("HEARTBEAT seq 0 sys 1 comp 200:", hexs(mavlink2_frame(0, 1, 200, 0, hb, 50)))
 
     # HIL_SENSOR: time_usec 1234567, acc (0.5, -0.25, -9.75) m/s^2,
@@ -124,3 +125,19 @@ if __name__ == "__main__":
     frame = header + payload
     frame += struct.pack("<I", crc32c(frame))
     print(f"native example ({len(frame)} bytes):", hexs(frame))
+
+    # MIP GPS timestamp field (0x80, 0x12) of a trajectory on a UTC time base:
+    # 2024-01-01T00:00:00Z is GPS time 2024-01-01T00:00:18 (GPS - UTC = 18 s
+    # since 2017-01-01, IERS Bulletin C), counted from the GPS epoch
+    # 1980-01-06, as week and time of week; valid flags initialized | tow |
+    # week = 0x1C. Computed with datetime, not with the leap-second table.
+    import datetime
+    gps_epoch = datetime.datetime(1980, 1, 6, tzinfo=datetime.timezone.utc)
+    utc = datetime.datetime(2024, 1, 1, tzinfo=datetime.timezone.utc)
+    gps_s = (utc - gps_epoch).total_seconds() + 18
+    week, tow = divmod(int(gps_s), 604800)
+    field = struct.pack(">BBdHH", 14, 0x12, float(tow), week, 0x1C)
+    print(f"MIP GPS timestamp of UTC 2024-01-01T00:00:00Z: week {week} tow {tow} s:", hexs(field))
+    # Trajectory time on no known time base (the default): the internal
+    # clock, e.g. t = 0, with the valid flags clear.
+    print("MIP GPS timestamp, unknown time base, t = 0:", hexs(struct.pack(">BBdHH", 14, 0x12, 0.0, 0, 0)))

@@ -1,0 +1,282 @@
+// The protocol option table (protocol_options.hpp). Ranges are the wire's:
+// the cited field widths and reserved values of each protocol.
+#include "drivers/protocols/protocol_options.hpp"
+
+#include <charconv>
+#include <cmath>
+#include <limits>
+#include <sstream>
+#include <stdexcept>
+
+namespace imuemu::drivers {
+
+namespace {
+
+constexpr std::int64_t kInt62 = std::numeric_limits<std::int64_t>::max() / 2;
+
+std::int64_t as_int(const OptionValue& v) { return std::get<std::int64_t>(v); }
+double as_number(const OptionValue& v) { return std::get<double>(v); }
+bool as_bool(const OptionValue& v) { return std::get<bool>(v); }
+const std::string& as_choice(const OptionValue& v) { return std::get<std::string>(v); }
+
+ProtocolOption boolean(std::string protocol, std::string key, bool fallback, std::string help,
+                       std::function<void(ProtocolOptions&, bool)> set) {
+  ProtocolOption o;
+  o.protocol = std::move(protocol);
+  o.key = std::move(key);
+  o.type = OptionType::boolean;
+  o.default_text = fallback ? "true" : "false";
+  o.help = std::move(help);
+  o.apply = [set = std::move(set)](ProtocolOptions& p, const OptionValue& v) { set(p, as_bool(v)); };
+  return o;
+}
+
+ProtocolOption integer(std::string protocol, std::string key, std::int64_t lo, std::int64_t hi, std::string fallback,
+                       std::string help, std::function<void(ProtocolOptions&, std::int64_t)> set) {
+  ProtocolOption o;
+  o.protocol = std::move(protocol);
+  o.key = std::move(key);
+  o.type = OptionType::integer;
+  o.integer_min = lo;
+  o.integer_max = hi;
+  o.default_text = std::move(fallback);
+  o.help = std::move(help);
+  o.apply = [set = std::move(set)](ProtocolOptions& p, const OptionValue& v) { set(p, as_int(v)); };
+  return o;
+}
+
+ProtocolOption number(std::string protocol, std::string key, double lo, double hi, bool lo_open, std::string fallback,
+                      std::string help, std::function<void(ProtocolOptions&, double)> set) {
+  ProtocolOption o;
+  o.protocol = std::move(protocol);
+  o.key = std::move(key);
+  o.type = OptionType::number;
+  o.number_min = lo;
+  o.number_max = hi;
+  o.number_min_open = lo_open;
+  o.default_text = std::move(fallback);
+  o.help = std::move(help);
+  o.apply = [set = std::move(set)](ProtocolOptions& p, const OptionValue& v) { set(p, as_number(v)); };
+  return o;
+}
+
+ProtocolOption choice(std::string protocol, std::string key, std::vector<std::string> choices, std::string help,
+                      std::function<void(ProtocolOptions&, const std::string&)> set) {
+  ProtocolOption o;
+  o.protocol = std::move(protocol);
+  o.key = std::move(key);
+  o.type = OptionType::choice;
+  o.default_text = choices.front();
+  o.choices = std::move(choices);
+  o.help = std::move(help);
+  o.apply = [set = std::move(set)](ProtocolOptions& p, const OptionValue& v) { set(p, as_choice(v)); };
+  return o;
+}
+
+std::vector<ProtocolOption> make_table() {
+  std::vector<ProtocolOption> t;
+  // ---- native (docs/native-protocol.md)
+  t.push_back(boolean("native", "include_deltas", true, "send delta-theta / delta-velocity as well as the rates",
+                      [](ProtocolOptions& p, bool v) { p.stream.include_deltas = v; }));
+
+  // ---- mavlink2 (mavlink2.hpp; MAVLink guide: 0 is not a valid source id)
+  t.push_back(integer("mavlink2", "system_id", 1, 255, "1", "source system id (0 is broadcast)",
+                      [](ProtocolOptions& p, std::int64_t v) { p.stream.mavlink_system_id = static_cast<std::uint8_t>(v); }));
+  t.push_back(integer("mavlink2", "component_id", 1, 255, "200", "source component id (200 = MAV_COMP_ID_IMU)",
+                      [](ProtocolOptions& p, std::int64_t v) { p.stream.mavlink_component_id = static_cast<std::uint8_t>(v); }));
+  t.push_back(boolean("mavlink2", "heartbeat", true, "HEARTBEAT (MAV_TYPE_IMU, MAV_AUTOPILOT_INVALID) at 1 Hz",
+                      [](ProtocolOptions& p, bool v) { p.stream.mavlink_heartbeat = v; }));
+  t.push_back(boolean("mavlink2", "hil_sensor", true, "HIL_SENSOR (#107) per sample",
+                      [](ProtocolOptions& p, bool v) { p.stream.mavlink_hil_sensor = v; }));
+  t.push_back(boolean("mavlink2", "highres_imu", false, "HIGHRES_IMU (#105) per sample; at least one of the two",
+                      [](ProtocolOptions& p, bool v) { p.stream.mavlink_highres_imu = v; }));
+  t.push_back(integer("mavlink2", "sensor_id", 0, 255, "0", "the messages' `id` field",
+                      [](ProtocolOptions& p, std::int64_t v) { p.stream.mavlink_sensor_id = static_cast<std::uint8_t>(v); }));
+  t.push_back(number("mavlink2", "temperature_degC", -273.15, 1000.0, false, "not sent",
+                     "`temperature` field (degC, fields_updated bit 12)",
+                     [](ProtocolOptions& p, double v) { p.stream.mavlink_temperature_degC = v; }));
+
+  // ---- mip (mip.hpp)
+  t.push_back(boolean("mip", "include_deltas", true, "delta-theta / delta-velocity fields (0x80, 0x07 / 0x08)",
+                      [](ProtocolOptions& p, bool v) { p.stream.include_deltas = v; }));
+  t.push_back(choice("mip", "time_base", {"unknown", "gps", "utc"},
+                     "what trajectory time is: unknown = the GPS timestamp field carries it as the device's internal "
+                     "clock with the valid flags clear; gps = GPS time (+ gps_time_at_t0_ns), flagged valid; utc = "
+                     "POSIX UTC, converted to GPS time with the leap seconds (default gps when gps_time_at_t0_ns is "
+                     "given)",
+                     [](ProtocolOptions& p, const std::string& v) {
+                       p.stream.mip_time_base = v == "gps"   ? MipTimeBase::gps
+                                                : v == "utc" ? MipTimeBase::utc
+                                                             : MipTimeBase::unknown;
+                     }));
+  t.push_back(integer("mip", "gps_time_at_t0_ns", 0, kInt62, "0",
+                      "time_base gps: GPS time (ns since 1980-01-06, no leap seconds) of trajectory time 0",
+                      [](ProtocolOptions& p, std::int64_t v) { p.stream.mip_gps_time_at_t0_ns = v; }));
+  t.push_back(integer("mip", "gps_minus_utc_s", 0, 255, "leap-second table (18 since 2017)",
+                      "time_base utc: GPS - UTC in whole seconds, instead of the built-in leap-second table",
+                      [](ProtocolOptions& p, std::int64_t v) { p.stream.mip_gps_minus_utc_s = static_cast<int>(v); }));
+  t.push_back(boolean("mip", "overrange_status", true, "overrange status field (0x80, 0x18)",
+                      [](ProtocolOptions& p, bool v) { p.stream.mip_overrange_status = v; }));
+
+  // ---- dronecan (dronecan.hpp)
+  t.push_back(integer("dronecan", "node_id", 1, 127, "42", "source node id, unique per CAN interface",
+                      [](ProtocolOptions& p, std::int64_t v) { p.can.dronecan.node_id = static_cast<std::uint8_t>(v); }));
+  t.push_back(integer("dronecan", "raw_imu_priority", 0, 31, "8", "RawIMU transfer priority (lower is more urgent)",
+                      [](ProtocolOptions& p, std::int64_t v) { p.can.dronecan.raw_imu_priority = static_cast<std::uint8_t>(v); }));
+  t.push_back(integer("dronecan", "node_status_priority", 0, 31, "24", "NodeStatus transfer priority",
+                      [](ProtocolOptions& p, std::int64_t v) {
+                        p.can.dronecan.node_status_priority = static_cast<std::uint8_t>(v);
+                      }));
+  t.push_back(number("dronecan", "node_status_period_s", 0.0, 1.0, true, "1.0",
+                     "NodeStatus period (s; DSDL MAX_BROADCASTING_PERIOD_MS = 1000)", [](ProtocolOptions& p, double v) {
+                       p.can.dronecan.node_status_period_ns = static_cast<TimeNs>(std::llround(v * 1e9));
+                     }));
+  t.push_back(integer("dronecan", "timestamp_offset_ns", -kInt62, kInt62, "0",
+                      "added to the sample time in RawIMU timestamp.usec",
+                      [](ProtocolOptions& p, std::int64_t v) { p.can.dronecan.timestamp_offset_ns = v; }));
+  t.push_back(boolean("dronecan", "send_integrals", true, "delta-theta / delta-velocity as the RawIMU integrals",
+                      [](ProtocolOptions& p, bool v) { p.can.dronecan.send_integrals = v; }));
+
+  // ---- j1939 (j1939.hpp)
+  t.push_back(integer("j1939", "source_address", 0, 253, "128",
+                      "source address, unique per CAN interface (254 null, 255 global)",
+                      [](ProtocolOptions& p, std::int64_t v) { p.can.j1939.source_address = static_cast<std::uint8_t>(v); }));
+  t.push_back(integer("j1939", "priority", 0, 7, "3", "CAN id priority of the three PGNs",
+                      [](ProtocolOptions& p, std::int64_t v) { p.can.j1939.priority = static_cast<std::uint8_t>(v); }));
+  t.push_back(boolean("j1939", "send_angular_rate", true, "Angular Rate Information (PGN 61482)",
+                      [](ProtocolOptions& p, bool v) { p.can.j1939.send_angular_rate = v; }));
+  t.push_back(boolean("j1939", "send_acceleration", true, "Acceleration Sensor (PGN 61485)",
+                      [](ProtocolOptions& p, bool v) { p.can.j1939.send_acceleration = v; }));
+  t.push_back(boolean("j1939", "send_slope", false,
+                      "Slope Sensor Information 2 (PGN 61481): pitch and roll of the sensor; at least one of the three",
+                      [](ProtocolOptions& p, bool v) { p.can.j1939.send_slope = v; }));
+  t.push_back(number("j1939", "measurement_latency_ms", 0.0, 125.0, false, "not available",
+                     "ARI / SSI2 byte 8 (SPN 4989 / 4982, 0.5 ms/bit)",
+                     [](ProtocolOptions& p, double v) { p.can.j1939.measurement_latency_ms = v; }));
+  t.push_back(choice("j1939", "axes", {"j1939da", "iso8855", "sae-j670e"},
+                     "vehicle axes on the wire: j1939da = the SPN definitions (ARI, SSI2 z down; ACCS z up), iso8855 "
+                     "= all z up, sae-j670e = all z down",
+                     [](ProtocolOptions& p, const std::string& v) {
+                       p.can.j1939.axes = v == "iso8855"     ? j1939::VehicleAxes::kIso8855ZUp
+                                          : v == "sae-j670e" ? j1939::VehicleAxes::kSaeJ670eZDown
+                                                             : j1939::VehicleAxes::kJ1939da;
+                     }));
+  return t;
+}
+
+std::string join_choices(const std::vector<std::string>& names) {
+  std::string s;
+  for (std::size_t i = 0; i < names.size(); ++i) {
+    if (i > 0) s += (i + 1 == names.size()) ? " or " : ", ";
+    s += names[i];
+  }
+  return s;
+}
+
+}  // namespace
+
+const std::vector<ProtocolOption>& protocol_option_table() {
+  static const std::vector<ProtocolOption> table = make_table();
+  return table;
+}
+
+std::vector<const ProtocolOption*> protocol_options_of(const std::string& protocol) {
+  std::vector<const ProtocolOption*> rows;
+  for (const ProtocolOption& o : protocol_option_table())
+    if (o.protocol == protocol) rows.push_back(&o);
+  return rows;
+}
+
+std::string protocol_option_table_name(const std::string& protocol) {
+  return protocol == "mavlink2" ? "mavlink" : protocol;
+}
+
+std::string command_line_flag(const ProtocolOption& option) {
+  std::string key = option.key;
+  for (char& c : key)
+    if (c == '_') c = '-';
+  return "--" + protocol_option_table_name(option.protocol) + "-" + key;
+}
+
+std::string allowed_text(const ProtocolOption& option) {
+  switch (option.type) {
+    case OptionType::boolean:
+      return "true or false";
+    case OptionType::integer:
+      return "an integer in " + std::to_string(option.integer_min) + ".." + std::to_string(option.integer_max);
+    case OptionType::number: {
+      std::ostringstream range;
+      range << "a number in " << (option.number_min_open ? "(" : "[") << option.number_min << ", " << option.number_max
+            << "]";
+      return range.str();
+    }
+    case OptionType::choice:
+      return "one of " + join_choices(option.choices);
+  }
+  return "";
+}
+
+OptionValue parse_option_text(const ProtocolOption& option, const std::string& text) {
+  auto refuse = [&](const std::string& why) -> std::invalid_argument {
+    return std::invalid_argument("'" + text + "' " + why + "; expected " + allowed_text(option));
+  };
+  switch (option.type) {
+    case OptionType::boolean:
+      if (text == "true" || text == "1" || text == "yes" || text == "on") return true;
+      if (text == "false" || text == "0" || text == "no" || text == "off") return false;
+      throw refuse("is not a boolean");
+    case OptionType::integer: {
+      std::int64_t v = 0;
+      const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), v);
+      if (text.empty() || ec != std::errc() || end != text.data() + text.size()) throw refuse("is not an integer");
+      if (v < option.integer_min || v > option.integer_max) throw refuse("is out of range");
+      return v;
+    }
+    case OptionType::number: {
+      double v = 0.0;
+      const auto [end, ec] = std::from_chars(text.data(), text.data() + text.size(), v);
+      if (text.empty() || ec != std::errc() || end != text.data() + text.size() || !std::isfinite(v))
+        throw refuse("is not a finite number");
+      if (v < option.number_min || v > option.number_max || (option.number_min_open && v == option.number_min))
+        throw refuse("is out of range");
+      return v;
+    }
+    case OptionType::choice:
+      for (const std::string& c : option.choices)
+        if (c == text) return text;
+      throw refuse("is not allowed");
+  }
+  throw refuse("is not understood");
+}
+
+ProtocolOptions default_protocol_options(double rate_hz) {
+  ProtocolOptions p;
+  p.stream.nominal_sample_rate_hz = rate_hz;
+  return p;
+}
+
+std::optional<OptionProblem> finish_protocol_options(const std::string& protocol, ProtocolOptions& options,
+                                                     const std::set<std::string>& given) {
+  const auto has = [&given](const char* key) { return given.count(key) != 0; };
+  if (protocol == "mavlink2" && !options.stream.mavlink_hil_sensor && !options.stream.mavlink_highres_imu)
+    return OptionProblem{has("hil_sensor") ? "hil_sensor" : "highres_imu",
+                         "with hil_sensor and highres_imu both false no sample is sent; enable at least one"};
+  if (protocol == "mip") {
+    StreamEncoderOptions& s = options.stream;
+    // gps_time_at_t0_ns states a GPS time base by itself.
+    if (has("gps_time_at_t0_ns") && !has("time_base")) s.mip_time_base = MipTimeBase::gps;
+    if (has("gps_time_at_t0_ns") && s.mip_time_base != MipTimeBase::gps)
+      return OptionProblem{"gps_time_at_t0_ns", "applies to time_base = \"gps\" only"};
+    if (has("gps_minus_utc_s") && s.mip_time_base != MipTimeBase::utc)
+      return OptionProblem{"gps_minus_utc_s", "applies to time_base = \"utc\" only"};
+  }
+  if (protocol == "j1939") {
+    const j1939::J1939Options& j = options.can.j1939;
+    if (!j.send_angular_rate && !j.send_acceleration && !j.send_slope)
+      return OptionProblem{"send_angular_rate",
+                           "send_angular_rate, send_acceleration and send_slope are all false; nothing would be sent"};
+  }
+  return std::nullopt;
+}
+
+}  // namespace imuemu::drivers
