@@ -39,6 +39,8 @@ struct EmitArgs {
   std::string stats_json_path;
   std::string late_ticks = "drop"; // drop | send: a tick woken more than a period late (EngineOptions::drop_late_ticks)
   std::string start = "now";    // now | next-second
+  std::string sensor = "ideal";  // sensor error model: a preset or a TOML file (docs/sensor-models.md)
+  std::int64_t seed = -1;        // < 0: the file's seed (0 for a preset)
 };
 
 int emit(const EmitArgs& args);

@@ -374,7 +374,7 @@ std::vector<TermReport> describe(const SensorModelSpec& spec, double fs) {
       out.push_back({name, term, value, discrete});
     };
     if (!s.white_density.isZero())
-      add("white noise", "N = " + fmt3(s.white_density) + " " + u + "/sqrt(Hz) (one-sided PSD)",
+      add("white noise", "N = " + fmt3(s.white_density) + " " + u + "/sqrt(Hz) (IEEE 952 N)",
           "sigma = N sqrt(fs) = " + fmt3(s.white_density * std::sqrt(fs)) + " " + u + " per sample");
     if (!s.bias_instability.isZero()) {
       const FlickerProcesses p = flicker_processes(s.bias_instability.maxCoeff(), s.flicker_tau_min_s, s.flicker_tau_max_s);
