@@ -195,6 +195,12 @@ FlickerProcesses flicker_processes(double bias_instability, double tau_min_s, do
   return p;
 }
 
+std::uint32_t hold_period(double tau_s, double dt_s) {
+  const double m = std::floor(tau_s / (kHoldRatio * dt_s));
+  if (!(m >= 1.0)) return 1;
+  return m > 1e6 ? 1'000'000u : static_cast<std::uint32_t>(m);
+}
+
 // Terms of the stream keys (never renumber: it would change the noise).
 enum Term : unsigned { kTermWhite = 1, kTermFlicker = 2, kTermWalk = 3, kTermGaussMarkov = 4, kTermTurnOn = 5 };
 
@@ -228,9 +234,11 @@ void SensorModel::init_triad(Triad& tr, const TriadSpec& s, unsigned sensor, std
     ax.flicker = fp[a].count > 0;
     ax.flicker_count = fp[a].count;
     for (int j = 0; j < fp[a].count; ++j) {
-      const double phi = std::exp(-dt_s_ / fp[a].tau_s[j]);
-      ax.flicker_phi[j] = phi;
-      ax.flicker_drive[j] = fp[a].sigma * std::sqrt(-std::expm1(-2.0 * dt_s_ / fp[a].tau_s[j]));  // sigma sqrt(1 - phi^2)
+      const std::uint32_t period = hold_period(fp[a].tau_s[j], dt_s_);
+      const double step_s = period * dt_s_;
+      ax.flicker_period[j] = ax.flicker_countdown[j] = period;
+      ax.flicker_phi[j] = std::exp(-step_s / fp[a].tau_s[j]);
+      ax.flicker_drive[j] = fp[a].sigma * std::sqrt(-std::expm1(-2.0 * step_s / fp[a].tau_s[j]));  // sigma sqrt(1 - phi^2)
       ax.flicker_stream[j].state = stream_key(seed, dev, sensor, a, kTermFlicker, static_cast<unsigned>(j));
       ax.flicker_state[j] = fp[a].sigma * ax.flicker_stream[j].gaussian();  // stationary start
     }
@@ -238,8 +246,10 @@ void SensorModel::init_triad(Triad& tr, const TriadSpec& s, unsigned sensor, std
     ax.walk_step = s.random_walk[a] * std::sqrt(dt_s_);
     ax.walk_stream.state = stream_key(seed, dev, sensor, a, kTermWalk, 0);
     ax.gm = s.gauss_markov_sigma[a] > 0.0;
-    ax.gm_phi = std::exp(-dt_s_ / s.gauss_markov_tau_s[a]);
-    ax.gm_drive = s.gauss_markov_sigma[a] * std::sqrt(-std::expm1(-2.0 * dt_s_ / s.gauss_markov_tau_s[a]));
+    ax.gm_period = ax.gm_countdown = hold_period(s.gauss_markov_tau_s[a], dt_s_);
+    const double gm_step_s = ax.gm_period * dt_s_;
+    ax.gm_phi = std::exp(-gm_step_s / s.gauss_markov_tau_s[a]);
+    ax.gm_drive = s.gauss_markov_sigma[a] * std::sqrt(-std::expm1(-2.0 * gm_step_s / s.gauss_markov_tau_s[a]));
     ax.gm_stream.state = stream_key(seed, dev, sensor, a, kTermGaussMarkov, 0);
     if (ax.gm) ax.gm_state = s.gauss_markov_sigma[a] * ax.gm_stream.gaussian();
     Stream turn_on{stream_key(seed, dev, sensor, a, kTermTurnOn, 0)};
@@ -276,9 +286,15 @@ void SensorModel::advance(Triad& tr) noexcept {
   for (Axis& ax : tr.axis) {
     if (ax.flicker)
       for (int j = 0; j < ax.flicker_count; ++j)
-        ax.flicker_state[j] = ax.flicker_phi[j] * ax.flicker_state[j] + ax.flicker_drive[j] * ax.flicker_stream[j].gaussian();
+        if (--ax.flicker_countdown[j] == 0) {  // exact step over flicker_period samples, held between
+          ax.flicker_countdown[j] = ax.flicker_period[j];
+          ax.flicker_state[j] = ax.flicker_phi[j] * ax.flicker_state[j] + ax.flicker_drive[j] * ax.flicker_stream[j].gaussian();
+        }
     if (ax.walk) ax.walk_state += ax.walk_step * ax.walk_stream.gaussian();
-    if (ax.gm) ax.gm_state = ax.gm_phi * ax.gm_state + ax.gm_drive * ax.gm_stream.gaussian();
+    if (ax.gm && --ax.gm_countdown == 0) {
+      ax.gm_countdown = ax.gm_period;
+      ax.gm_state = ax.gm_phi * ax.gm_state + ax.gm_drive * ax.gm_stream.gaussian();
+    }
   }
 }
 
@@ -398,8 +414,11 @@ std::vector<TermReport> describe(const SensorModelSpec& spec, double fs) {
         phi[a] = std::exp(-dt / s.gauss_markov_tau_s[a]);
         drive[a] = s.gauss_markov_sigma[a] * std::sqrt(-std::expm1(-2.0 * dt / s.gauss_markov_tau_s[a]));
       }
+      Vec3 period;
+      for (int a = 0; a < 3; ++a) period[a] = hold_period(s.gauss_markov_tau_s[a], dt);
       add("Gauss-Markov bias", "sigma = " + fmt3(s.gauss_markov_sigma) + " " + u + ", tau = " + fmt3(s.gauss_markov_tau_s) + " s",
-          "phi = " + fmt3(phi) + ", drive sigma = " + fmt3(drive) + " " + u);
+          "per sample phi = " + fmt3(phi) + ", drive sigma = " + fmt3(drive) + " " + u + " (stepped exactly every " +
+              fmt3(period) + " samples)");
     }
     if (!s.turn_on_bias.isZero() || !s.turn_on_bias_sigma.isZero())
       add("turn-on bias", "fixed " + fmt3(s.turn_on_bias) + " " + u + ", sigma " + fmt3(s.turn_on_bias_sigma) + " " + u,

@@ -20,6 +20,11 @@
 //    [tau_min, tau_max]; derivation in docs/sensor-models.md.
 //  * Gauss-Markov bias: exact discretisation phi = exp(-dt/tau),
 //    x[k+1] = phi x[k] + sigma sqrt(1 - phi^2) w[k], started stationary.
+//    A slow process (tau >= kHoldRatio * dt, the flicker's and most bias
+//    processes) is stepped exactly over M = floor(tau / (kHoldRatio dt))
+//    samples and held between steps: exact at every step, its Allan curve
+//    unchanged (the hold moves less than sqrt(2/kHoldRatio) sigma), at 1/M
+//    of the cost (docs/sensor-models.md).
 //
 // The model runs at the sample interval it is constructed with (not baked to
 // an output rate): the signal chain of the next issue runs it at an internal
@@ -91,6 +96,10 @@ struct SensorModelSpec {
 void validate(const SensorModelSpec& spec);
 
 inline constexpr int kMaxFlickerProcesses = 12;
+// A Gauss-Markov process is stepped at most every tau / kHoldRatio.
+inline constexpr double kHoldRatio = 64.0;
+// Samples between steps of a process of correlation time tau at interval dt.
+std::uint32_t hold_period(double tau_s, double dt_s);
 
 // Per-axis saturation flags of Measurement::saturated_axes.
 enum SaturatedAxis : std::uint8_t {
@@ -152,10 +161,12 @@ class SensorModel {
     Stream white_stream;
     int flicker_count = 0;
     std::array<double, kMaxFlickerProcesses> flicker_phi{}, flicker_drive{}, flicker_state{};
+    std::array<std::uint32_t, kMaxFlickerProcesses> flicker_period{}, flicker_countdown{};
     std::array<Stream, kMaxFlickerProcesses> flicker_stream{};
     double walk_step = 0.0, walk_state = 0.0;
     Stream walk_stream;
     double gm_phi = 0.0, gm_drive = 0.0, gm_state = 0.0;
+    std::uint32_t gm_period = 1, gm_countdown = 1;
     Stream gm_stream;
   };
   struct Triad {
