@@ -240,7 +240,11 @@ void SensorModel::init_triad(Triad& tr, const TriadSpec& s, unsigned sensor, std
       ax.flicker_phi[j] = std::exp(-step_s / fp[a].tau_s[j]);
       ax.flicker_drive[j] = fp[a].sigma * std::sqrt(-std::expm1(-2.0 * step_s / fp[a].tau_s[j]));  // sigma sqrt(1 - phi^2)
       ax.flicker_stream[j].state = stream_key(seed, dev, sensor, a, kTermFlicker, static_cast<unsigned>(j));
-      ax.flicker_state[j] = fp[a].sigma * ax.flicker_stream[j].gaussian();  // stationary start
+      // Starts at 0: the bias at switch-on is the turn-on bias; the flicker
+      // is the in-run change from it (a stationary start would add a random
+      // offset of about 2 B, counting the run-to-run bias twice). The Allan
+      // variance does not see the difference: it is blind to offsets.
+      ax.flicker_state[j] = 0.0;
     }
     ax.walk = s.random_walk[a] > 0.0;
     ax.walk_step = s.random_walk[a] * std::sqrt(dt_s_);

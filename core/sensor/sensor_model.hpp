@@ -15,7 +15,8 @@
 //    sample (variance grows as K^2 t; Allan deviation K * sqrt(tau / 3)).
 //  * Bias instability B (flicker, 1/f): a sum of first-order Gauss-Markov
 //    processes with correlation times one decade apart, from tau_min/10 to
-//    tau_max*10, each of variance B^2 ln(10) / pi. Its Allan deviation is
+//    tau_max*10, each of variance B^2 ln(10) / pi, started at 0 (the in-run
+//    change from the turn-on bias). Its Allan deviation is
 //    0.664 B (= B sqrt(2 ln 2 / pi)) within -2.3 % / +0.9 % over
 //    [tau_min, tau_max]; derivation in docs/sensor-models.md.
 //  * Gauss-Markov bias: exact discretisation phi = exp(-dt/tau),
