@@ -15,6 +15,7 @@
 #include "core/attitude.hpp"
 #include "core/mounting.hpp"
 #include "core/stream.hpp"
+#include "daemon/error_model_config.hpp"
 #include "daemon/scene_runner.hpp"
 #include "core/earth.hpp"
 #include "core/pipeline.hpp"
@@ -95,6 +96,9 @@ int run_guarded(Fn&& fn) {
   } catch (const io::CsvFormatError& e) {
     std::cerr << "imuemu: " << e.what() << "\n";
     return kBadInput;
+  } catch (const scene::SceneError& e) {
+    std::cerr << "imuemu: " << e.what() << "\n";
+    return kBadInput;
   } catch (const interp::InterpolationError& e) {
     std::cerr << "imuemu: cannot interpolate: " << e.what() << "\n";
     return kCannotProcess;
@@ -108,6 +112,19 @@ int run_guarded(Fn&& fn) {
     std::cerr << "imuemu: internal error: " << e.what() << "\n";
     return kInternalError;
   }
+}
+
+// The sensor stage of `generate` (daemon/error_model_config.cpp): the same
+// SensorModel::measure on sample k as imuemud's producer on tick k.
+void apply_sensor_stage(const scene::ErrorModelConfig& model, const std::string& device, std::int64_t rate_hz,
+                        TimeNs t0_ns, std::vector<ImuSample>& imu, bool quiet) {
+  if (model.ideal()) return;
+  if (!quiet)
+    for (const std::string& line : scene::error_model_lines(model, static_cast<double>(rate_hz)))
+      std::cerr << "imuemu: sensor " << device << ": " << line << "\n";
+  const std::uint64_t saturated = scene::apply_error_model(model, device, rate_hz, t0_ns, imu);
+  if (!quiet && saturated > 0)
+    std::cerr << "imuemu: sensor " << device << ": " << saturated << " samples saturated (clipped to the range)\n";
 }
 
 }  // namespace
@@ -137,6 +154,11 @@ int generate_for_scene(const GenerateArgs& args) {
   }
   BatchResult result = run_batch(knots, opt);
   std::erase_if(result.imu, [end_ns](const ImuSample& s) { return s.t_ns >= end_ns; });
+  const scene::ErrorModelConfig model =
+      args.sensor.empty() ? imu->error_model : scene::error_model_from_option(args.sensor, args.seed);
+  scene::ErrorModelConfig seeded = model;
+  if (args.seed >= 0) seeded.spec.seed = static_cast<std::uint64_t>(args.seed);
+  if (!knots.empty()) apply_sensor_stage(seeded, imu->name, imu->rate_hz, knots.front().t_ns, result.imu, args.quiet);
   io::write_imu_csv(args.out_path, result.imu);
   if (!args.quiet)
     std::cerr << "imuemu: scene " << sc.name << ", imu " << imu->name << ": " << knots.size() << " knots -> "
@@ -170,11 +192,13 @@ int generate(const GenerateArgs& args) {
     const std::vector<Pose> knots = io::poses_in_scene(trajectory, opt.scene.physics);
     if (args.delta < 0)
       opt.kernel.delta = auto_delta(knots, args.rate_hz, opt.interpolation.method == interp::Method::hermite ? 1.0 : 2.0);
+    const scene::ErrorModelConfig model = scene::error_model_from_option(args.sensor.empty() ? "ideal" : args.sensor, args.seed);
     BatchResult result;
     {
       ProgressBar bar(!args.quiet);
       result = run_batch(knots, opt, [&](double f) { bar.update(f); });
     }
+    if (!knots.empty()) apply_sensor_stage(model, "imu0", args.rate_hz, knots.front().t_ns, result.imu, args.quiet);
     io::write_imu_csv(args.out_path, result.imu);
     if (!args.trajectory_out_path.empty())
       io::write_trajectory_csv(args.trajectory_out_path, result.trajectory, opt.scene.physics);

@@ -44,6 +44,10 @@ struct GenerateArgs {
   // knots beyond what those samples can see are not read).
   std::string scene_file, imu_name;
   double max_seconds = -1.0;
+  // Sensor error model (docs/sensor-models.md): a preset, a TOML file, or
+  // "ideal"; empty: the scene's [imu.error_model] with --scene-file, else ideal.
+  std::string sensor;
+  std::int64_t seed = -1;  // >= 0: replaces the model's seed
 };
 int generate(const GenerateArgs& args);
 
@@ -93,12 +97,21 @@ struct StreamArgs {
   double blend_s = 0.2;
   double margin_s = 0.1;        // extra delay beyond the engine's look-ahead: absorbs input jitter
   double duration_s = -1.0;     // < 0: until the input ends (or SIGINT/SIGTERM)
+  std::string sensor = "ideal"; // sensor error model: preset or TOML file (docs/sensor-models.md)
+  std::int64_t seed = -1;
 };
 int stream(const StreamArgs& args);
 
 // "udp:127.0.0.1:5005" (scheme "udp") -> address and port; std::invalid_argument
 // naming the option value otherwise. Used by `stream` and `emit` --source.
 io::NetEndpoint endpoint_of(const std::string& spec, const std::string& scheme);
+
+// The sensor models' --help text: the presets and the one noise convention.
+extern const char* const kSensorOptionHelp;
+
+// `imuemu sensors`: the presets, their terms with the discrete sigma at
+// rate_hz, and their sources.
+int sensors(double rate_hz);
 
 // The README's main job: sample flight -> generate -> verify, in out_dir.
 int demo(const std::string& out_dir, std::int64_t rate_hz);

@@ -166,6 +166,7 @@ struct Device {
   OnDemandSource* on_demand = nullptr;  // trajectory input: == samples
   bool mounted = false;                 // mounting is not the identity
   std::vector<Pose> sensor_knots;       // trajectory input, mounted: the sensor's poses
+  std::optional<sensor::SensorModel> sensor;  // producer only; empty: the ideal sensor
   boost::lockfree::spsc_queue<Slot> ring;
 
   // Producer thread only.
@@ -182,7 +183,7 @@ struct Device {
   // Shared (relaxed atomics; snapshot by stats()).
   std::atomic<std::uint64_t> end_tick{std::numeric_limits<std::uint64_t>::max()};  // no tick at or after
   std::atomic<std::uint64_t> ticks{0}, emitted{0}, exact{0}, extrapolated{0}, blending{0}, not_sent{0},
-      producer_late{0}, deadline_misses{0}, dropped_late{0}, write_errors{0}, last_counter{0};
+      producer_late{0}, deadline_misses{0}, dropped_late{0}, write_errors{0}, last_counter{0}, saturated{0};
   std::atomic<TimeNs> engine_lag_ns{0};
   LatenessHistogram lateness;
   mutable std::mutex live_mutex;  // producer <-> stats(), never the emission thread
@@ -275,6 +276,8 @@ EmissionEngine::EmissionEngine(EngineOptions options, std::vector<DeviceOptions>
     lo.underrun = d->options.underrun;
     lo.blend_ns = d->options.blend_ns;
     d->emitter = std::make_unique<live::LiveEmitter>(lo);
+    if (d->options.sensor_model && !d->options.sensor_model->is_ideal())
+      d->sensor.emplace(*d->options.sensor_model, static_cast<double>(d->options.rate_hz), d->options.name);
     d->mounted = d->options.mounting.sensor_to_body != Mat3::Identity() || !d->options.mounting.lever_arm_b_m.isZero();
     if (o.source == nullptr) {
       if (d->mounted) {
@@ -338,26 +341,36 @@ void EmissionEngine::Impl::produce(Device& d, bool time_gated) {
       drivers::ImuFrameInput& f = slot.frame;
       f.sample_counter = k;
       f.t_ns = tick_ns;
-      f.gyro_rad_s = e.imu.gyro_rad_s;
-      f.accel_m_s2 = e.imu.accel_m_s2;
+      // The sensor model (core/sensor/): tick k is its sample k, as in
+      // `imuemu generate` (daemon/error_model_config.cpp apply_error_model).
+      ImuSample measured = e.imu;
+      if (d.sensor) {
+        const sensor::Measurement m = d.sensor->measure(k, e.imu.gyro_rad_s, e.imu.accel_m_s2);
+        measured.gyro_rad_s = m.gyro_rad_s;
+        measured.accel_m_s2 = m.accel_m_s2;
+        if (m.saturated_axes != 0) f.status |= drivers::kStatusSaturated;  // counted when sent
+      }
+      f.gyro_rad_s = measured.gyro_rad_s;
+      f.accel_m_s2 = measured.accel_m_s2;
       f.period_ns = k > 0 ? tick_ns - grid_ns(t0_ns, k - 1, d.options.rate_hz)
                           : grid_ns(t0_ns, 1, d.options.rate_hz) - tick_ns;
       // Integrals over the period ending at t_k: trapezoid between the
       // previous tick's sample and this one (second order; no coning or
-      // sculling terms, as the ideal IMU has no sensor model yet). Without a
-      // previous sample (first tick, after a gap): rectangle.
+      // sculling terms: the signal chain of the next issue integrates at its
+      // internal rate). Without a previous sample (first tick, after a gap):
+      // rectangle.
       const double dt_s = static_cast<double>(f.period_ns) * 1e-9;
       if (d.previous_imu && d.previous_imu->first + 1 == k) {
-        f.delta_theta_rad = 0.5 * (d.previous_imu->second.gyro_rad_s + e.imu.gyro_rad_s) * dt_s;
-        f.delta_velocity_m_s = 0.5 * (d.previous_imu->second.accel_m_s2 + e.imu.accel_m_s2) * dt_s;
+        f.delta_theta_rad = 0.5 * (d.previous_imu->second.gyro_rad_s + measured.gyro_rad_s) * dt_s;
+        f.delta_velocity_m_s = 0.5 * (d.previous_imu->second.accel_m_s2 + measured.accel_m_s2) * dt_s;
       } else {
-        f.delta_theta_rad = e.imu.gyro_rad_s * dt_s;
-        f.delta_velocity_m_s = e.imu.accel_m_s2 * dt_s;
+        f.delta_theta_rad = measured.gyro_rad_s * dt_s;
+        f.delta_velocity_m_s = measured.accel_m_s2 * dt_s;
       }
       if (!e.exact()) f.status |= drivers::kStatusExtrapolated;
       if (d.options.can_encoder && d.options.can_encoder->needs_level_attitude())
         set_level_attitude(e.kinematics, d.options.pipeline.scene.physics, f);
-      d.previous_imu.emplace(k, e.imu);
+      d.previous_imu.emplace(k, measured);
     } else {
       d.previous_imu.reset();
     }
@@ -499,6 +512,7 @@ void EmissionEngine::Impl::emit_tick(Device& d, std::uint64_t k, bool drop) {
     d.write_errors.fetch_add(1, std::memory_order_relaxed);
   }
   if (d.options.gpio) d.options.gpio->pulse(frame.sample_counter, frame.t_ns);
+  if ((frame.status & drivers::kStatusSaturated) != 0) d.saturated.fetch_add(1, std::memory_order_relaxed);
   switch (slot->status) {
     case live::EmissionStatus::exact: d.exact.fetch_add(1, std::memory_order_relaxed); break;
     case live::EmissionStatus::extrapolated: d.extrapolated.fetch_add(1, std::memory_order_relaxed); break;
@@ -711,6 +725,7 @@ EngineStats EmissionEngine::stats() const {
     ds.deadline_misses = d.deadline_misses.load(std::memory_order_relaxed);
     ds.dropped_late = d.dropped_late.load(std::memory_order_relaxed);
     ds.write_errors = d.write_errors.load(std::memory_order_relaxed);
+    ds.saturated = d.saturated.load(std::memory_order_relaxed);
     ds.packets = ds.transport.frames_sent;
     ds.bytes = ds.transport.bytes_sent;
     ds.queue_overflows = ds.transport.dropped_queue_full;
@@ -783,6 +798,7 @@ nlohmann::json to_json(const EngineStats& s) {
                      {"deadline_misses", d.deadline_misses},
                      {"dropped_late", d.dropped_late},
                      {"write_errors", d.write_errors},
+                     {"saturated", d.saturated},
                      {"packets", d.packets},
                      {"bytes", d.bytes},
                      {"queue_overflows", d.queue_overflows},

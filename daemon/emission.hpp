@@ -34,6 +34,7 @@
 #include "core/live_emitter.hpp"
 #include "core/mounting.hpp"
 #include "core/pipeline.hpp"
+#include "core/sensor/sensor_model.hpp"
 #include "core/time_mapping.hpp"
 #include "daemon/lateness_histogram.hpp"
 #include "drivers/gpio_sync.hpp"
@@ -80,6 +81,10 @@ struct DeviceOptions {
   // Where this IMU sits on the body (core/mounting.hpp): the device smooths
   // and differentiates the sensor's own poses, sensor_pose(pose, mounting).
   Mounting mounting;
+  // The sensor's errors (core/sensor/sensor_model.hpp), run at rate_hz on
+  // tick k as sample k (the noise streams are keyed by the device's name);
+  // empty or ideal: no stage at all.
+  std::optional<sensor::SensorModelSpec> sensor_model;
 };
 
 enum class StartAlignment { now, next_realtime_second };
@@ -135,6 +140,7 @@ struct DeviceStats {
   std::uint64_t deadline_misses = 0;  // woke more than one period late
   std::uint64_t dropped_late = 0;     // deadline misses not sent (EngineOptions::drop_late_ticks)
   std::uint64_t write_errors = 0;     // frames the transport refused (any reason)
+  std::uint64_t saturated = 0;        // samples with an axis clipped to the sensor's range (kStatusSaturated)
   std::uint64_t packets = 0, bytes = 0, queue_overflows = 0;  // the transport's own counters
   drivers::TransportCounters transport;
   std::optional<drivers::GpioSyncCounters> gpio;

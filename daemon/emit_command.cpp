@@ -7,6 +7,8 @@
 // k-th output line, bit for bit when exact (the stream is the batch's loop).
 #include "daemon/emit_command.hpp"
 
+#include "daemon/error_model_config.hpp"
+
 #include <signal.h>
 #include <stdlib.h>
 #include <unistd.h>
@@ -159,6 +161,13 @@ int emit(const EmitArgs& a) {
   dev.rate_hz = a.rate_hz;
   dev.pipeline.scene = scene;
   dev.pipeline.rate_hz = a.rate_hz;
+  try {
+    const scene::ErrorModelConfig em = scene::error_model_from_option(a.sensor, a.seed);
+    if (!em.ideal()) dev.sensor_model = em.spec;
+  } catch (const std::exception& e) {
+    std::cerr << "imuemu emit: --sensor: " << e.what() << "\n";
+    return kBadInput;
+  }
 
   // Input.
   try {
@@ -335,6 +344,8 @@ void add_emit_command(CLI::App& app, int& exit_code) {
   c->add_flag("--lock-memory", a.lock_memory, "mlockall(MCL_CURRENT|MCL_FUTURE)");
   c->add_flag("--require-realtime", a.require_realtime, "Fail instead of running without the priority or the memory lock");
   c->add_option("--stats-json", a.stats_json_path, "Write the final statistics (JSON) here");
+  c->add_option("--sensor", a.sensor, kSensorOptionHelp)->capture_default_str();
+  c->add_option("--seed", a.seed, "Noise seed of the sensor model (integer >= 0; default: the file's, 0 for a preset)")->check(CLI::NonNegativeNumber);
   c->add_option("--late-ticks", a.late_ticks,
                 "A tick whose wake-up missed its deadline by more than a period: drop (as a real IMU that skips a "
                 "sample: the sample time jumps; a sequence gap only in native) or send (late)")

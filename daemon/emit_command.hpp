@@ -43,6 +43,8 @@ struct EmitArgs {
   // Protocol options as given on the command line: flag (--mavlink-system-id,
   // from drivers/protocols/protocol_options.hpp) -> its text.
   std::map<std::string, std::string> protocol_options;
+  std::string sensor = "ideal";  // sensor error model: a preset or a TOML file (docs/sensor-models.md)
+  std::int64_t seed = -1;        // < 0: the file's seed (0 for a preset)
 };
 
 int emit(const EmitArgs& args);

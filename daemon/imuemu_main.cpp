@@ -50,6 +50,8 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({"ecef", "flat"}));
   g->add_option("--gravity", gen.gravity_m_s2, "flat scene: gravity magnitude (m/s^2), along NED down")->capture_default_str();
   g->add_flag("--quiet", gen.quiet, "No progress bar or summary");
+  g->add_option("--sensor", gen.sensor, std::string(kSensorOptionHelp) + "; default: ideal, or the scene's [imu.error_model] with --scene-file");
+  g->add_option("--seed", gen.seed, "Noise seed of the sensor model (integer >= 0; default: the model's)")->check(CLI::NonNegativeNumber);
 
   VerifyArgs ver;
   auto* v = app.add_subcommand("verify", "Integrate IMU samples (Eq. 3.69) and print drift against a trajectory");
@@ -88,6 +90,12 @@ int main(int argc, char** argv) {
   st->add_option("--blend-s", str.blend_s, "Rejoin blend after an extrapolation")->capture_default_str()->check(CLI::NonNegativeNumber);
   st->add_option("--margin-s", str.margin_s, "Extra delay beyond the engine's look-ahead")->capture_default_str()->check(CLI::NonNegativeNumber);
   st->add_option("--duration-s", str.duration_s, "Stop after this much trajectory time");
+  st->add_option("--sensor", str.sensor, kSensorOptionHelp)->capture_default_str();
+  st->add_option("--seed", str.seed, "Noise seed of the sensor model (integer >= 0; default: the model's)")->check(CLI::NonNegativeNumber);
+
+  double sensors_rate_hz = 400.0;
+  auto* sens = app.add_subcommand("sensors", "List the sensor-model presets: terms, discrete sigma at a rate, datasheet sources");
+  sens->add_option("--rate", sensors_rate_hz, "Rate (Hz) for the discrete values")->capture_default_str()->check(CLI::PositiveNumber);
 
   std::string demo_dir = "out/demo";
   std::int64_t demo_rate = 400;
@@ -122,6 +130,7 @@ int main(int argc, char** argv) {
   if (*s) return sample_trajectory(smp);
   if (*d) return demo(demo_dir, demo_rate);
   if (*st) return stream(str);
+  if (*sens) return sensors(sensors_rate_hz);
   if (*ports_command) return ports();
   return exit_code;
 }

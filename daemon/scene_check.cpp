@@ -1,5 +1,7 @@
 #include "daemon/scene_check.hpp"
 
+#include "daemon/error_model_config.hpp"
+
 #include <algorithm>
 #include <cstdio>
 #include <map>
@@ -93,6 +95,7 @@ SceneCheck check_scene(const SceneConfig& scene) {
     }
     check.total_cpu_fraction += c.cpu_fraction;
     check.max_emission_delay_ns = std::max(check.max_emission_delay_ns, c.emission_delay_ns);
+    c.error_model = error_model_lines(imu.error_model, rate);
     check.imus.push_back(std::move(c));
   }
 
@@ -135,6 +138,8 @@ std::string to_text(const SceneCheck& c) {
     else
       out << "    link: no line rate (" << d.transport.substr(0, d.transport.find(' ')) << ")\n";
     out << "    cpu ~" << fixed(100.0 * d.cpu_fraction, 2) << " % of one core\n";
+    for (std::size_t i = 0; i < d.error_model.size(); ++i)
+      out << (i == 0 ? "    sensor model: " : "      ") << d.error_model[i] << "\n";
   }
   for (const SceneCheck::SharedLink& s : c.shared_links) {
     out << "  " << s.link << " shared by";
@@ -177,6 +182,7 @@ std::string to_json(const SceneCheck& c) {
     e["bytes_per_second"] = d.bytes_per_second ? json(*d.bytes_per_second) : json(nullptr);
     e["can_frames_per_second"] = d.can_frames_per_second ? json(*d.can_frames_per_second) : json(nullptr);
     e["link"] = d.link ? budget_json(*d.link) : json(nullptr);
+    e["error_model"] = d.error_model;
     j["imus"].push_back(std::move(e));
   }
   j["shared_links"] = json::array();

@@ -32,6 +32,7 @@ struct ImuCheck {
   std::optional<double> can_frames_per_second;
   std::optional<drivers::LinkBudget> link;    // serial and can transports (pty and null have no line rate)
   double cpu_fraction = 0.0;             // of one core: rate x kCpuSecondsPerSample
+  std::vector<std::string> error_model;  // each term with its discrete sigma at rate_hz (daemon/error_model_config.hpp)
 };
 
 struct SceneCheck {

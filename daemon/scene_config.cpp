@@ -16,6 +16,8 @@
 #include <sstream>
 #include <toml++/toml.h>
 
+#include "daemon/error_model_config.hpp"
+
 #include "core/attitude.hpp"
 #include "core/stream.hpp"
 #include "drivers/protocols/protocol_options.hpp"
@@ -584,12 +586,6 @@ void parse_sync(const Table& t, const ImuConfig& imu, SyncConfig& out) {
   out.trailing_edge_priority = static_cast<int>(t.integer("trailing_edge_priority", 0, 0, 99));
 }
 
-void parse_error_model(const Table& t, ImuConfig& out) {
-  // Placeholder for the sensor-model issue: only the ideal sensor exists.
-  t.allow_only({"model"});
-  out.error_model = t.choice("model", "ideal", {"ideal"});
-}
-
 ImuConfig parse_imu(const Table& t) {
   ImuConfig imu;
   imu.line = t.where().begin.line;
@@ -619,7 +615,8 @@ ImuConfig parse_imu(const Table& t) {
     imu.sync.emplace();
     parse_sync(*s, imu, *imu.sync);
   }
-  if (const auto e = t.subtable("error_model")) parse_error_model(*e, imu);
+  if (const auto e = t.subtable("error_model"))  // daemon/error_model_config.cpp
+    imu.error_model = parse_error_model_table(*t.node("error_model")->as_table(), t.ctx().file, e->path());
   return imu;
 }
 

@@ -18,6 +18,7 @@
 #include "core/live_emitter.hpp"
 #include "core/mounting.hpp"
 #include "core/pipeline.hpp"
+#include "core/sensor/sensor_model.hpp"
 #include "core/time_mapping.hpp"
 #include "drivers/gpio_sync.hpp"
 #include "drivers/protocols/can_protocols.hpp"
@@ -159,6 +160,14 @@ struct SyncConfig {
   int trailing_edge_priority = 0;
 };
 
+// [imu.error_model] (daemon/error_model_config.hpp): ideal unless a preset or
+// a term is given.
+struct ErrorModelConfig {
+  std::string preset = "ideal";   // the preset the terms start from
+  sensor::SensorModelSpec spec;   // preset + overrides, SI units, with the seed
+  bool ideal() const { return spec.is_ideal(); }
+};
+
 struct ImuConfig {
   std::string name;
   std::int64_t rate_hz = 400;
@@ -168,7 +177,7 @@ struct ImuConfig {
   drivers::CanEncoderOptions can_options;
   TransportConfig transport;
   std::optional<SyncConfig> sync;
-  std::string error_model = "ideal";  // only "ideal" until the sensor-model issue
+  ErrorModelConfig error_model;
   std::uint32_t line = 0;             // where its [[imu]] header is in the file
 };
 

@@ -21,6 +21,7 @@
 #include "core/stream.hpp"
 #include "core/time_mapping.hpp"
 #include "daemon/commands.hpp"
+#include "daemon/error_model_config.hpp"
 #include "io/pose_source.hpp"
 
 namespace imuemu::cli {
@@ -80,6 +81,29 @@ int stream(const StreamArgs& args) {
   po.gap_policy = GapPolicy::split;
   po.max_gap_s = args.max_gap_s;
   const bool as_fast_as_possible = args.speed == "max";
+  // The sensor stage: tick k is the model's sample k, as in generate and imuemud.
+  std::optional<sensor::SensorModel> sensor_model;
+  try {
+    const scene::ErrorModelConfig em = scene::error_model_from_option(args.sensor, args.seed);
+    if (!em.ideal()) {
+      sensor_model.emplace(em.spec, static_cast<double>(args.rate_hz), "imu0");
+      for (const std::string& line : scene::error_model_lines(em, static_cast<double>(args.rate_hz)))
+        std::cerr << "imuemu stream: sensor imu0: " << line << "\n";
+    }
+  } catch (const std::exception& e) {
+    std::cerr << "imuemu stream: --sensor: " << e.what() << "\n";
+    return kBadInput;
+  }
+  std::uint64_t saturated = 0;
+  auto measured = [&](std::uint64_t k, live::Emission e) {
+    if (sensor_model) {
+      const sensor::Measurement m = sensor_model->measure(k, e.imu.gyro_rad_s, e.imu.accel_m_s2);
+      e.imu.gyro_rad_s = m.gyro_rad_s;
+      e.imu.accel_m_s2 = m.accel_m_s2;
+      if (m.saturated_axes != 0) ++saturated;
+    }
+    return e;
+  };
   live::SpeedFactor speed;
   std::unique_ptr<io::PoseSource> source;
   io::PoseSourceOptions so;
@@ -164,13 +188,17 @@ int stream(const StreamArgs& args) {
       StreamSample s;
       while (!g_stop) {
         take_input();
-        while (engine.pop(s)) write_row(out.file, {live::EmissionStatus::exact, s.kinematics, s.imu});
+        while (engine.pop(s))
+          write_row(out.file, measured(scene::grid_index(engine.first_knot_ns(), s.imu.t_ns, po.rate_hz),
+                                       {live::EmissionStatus::exact, s.kinematics, s.imu}));
         if (input_done) break;
         sleep_until_monotonic(io::monotonic_now_ns() + 1'000'000);
       }
       if (engine.knots_pushed() >= 2) {
         engine.finish();
-        while (engine.pop(s)) write_row(out.file, {live::EmissionStatus::exact, s.kinematics, s.imu});
+        while (engine.pop(s))
+          write_row(out.file, measured(scene::grid_index(engine.first_knot_ns(), s.imu.t_ns, po.rate_hz),
+                                       {live::EmissionStatus::exact, s.kinematics, s.imu}));
       }
     } else {
       // Wait for the first pose: it fixes the output grid and the clock.
@@ -196,7 +224,7 @@ int stream(const StreamArgs& args) {
           }
           if (finished && engine.ready() == 0 && tick > engine.last_knot_ns()) break;  // past the end of the input
           const live::Emission e = emitter.emit(tick, samples);
-          if (e.has_sample()) write_row(out.file, e);
+          if (e.has_sample()) write_row(out.file, measured(static_cast<std::uint64_t>(k), e));
           if (k % 64 == 0) std::fflush(out.file);
         }
       }
@@ -212,7 +240,9 @@ int stream(const StreamArgs& args) {
   std::cerr << "imuemu stream: poses " << c.accepted << " accepted, " << c.rejected() << " rejected (" << c.duplicate
             << " duplicate, " << c.out_of_order << " out of order), " << c.lost() << " lost, " << refused
             << " refused by the method; samples " << lc.exact << " exact, " << lc.extrapolated << " extrapolated, "
-            << lc.blending << " blending, " << lc.paused << " paused, " << lc.waiting << " waiting (" << lc.underrun_events << " underruns, " << lc.stale_discarded << " stale)\n";
+            << lc.blending << " blending, " << lc.paused << " paused, " << lc.waiting << " waiting (" << lc.underrun_events << " underruns, " << lc.stale_discarded << " stale)";
+  if (sensor_model) std::cerr << ", " << saturated << " saturated";
+  std::cerr << "\n";
   if (std::ferror(out.file)) return kOutputError;
   return code;
 }

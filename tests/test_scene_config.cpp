@@ -256,7 +256,7 @@ TEST(SceneErrors, EachNamesFileLineKeyAndWhatIsAllowed) {
       {"can protocol on a pty", {{11, "protocol = \"dronecan\""}}, "", 13, "imu[0].transport.type",
        "needs transport type can or null"},
       {"error model", {}, "[imu.error_model]\nmodel = \"noisy\"\n", 16, "imu[0].error_model.model",
-       "expected one of ideal"},
+       "unknown key 'model'"},
       {"circle in ecef", {{3, "physics = \"ecef\""}, {6, "source = \"sample:circle\""}}, "", 6, "trajectory.source", "flat-scene motion"},
       {"gravity in ecef", {{3, "physics = \"ecef\"\ngravity_m_s2 = 9.8"}}, "", 4, "scene.gravity_m_s2",
        "applies to physics = \"flat\" only"},

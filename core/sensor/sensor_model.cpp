@@ -1,0 +1,447 @@
+// The sensor model (core/sensor/sensor_model.hpp).
+#include "core/sensor/sensor_model.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+#include <sstream>
+#include <stdexcept>
+
+namespace imuemu::sensor {
+namespace {
+
+// ---- SplitMix64 (Steele, Lea, Flood 2014): state += gamma, then the mix.
+constexpr std::uint64_t kGamma = 0x9E3779B97F4A7C15ULL;
+constexpr std::uint64_t mix64(std::uint64_t z) noexcept {
+  z = (z ^ (z >> 30)) * 0xBF58476D1CE4E5B9ULL;
+  z = (z ^ (z >> 27)) * 0x94D049BB133111EBULL;
+  return z ^ (z >> 31);
+}
+
+// ---- Ziggurat for N(0,1): Marsaglia & Tsang (2000) with 256 layers; the
+// double-precision tables and tests of Doornik, "An improved ziggurat method
+// to generate normal random samples" (2005). Tables computed once from r and
+// v (the paper's constants for C = 256), with the same binary's exp/log, so
+// reproducible run to run.
+constexpr int kLayers = 256;
+constexpr double kZigR = 3.6541528853610088;
+constexpr double kZigV = 0.00492867323399;
+
+struct ZigguratTables {
+  std::array<double, kLayers + 1> x{};
+  std::array<double, kLayers> ratio{};
+  ZigguratTables() {
+    double f = std::exp(-0.5 * kZigR * kZigR);
+    x[0] = kZigV / f;  // the base layer with the tail: V / f(R)
+    x[1] = kZigR;
+    x[kLayers] = 0.0;
+    for (int i = 2; i < kLayers; ++i) {
+      x[i] = std::sqrt(-2.0 * std::log(kZigV / x[i - 1] + f));
+      f = std::exp(-0.5 * x[i] * x[i]);
+    }
+    for (int i = 0; i < kLayers; ++i) ratio[i] = x[i + 1] / x[i];
+  }
+};
+const ZigguratTables& zig() {
+  static const ZigguratTables t;
+  return t;
+}
+
+constexpr double kDegToRad = std::numbers::pi / 180.0;
+
+std::string fmt(double v) {
+  std::ostringstream s;
+  s.precision(6);
+  s << v;
+  return s.str();
+}
+std::string fmt3(const Vec3& v) {
+  if (v.x() == v.y() && v.y() == v.z()) return fmt(v.x());
+  std::string out = "[";
+  out += fmt(v.x());
+  out += ", ";
+  out += fmt(v.y());
+  out += ", ";
+  out += fmt(v.z());
+  out += "]";
+  return out;
+}
+
+bool finite(const Vec3& v) { return v.allFinite(); }
+bool nonneg(const Vec3& v) { return (v.array() >= 0.0).all(); }
+
+void validate_triad(const TriadSpec& s, const std::string& who) {
+  auto need = [&](bool ok, const std::string& field, const std::string& what) {
+    if (!ok) throw std::invalid_argument(who + "." + field + ": " + what);
+  };
+  const Vec3* nonneg_fields[] = {&s.white_density, &s.bias_instability, &s.random_walk, &s.gauss_markov_sigma,
+                                 &s.turn_on_bias_sigma};
+  const char* nonneg_names[] = {"white noise density", "bias instability", "random walk", "Gauss-Markov sigma",
+                                "turn-on bias sigma"};
+  for (int i = 0; i < 5; ++i)
+    need(finite(*nonneg_fields[i]) && nonneg(*nonneg_fields[i]), nonneg_names[i], "expected finite values >= 0");
+  for (const Vec3* v : {&s.ramp, &s.turn_on_bias, &s.scale_factor, &s.scale_factor_asymmetry, &s.nonlinearity,
+                        &s.misalignment_rad, &s.non_orthogonality_rad, &s.bias_temperature_coeff,
+                        &s.scale_factor_temperature_coeff})
+    need(finite(*v), "terms", "expected finite values");
+  need(s.g_sensitivity.allFinite(), "g sensitivity", "expected finite values");
+  need((s.gauss_markov_tau_s.array() > 0.0).all() && finite(s.gauss_markov_tau_s), "Gauss-Markov tau",
+       "expected finite values > 0 s");
+  need(std::isfinite(s.lsb) && s.lsb >= 0.0, "lsb", "expected a finite value >= 0");
+  need(std::isfinite(s.range) && s.range >= 0.0, "range", "expected a finite value >= 0");
+  need(s.range == 0.0 || s.lsb <= s.range, "lsb", "is larger than the range");
+  need(s.nonlinearity.isZero() || s.range > 0.0, "nonlinearity", "is a fraction of full scale: needs a range");
+  need((s.scale_factor.array() > -1.0).all(), "scale factor", "must stay above -100 %");
+  if (!s.bias_instability.isZero()) {
+    need(std::isfinite(s.flicker_tau_min_s) && std::isfinite(s.flicker_tau_max_s) && s.flicker_tau_min_s > 0.0 &&
+             s.flicker_tau_min_s < s.flicker_tau_max_s,
+         "bias instability tau range", "expected 0 < tau_min < tau_max");
+    const int n = static_cast<int>(std::ceil(std::log10(s.flicker_tau_max_s / s.flicker_tau_min_s) - 1e-9)) + 3;
+    need(n <= kMaxFlickerProcesses, "bias instability tau range",
+         "spans more than " + std::to_string(kMaxFlickerProcesses - 3) + " decades");
+  }
+}
+
+}  // namespace
+
+double TemperatureSpec::at(double t_s) const {
+  if (warmup_tau_s <= 0.0 || start_c == end_c) return end_c;
+  return end_c - (end_c - start_c) * std::exp(-t_s / warmup_tau_s);
+}
+
+bool SensorModelSpec::is_ideal() const {
+  const SensorModelSpec ideal;
+  auto same = [](const TriadSpec& a, const TriadSpec& b) {
+    return a.white_density == b.white_density && a.bias_instability == b.bias_instability &&
+           a.random_walk == b.random_walk && a.ramp == b.ramp && a.gauss_markov_sigma == b.gauss_markov_sigma &&
+           a.turn_on_bias == b.turn_on_bias && a.turn_on_bias_sigma == b.turn_on_bias_sigma &&
+           a.scale_factor == b.scale_factor && a.scale_factor_asymmetry == b.scale_factor_asymmetry &&
+           a.nonlinearity == b.nonlinearity && a.misalignment_rad == b.misalignment_rad &&
+           a.non_orthogonality_rad == b.non_orthogonality_rad && a.g_sensitivity == b.g_sensitivity &&
+           a.bias_temperature_coeff == b.bias_temperature_coeff &&
+           a.scale_factor_temperature_coeff == b.scale_factor_temperature_coeff && a.lsb == b.lsb &&
+           a.range == b.range;
+  };
+  return same(gyro, ideal.gyro) && same(accel, ideal.accel);
+}
+
+void validate(const SensorModelSpec& spec) {
+  validate_triad(spec.gyro, "gyro");
+  validate_triad(spec.accel, "accel");
+  if (!spec.accel.g_sensitivity.isZero()) throw std::invalid_argument("accel.g sensitivity: applies to the gyro only");
+  const TemperatureSpec& t = spec.temperature;
+  if (!std::isfinite(t.reference_c) || !std::isfinite(t.start_c) || !std::isfinite(t.end_c) ||
+      !std::isfinite(t.warmup_tau_s) || t.warmup_tau_s < 0.0)
+    throw std::invalid_argument("temperature: expected finite temperatures and warmup tau >= 0 s");
+}
+
+std::uint64_t Stream::next() noexcept { return mix64(state += kGamma); }
+
+double Stream::uniform() noexcept { return static_cast<double>(next() >> 11) * 0x1.0p-53; }
+
+double Stream::gaussian() noexcept {
+  const ZigguratTables& t = zig();
+  for (;;) {
+    const std::uint64_t bits = next();
+    const int i = static_cast<int>(bits & 0xFF);
+    // u in (-1, 1) from the top 53 bits (independent of the layer bits).
+    const double u = 2.0 * (static_cast<double>(bits >> 11) + 0.5) * 0x1.0p-53 - 1.0;
+    if (std::abs(u) < t.ratio[i]) return u * t.x[i];  // inside the layer's rectangle
+    if (i == 0) {  // the tail beyond R (Marsaglia 1964)
+      double x = 0.0, y = 0.0;
+      do {
+        x = std::log(1.0 - uniform()) / kZigR;
+        y = std::log(1.0 - uniform());
+      } while (-2.0 * y < x * x);
+      return u < 0.0 ? x - kZigR : kZigR - x;
+    }
+    const double x = u * t.x[i];
+    const double f0 = std::exp(-0.5 * (t.x[i] * t.x[i] - x * x));
+    const double f1 = std::exp(-0.5 * (t.x[i + 1] * t.x[i + 1] - x * x));
+    if (f1 + uniform() * (f0 - f1) < 1.0) return x;
+  }
+}
+
+std::uint64_t stream_key(std::uint64_t seed, std::uint64_t device_hash_value, unsigned sensor, unsigned axis,
+                         unsigned term, unsigned sub) noexcept {
+  std::uint64_t h = mix64(seed ^ 0x5EED5EED5EED5EEDULL);
+  h = mix64(h ^ device_hash_value);
+  h = mix64(h ^ ((static_cast<std::uint64_t>(sensor) << 48) | (static_cast<std::uint64_t>(axis) << 32) |
+                 (static_cast<std::uint64_t>(term) << 16) | sub));
+  return h;
+}
+
+std::uint64_t device_hash(const std::string& name) noexcept {
+  std::uint64_t h = 0xCBF29CE484222325ULL;  // FNV-1a 64
+  for (unsigned char c : name) {
+    h ^= c;
+    h *= 0x100000001B3ULL;
+  }
+  return h;
+}
+
+FlickerProcesses flicker_processes(double bias_instability, double tau_min_s, double tau_max_s) {
+  FlickerProcesses p;
+  if (!(bias_instability > 0.0)) return p;
+  // One process per decade from tau_min/10 to (at least) tau_max*10: the sum
+  // of Allan variances sigma^2 g(tau/T_j), g(x) = (2/x^2)(x - 3/2 + 2e^-x -
+  // e^-2x/2), over T_j = T_0 10^j is flat to first order with mean
+  // sigma^2 (1/ln 10) Int g(x) dx/x = sigma^2 2 ln 2 / ln 10; equal to the
+  // flicker floor (2 ln 2 / pi) B^2 for sigma^2 = B^2 ln 10 / pi.
+  const int decades = static_cast<int>(std::ceil(std::log10(tau_max_s / tau_min_s) - 1e-9));
+  p.count = std::min(decades + 3, kMaxFlickerProcesses);
+  for (int j = 0; j < p.count; ++j) p.tau_s[j] = tau_min_s * std::pow(10.0, j - 1);
+  p.sigma = bias_instability * std::sqrt(std::numbers::ln10 / std::numbers::pi);
+  return p;
+}
+
+std::uint32_t hold_period(double tau_s, double dt_s) {
+  const double m = std::floor(tau_s / (kHoldRatio * dt_s));
+  if (!(m >= 1.0)) return 1;
+  return m > 1e6 ? 1'000'000u : static_cast<std::uint32_t>(m);
+}
+
+// Terms of the stream keys (never renumber: it would change the noise).
+enum Term : unsigned { kTermWhite = 1, kTermFlicker = 2, kTermWalk = 3, kTermGaussMarkov = 4, kTermTurnOn = 5 };
+
+SensorModel::SensorModel(const SensorModelSpec& spec, double sample_rate_hz, const std::string& device)
+    : spec_(spec), rate_hz_(sample_rate_hz) {
+  if (!std::isfinite(sample_rate_hz) || sample_rate_hz <= 0.0)
+    throw std::invalid_argument("sensor model: sample rate must be finite and > 0 Hz");
+  validate(spec);
+  dt_s_ = 1.0 / rate_hz_;
+  const std::uint64_t dev = device_hash(device);
+  init_triad(gyro_, spec.gyro, 0, dev);
+  init_triad(accel_, spec.accel, 1, dev);
+  const TemperatureSpec& t = spec.temperature;
+  temperature_varies_ = t.warmup_tau_s > 0.0 && t.start_c != t.end_c;
+  temperature_terms_ = !spec.gyro.bias_temperature_coeff.isZero() || !spec.gyro.scale_factor_temperature_coeff.isZero() ||
+                       !spec.accel.bias_temperature_coeff.isZero() ||
+                       !spec.accel.scale_factor_temperature_coeff.isZero();
+}
+
+void SensorModel::init_triad(Triad& tr, const TriadSpec& s, unsigned sensor, std::uint64_t dev) {
+  tr.spec = s;
+  const std::uint64_t seed = spec_.seed;
+  const FlickerProcesses fp[3] = {flicker_processes(s.bias_instability.x(), s.flicker_tau_min_s, s.flicker_tau_max_s),
+                                  flicker_processes(s.bias_instability.y(), s.flicker_tau_min_s, s.flicker_tau_max_s),
+                                  flicker_processes(s.bias_instability.z(), s.flicker_tau_min_s, s.flicker_tau_max_s)};
+  for (unsigned a = 0; a < 3; ++a) {
+    Axis& ax = tr.axis[a];
+    ax.white = s.white_density[a] > 0.0;
+    ax.white_sigma = s.white_density[a] * std::sqrt(rate_hz_);  // sigma = N sqrt(fs), one-sided PSD
+    ax.white_stream.state = stream_key(seed, dev, sensor, a, kTermWhite, 0);
+    ax.flicker = fp[a].count > 0;
+    ax.flicker_count = fp[a].count;
+    for (int j = 0; j < fp[a].count; ++j) {
+      const std::uint32_t period = hold_period(fp[a].tau_s[j], dt_s_);
+      const double step_s = period * dt_s_;
+      ax.flicker_period[j] = ax.flicker_countdown[j] = period;
+      ax.flicker_phi[j] = std::exp(-step_s / fp[a].tau_s[j]);
+      ax.flicker_drive[j] = fp[a].sigma * std::sqrt(-std::expm1(-2.0 * step_s / fp[a].tau_s[j]));  // sigma sqrt(1 - phi^2)
+      ax.flicker_stream[j].state = stream_key(seed, dev, sensor, a, kTermFlicker, static_cast<unsigned>(j));
+      // Starts at 0: the bias at switch-on is the turn-on bias; the flicker
+      // is the in-run change from it (a stationary start would add a random
+      // offset of about 2 B, counting the run-to-run bias twice). The Allan
+      // variance does not see the difference: it is blind to offsets.
+      ax.flicker_state[j] = 0.0;
+    }
+    ax.walk = s.random_walk[a] > 0.0;
+    ax.walk_step = s.random_walk[a] * std::sqrt(dt_s_);
+    ax.walk_stream.state = stream_key(seed, dev, sensor, a, kTermWalk, 0);
+    ax.gm = s.gauss_markov_sigma[a] > 0.0;
+    ax.gm_period = ax.gm_countdown = hold_period(s.gauss_markov_tau_s[a], dt_s_);
+    const double gm_step_s = ax.gm_period * dt_s_;
+    ax.gm_phi = std::exp(-gm_step_s / s.gauss_markov_tau_s[a]);
+    ax.gm_drive = s.gauss_markov_sigma[a] * std::sqrt(-std::expm1(-2.0 * gm_step_s / s.gauss_markov_tau_s[a]));
+    ax.gm_stream.state = stream_key(seed, dev, sensor, a, kTermGaussMarkov, 0);
+    if (ax.gm) ax.gm_state = s.gauss_markov_sigma[a] * ax.gm_stream.gaussian();
+    Stream turn_on{stream_key(seed, dev, sensor, a, kTermTurnOn, 0)};
+    tr.turn_on[a] = s.turn_on_bias[a] + (s.turn_on_bias_sigma[a] > 0.0 ? s.turn_on_bias_sigma[a] * turn_on.gaussian() : 0.0);
+    tr.stochastic = tr.stochastic || ax.flicker || ax.walk || ax.gm;
+  }
+  // Body -> sensor axes, first order in the small angles: a rotation by the
+  // misalignment m (R = I - [m]x maps body vectors into the tilted triad) and
+  // the non-orthogonality of the sensor axes (each axis leans toward the
+  // previous ones: lower triangle).
+  const Vec3& m = s.misalignment_rad;
+  Mat3 rot;
+  rot << 1.0, m.z(), -m.y(), -m.z(), 1.0, m.x(), m.y(), -m.x(), 1.0;
+  Mat3 skew = Mat3::Identity();
+  skew(1, 0) = s.non_orthogonality_rad.x();
+  skew(2, 0) = s.non_orthogonality_rad.y();
+  skew(2, 1) = s.non_orthogonality_rad.z();
+  tr.axes = skew * rot;
+  tr.deterministic_matrix = !m.isZero() || !s.non_orthogonality_rad.isZero();
+  tr.g_sens = !s.g_sensitivity.isZero();
+  tr.scale = !s.scale_factor.isZero() || !s.scale_factor_asymmetry.isZero() || !s.scale_factor_temperature_coeff.isZero();
+  tr.nonlinear = !s.nonlinearity.isZero();
+  if (tr.nonlinear) tr.nonlinear_k2 = s.nonlinearity / s.range;  // k2 x^2 = nl * range at x = range
+  tr.saturation = s.range;
+  if (s.range > 0.0 && s.lsb > 0.0) {
+    // A range that is a whole number of LSBs (every preset) saturates at the
+    // range itself; otherwise at the largest multiple of the LSB within it.
+    const double codes = s.range / s.lsb;
+    if (std::abs(codes - std::nearbyint(codes)) > 1e-9 * codes) tr.saturation = std::floor(codes) * s.lsb;
+  }
+}
+
+void SensorModel::advance(Triad& tr) noexcept {
+  for (Axis& ax : tr.axis) {
+    if (ax.flicker)
+      for (int j = 0; j < ax.flicker_count; ++j)
+        if (--ax.flicker_countdown[j] == 0) {  // exact step over flicker_period samples, held between
+          ax.flicker_countdown[j] = ax.flicker_period[j];
+          ax.flicker_state[j] = ax.flicker_phi[j] * ax.flicker_state[j] + ax.flicker_drive[j] * ax.flicker_stream[j].gaussian();
+        }
+    if (ax.walk) ax.walk_state += ax.walk_step * ax.walk_stream.gaussian();
+    if (ax.gm && --ax.gm_countdown == 0) {
+      ax.gm_countdown = ax.gm_period;
+      ax.gm_state = ax.gm_phi * ax.gm_state + ax.gm_drive * ax.gm_stream.gaussian();
+    }
+  }
+}
+
+Vec3 SensorModel::stochastic_bias(const Triad& tr) noexcept {
+  Vec3 b = Vec3::Zero();
+  for (int a = 0; a < 3; ++a) {
+    const Axis& ax = tr.axis[a];
+    double s = 0.0;
+    for (int j = 0; j < ax.flicker_count; ++j) s += ax.flicker_state[j];
+    b[a] = s + ax.walk_state + ax.gm_state;
+  }
+  return b;
+}
+
+Vec3 SensorModel::white(Triad& tr) noexcept {
+  Vec3 w = Vec3::Zero();
+  for (int a = 0; a < 3; ++a)
+    if (tr.axis[a].white) w[a] = tr.axis[a].white_sigma * tr.axis[a].white_stream.gaussian();
+  return w;
+}
+
+Vec3 SensorModel::finish(const Triad& tr, const Vec3& in_axes, const Vec3& bias, double dT, double t_s,
+                         unsigned sat_shift, std::uint8_t& sat) const noexcept {
+  const TriadSpec& s = tr.spec;
+  Vec3 y = in_axes;
+  if (tr.scale) {
+    for (int a = 0; a < 3; ++a) {
+      const double asym = in_axes[a] >= 0.0 ? 0.5 * s.scale_factor_asymmetry[a] : -0.5 * s.scale_factor_asymmetry[a];
+      y[a] = (1.0 + s.scale_factor[a] + asym + s.scale_factor_temperature_coeff[a] * dT) * in_axes[a];
+    }
+  }
+  if (tr.nonlinear) y += (tr.nonlinear_k2.array() * in_axes.array().square()).matrix();
+  y += bias + tr.turn_on + s.ramp * t_s + s.bias_temperature_coeff * dT;
+  for (int a = 0; a < 3; ++a) {
+    if (!std::isfinite(y[a])) y[a] = 0.0;  // never NaN/Inf downstream (only reachable from a non-finite input)
+    if (tr.saturation > 0.0 && std::abs(y[a]) > tr.saturation) {
+      // Beyond the range: exactly the largest value the sensor can report
+      // (the range, or its largest multiple of the LSB), flagged.
+      sat = static_cast<std::uint8_t>(sat | (1u << (sat_shift + static_cast<unsigned>(a))));
+      y[a] = std::copysign(tr.saturation, y[a]);
+      continue;
+    }
+    if (s.lsb > 0.0) {
+      y[a] = std::nearbyint(y[a] / s.lsb) * s.lsb;
+      if (tr.saturation > 0.0 && std::abs(y[a]) > tr.saturation) y[a] = std::copysign(tr.saturation, y[a]);  // rounding at the top code
+    }
+  }
+  return y;
+}
+
+Measurement SensorModel::measure(std::uint64_t k, const Vec3& gyro_rad_s, const Vec3& accel_m_s2) {
+  if (k < next_k_)
+    throw std::invalid_argument("sensor model: sample " + std::to_string(k) + " after sample " +
+                                std::to_string(next_k_ - 1) + " (indices must not decrease)");
+  // Skipped indices: the stochastic states and the white streams step as if
+  // those samples had been measured, so sample k does not depend on which
+  // samples were asked for.
+  while (next_k_ < k) {
+    (void)white(gyro_);
+    (void)white(accel_);
+    advance(gyro_);
+    advance(accel_);
+    ++next_k_;
+  }
+  const double t_s = static_cast<double>(k) * dt_s_;
+  Measurement m;
+  m.temperature_c = temperature_varies_ ? spec_.temperature.at(t_s) : spec_.temperature.at(0.0);
+  const double dT = temperature_terms_ ? m.temperature_c - spec_.temperature.reference_c : 0.0;
+
+  Vec3 g_axes = gyro_.deterministic_matrix ? Vec3(gyro_.axes * gyro_rad_s) : gyro_rad_s;
+  Vec3 f_axes = accel_.deterministic_matrix ? Vec3(accel_.axes * accel_m_s2) : accel_m_s2;
+  Vec3 g_bias = white(gyro_);
+  Vec3 a_bias = white(accel_);
+  if (gyro_.stochastic) g_bias += stochastic_bias(gyro_);
+  if (accel_.stochastic) a_bias += stochastic_bias(accel_);
+  if (gyro_.g_sens) g_bias += gyro_.spec.g_sensitivity * accel_m_s2;
+  m.gyro_rad_s = finish(gyro_, g_axes, g_bias, dT, t_s, 0, m.saturated_axes);
+  m.accel_m_s2 = finish(accel_, f_axes, a_bias, dT, t_s, 3, m.saturated_axes);
+  advance(gyro_);
+  advance(accel_);
+  ++next_k_;
+  return m;
+}
+
+std::vector<TermReport> describe(const SensorModelSpec& spec, double fs) {
+  std::vector<TermReport> out;
+  const double dt = 1.0 / fs;
+  for (int which = 0; which < 2; ++which) {
+    const TriadSpec& s = which == 0 ? spec.gyro : spec.accel;
+    const std::string name = which == 0 ? "gyro" : "accel";
+    const std::string u = which == 0 ? "rad/s" : "m/s^2";
+    auto add = [&](const std::string& term, const std::string& value, const std::string& discrete) {
+      out.push_back({name, term, value, discrete});
+    };
+    if (!s.white_density.isZero())
+      add("white noise", "N = " + fmt3(s.white_density) + " " + u + "/sqrt(Hz) (IEEE 952 N)",
+          "sigma = N sqrt(fs) = " + fmt3(s.white_density * std::sqrt(fs)) + " " + u + " per sample");
+    if (!s.bias_instability.isZero()) {
+      const FlickerProcesses p = flicker_processes(s.bias_instability.maxCoeff(), s.flicker_tau_min_s, s.flicker_tau_max_s);
+      std::string taus;
+      for (int j = 0; j < p.count; ++j) {
+        if (j > 0) taus += ", ";
+        taus += fmt(p.tau_s[j]);
+      }
+      add("bias instability", "B = " + fmt3(s.bias_instability) + " " + u + ", Allan floor 0.664 B over [" +
+                                  fmt(s.flicker_tau_min_s) + ", " + fmt(s.flicker_tau_max_s) + "] s",
+          std::to_string(p.count) + " Gauss-Markov processes, tau = {" + taus + "} s, each sigma = B sqrt(ln10/pi) = " +
+              fmt3(s.bias_instability * std::sqrt(std::numbers::ln10 / std::numbers::pi)) + " " + u);
+    }
+    if (!s.random_walk.isZero())
+      add("random walk", "K = " + fmt3(s.random_walk) + " " + u + "/sqrt(s)",
+          "step sigma = K sqrt(dt) = " + fmt3(s.random_walk * std::sqrt(dt)) + " " + u);
+    if (!s.ramp.isZero()) add("ramp", "R = " + fmt3(s.ramp) + " " + u + "/s", "per sample " + fmt3(s.ramp * dt) + " " + u);
+    if (!s.gauss_markov_sigma.isZero()) {
+      Vec3 phi, drive;
+      for (int a = 0; a < 3; ++a) {
+        phi[a] = std::exp(-dt / s.gauss_markov_tau_s[a]);
+        drive[a] = s.gauss_markov_sigma[a] * std::sqrt(-std::expm1(-2.0 * dt / s.gauss_markov_tau_s[a]));
+      }
+      Vec3 period;
+      for (int a = 0; a < 3; ++a) period[a] = hold_period(s.gauss_markov_tau_s[a], dt);
+      add("Gauss-Markov bias", "sigma = " + fmt3(s.gauss_markov_sigma) + " " + u + ", tau = " + fmt3(s.gauss_markov_tau_s) + " s",
+          "per sample phi = " + fmt3(phi) + ", drive sigma = " + fmt3(drive) + " " + u + " (stepped exactly every " +
+              fmt3(period) + " samples)");
+    }
+    if (!s.turn_on_bias.isZero() || !s.turn_on_bias_sigma.isZero())
+      add("turn-on bias", "fixed " + fmt3(s.turn_on_bias) + " " + u + ", sigma " + fmt3(s.turn_on_bias_sigma) + " " + u,
+          "drawn once per run");
+    if (!s.scale_factor.isZero() || !s.scale_factor_asymmetry.isZero())
+      add("scale factor", fmt3(s.scale_factor * 1e6) + " ppm, asymmetry " + fmt3(s.scale_factor_asymmetry * 1e6) + " ppm", "");
+    if (!s.nonlinearity.isZero()) add("nonlinearity", fmt3(s.nonlinearity * 1e6) + " ppm of full scale", "quadratic");
+    if (!s.misalignment_rad.isZero() || !s.non_orthogonality_rad.isZero())
+      add("misalignment", fmt3(s.misalignment_rad * 1e3) + " mrad, non-orthogonality " +
+                              fmt3(s.non_orthogonality_rad * 1e3) + " mrad", "");
+    if (!s.g_sensitivity.isZero())
+      add("g-sensitivity", "max |G| = " + fmt(s.g_sensitivity.cwiseAbs().maxCoeff() / kDegToRad * 3600.0 * 9.80665) + " deg/h/g", "");
+    if (!s.bias_temperature_coeff.isZero() || !s.scale_factor_temperature_coeff.isZero())
+      add("temperature", "bias " + fmt3(s.bias_temperature_coeff) + " " + u + "/K, scale factor " +
+                             fmt3(s.scale_factor_temperature_coeff * 1e6) + " ppm/K", "");
+    if (s.lsb > 0.0) add("quantisation", "LSB = " + fmt(s.lsb) + " " + u, "uniform error sigma = LSB/sqrt(12) = " + fmt(s.lsb / std::sqrt(12.0)));
+    if (s.range > 0.0) add("saturation", "+-" + fmt(s.range) + " " + u, "");
+  }
+  return out;
+}
+
+}  // namespace imuemu::sensor

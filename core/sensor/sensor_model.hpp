@@ -1,0 +1,206 @@
+// The sensor model: what a real IMU adds to the ideal angular rate and
+// specific force (issue 15). Pure maths, deterministic, no I/O; sits between
+// the physics (core/imu_model.hpp) and the encoders (drivers/protocol.hpp):
+//   ideal (omega_ib^b, f^b) --SensorModel::measure--> measured values + flags.
+//
+// Conventions (docs/sensor-models.md):
+//  * White noise is given as a ONE-SIDED power spectral density N (the
+//    square root of it: rad/s/sqrt(Hz), m/s^2/sqrt(Hz)). At the rate fs the
+//    model runs at, each sample carries independent Gaussian noise of
+//        sigma = N * sqrt(fs)
+//    (the Allan deviation of that sequence is N / sqrt(tau), IEEE Std 952
+//    Annex C, whatever fs is). Angle / velocity random walk in deg/sqrt(h)
+//    and m/s/sqrt(h) are the same N: 1 deg/sqrt(h) = (pi/180)/60 rad/s/sqrt(Hz).
+//  * Rate / acceleration random walk K: the bias steps by K * sqrt(dt) each
+//    sample (variance grows as K^2 t; Allan deviation K * sqrt(tau / 3)).
+//  * Bias instability B (flicker, 1/f): a sum of first-order Gauss-Markov
+//    processes with correlation times one decade apart, from tau_min/10 to
+//    tau_max*10, each of variance B^2 ln(10) / pi, started at 0 (the in-run
+//    change from the turn-on bias). Its Allan deviation is
+//    0.664 B (= B sqrt(2 ln 2 / pi)) within -2.3 % / +0.9 % over
+//    [tau_min, tau_max]; derivation in docs/sensor-models.md.
+//  * Gauss-Markov bias: exact discretisation phi = exp(-dt/tau),
+//    x[k+1] = phi x[k] + sigma sqrt(1 - phi^2) w[k], started stationary.
+//    A slow process (tau >= kHoldRatio * dt, the flicker's and most bias
+//    processes) is stepped exactly over M = floor(tau / (kHoldRatio dt))
+//    samples and held between steps: exact at every step, its Allan curve
+//    unchanged (the hold moves less than sqrt(2/kHoldRatio) sigma), at 1/M
+//    of the cost (docs/sensor-models.md).
+//
+// The model runs at the sample interval it is constructed with (not baked to
+// an output rate): the signal chain of the next issue runs it at an internal
+// rate above the output rate before anti-alias filtering and decimation.
+//
+// Randomness: every (seed, device, sensor, axis, term, sub-process) has its
+// own SplitMix64 stream (Steele, Lea, Flood, "Fast splittable pseudorandom
+// number generators", OOPSLA 2014) keyed by a hash of those, so adding a term
+// or a device leaves the other streams' noise unchanged. Gaussians by the
+// ziggurat method (Marsaglia & Tsang, J. Stat. Softw. 5(8), 2000, with
+// Doornik's 2005 double-precision layout): bit-reproducible for one binary.
+#pragma once
+
+#include <array>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/types.hpp"
+
+namespace imuemu::sensor {
+
+// One triad (gyro or accelerometer), SI units: rad/s for the gyro, m/s^2 for
+// the accelerometer ("unit" below). Per-axis values are Vec3 (x, y, z of the
+// sensor's axes). Zero means "term off".
+struct TriadSpec {
+  Vec3 white_density = Vec3::Zero();      // N: unit/sqrt(Hz), one-sided PSD
+  Vec3 bias_instability = Vec3::Zero();   // B: unit (Allan floor 0.664 B)
+  double flicker_tau_min_s = 1.0;         // Allan deviation flat at 0.664 B over [tau_min, tau_max]
+  double flicker_tau_max_s = 1000.0;
+  Vec3 random_walk = Vec3::Zero();        // K: unit/sqrt(s) (RRW / acceleration random walk)
+  Vec3 ramp = Vec3::Zero();               // R: unit/s (rate ramp)
+  Vec3 gauss_markov_sigma = Vec3::Zero(); // stationary sigma, unit
+  Vec3 gauss_markov_tau_s = Vec3::Constant(100.0);
+  Vec3 turn_on_bias = Vec3::Zero();       // fixed part, unit
+  Vec3 turn_on_bias_sigma = Vec3::Zero(); // drawn once per run from N(0, sigma^2), unit
+  Vec3 scale_factor = Vec3::Zero();       // dimensionless (1e-6 per ppm)
+  Vec3 scale_factor_asymmetry = Vec3::Zero();  // dimensionless: +a/2 for positive input, -a/2 negative
+  Vec3 nonlinearity = Vec3::Zero();       // dimensionless fraction of full scale at full scale (needs range)
+  Vec3 misalignment_rad = Vec3::Zero();   // small rotation of the triad against the body axes
+  Vec3 non_orthogonality_rad = Vec3::Zero();  // (y toward x, z toward x, z toward y)
+  Mat3 g_sensitivity = Mat3::Zero();      // gyro only: rad/s per m/s^2 of specific force
+  Vec3 bias_temperature_coeff = Vec3::Zero();  // unit per kelvin about the reference temperature
+  Vec3 scale_factor_temperature_coeff = Vec3::Zero();  // 1/K
+  double lsb = 0.0;                       // quantisation step, unit; 0: none
+  double range = 0.0;                     // saturation at +-range (unit); 0: none
+};
+
+// T(t) = end - (end - start) exp(-t / warmup_tau) (constant when tau = 0 or start = end).
+struct TemperatureSpec {
+  double reference_c = 25.0;  // the temperature the datasheet biases refer to
+  double start_c = 25.0;
+  double end_c = 25.0;
+  double warmup_tau_s = 0.0;
+  double at(double t_s) const;
+};
+
+struct SensorModelSpec {
+  TriadSpec gyro, accel;
+  TemperatureSpec temperature;
+  std::uint64_t seed = 0;
+  bool is_ideal() const;  // no term on: callers skip the stage entirely
+};
+
+// Throws std::invalid_argument naming the field for a spec the model refuses
+// (negative sigma, tau <= 0, tau_min >= tau_max, more than kMaxFlickerProcesses
+// decades, nonlinearity without a range, non-finite values, lsb > range).
+void validate(const SensorModelSpec& spec);
+
+inline constexpr int kMaxFlickerProcesses = 12;
+// A Gauss-Markov process is stepped at most every tau / kHoldRatio.
+inline constexpr double kHoldRatio = 64.0;
+// Samples between steps of a process of correlation time tau at interval dt.
+std::uint32_t hold_period(double tau_s, double dt_s);
+
+// Per-axis saturation flags of Measurement::saturated_axes.
+enum SaturatedAxis : std::uint8_t {
+  kGyroX = 1u << 0, kGyroY = 1u << 1, kGyroZ = 1u << 2,
+  kAccelX = 1u << 3, kAccelY = 1u << 4, kAccelZ = 1u << 5,
+};
+
+struct Measurement {
+  Vec3 gyro_rad_s = Vec3::Zero();
+  Vec3 accel_m_s2 = Vec3::Zero();
+  std::uint8_t saturated_axes = 0;  // SaturatedAxis bits
+  double temperature_c = 25.0;
+};
+
+// SplitMix64: one 64-bit state per stream.
+struct Stream {
+  std::uint64_t state = 0;
+  std::uint64_t next() noexcept;
+  double gaussian() noexcept;  // N(0, 1), ziggurat
+  double uniform() noexcept;   // [0, 1), 53 bits
+};
+
+// The key of one noise stream: a hash of everything that names it.
+std::uint64_t stream_key(std::uint64_t seed, std::uint64_t device_hash, unsigned sensor, unsigned axis,
+                         unsigned term, unsigned sub) noexcept;
+// FNV-1a of a device name (the [[imu]] name), for stream_key.
+std::uint64_t device_hash(const std::string& name) noexcept;
+
+// Flicker decomposition for one axis: correlation times and the common sigma.
+struct FlickerProcesses {
+  int count = 0;
+  std::array<double, kMaxFlickerProcesses> tau_s{};
+  double sigma = 0.0;  // each process' stationary sigma: B sqrt(ln 10 / pi)
+};
+FlickerProcesses flicker_processes(double bias_instability, double tau_min_s, double tau_max_s);
+
+class SensorModel {
+ public:
+  // sample_rate_hz: the rate measure() is called at (sample k at t = k / fs
+  // since the start of the run). device: the device's name (its own noise).
+  // Throws std::invalid_argument (validate, rate not positive/finite).
+  SensorModel(const SensorModelSpec& spec, double sample_rate_hz, const std::string& device);
+
+  // Sample k (k never decreases; indices skipped since the last call are
+  // simulated, so sample k is the same whichever samples were asked for).
+  // Throws std::invalid_argument for a k below the next expected one.
+  Measurement measure(std::uint64_t k, const Vec3& gyro_rad_s, const Vec3& accel_m_s2);
+
+  double sample_rate_hz() const { return rate_hz_; }
+  std::uint64_t next_index() const { return next_k_; }
+  // Turn-on bias drawn for this run (fixed + random part), per triad.
+  const Vec3& gyro_turn_on_bias() const { return gyro_.turn_on; }
+  const Vec3& accel_turn_on_bias() const { return accel_.turn_on; }
+
+ private:
+  struct Axis {
+    bool white = false, flicker = false, walk = false, gm = false;
+    double white_sigma = 0.0;
+    Stream white_stream;
+    int flicker_count = 0;
+    std::array<double, kMaxFlickerProcesses> flicker_phi{}, flicker_drive{}, flicker_state{};
+    std::array<std::uint32_t, kMaxFlickerProcesses> flicker_period{}, flicker_countdown{};
+    std::array<Stream, kMaxFlickerProcesses> flicker_stream{};
+    double walk_step = 0.0, walk_state = 0.0;
+    Stream walk_stream;
+    double gm_phi = 0.0, gm_drive = 0.0, gm_state = 0.0;
+    std::uint32_t gm_period = 1, gm_countdown = 1;
+    Stream gm_stream;
+  };
+  struct Triad {
+    TriadSpec spec;
+    std::array<Axis, 3> axis;
+    bool stochastic = false, deterministic_matrix = false, g_sens = false, scale = false, nonlinear = false;
+    Mat3 axes = Mat3::Identity();  // body -> sensor axes (misalignment, non-orthogonality)
+    Vec3 turn_on = Vec3::Zero();
+    Vec3 nonlinear_k2 = Vec3::Zero();  // unit^-1
+    double saturation = 0.0;           // largest multiple of lsb within range (or range)
+  };
+  void init_triad(Triad& tr, const TriadSpec& spec, unsigned sensor, std::uint64_t dev);
+  static void advance(Triad& tr) noexcept;              // one step of the stochastic states
+  static Vec3 stochastic_bias(const Triad& tr) noexcept;  // sum of the states at the current step
+  Vec3 white(Triad& tr) noexcept;
+  Vec3 finish(const Triad& tr, const Vec3& in_axes, const Vec3& bias, double dT, double t_s, unsigned sat_shift,
+              std::uint8_t& sat) const noexcept;
+
+  SensorModelSpec spec_;
+  double rate_hz_ = 0.0, dt_s_ = 0.0;
+  std::uint64_t next_k_ = 0;
+  bool temperature_varies_ = false, temperature_terms_ = false;
+  Triad gyro_, accel_;
+};
+
+// What a term becomes at a given rate: one line per term and triad, for
+// `imuemu sensors`, check-config and generate.
+struct TermReport {
+  std::string sensor;   // gyro | accel
+  std::string term;     // white, bias instability, ...
+  std::string value;    // as configured, SI
+  std::string discrete; // per sample at the rate (sigma, phi, ...)
+};
+std::vector<TermReport> describe(const SensorModelSpec& spec, double sample_rate_hz);
+
+}  // namespace imuemu::sensor

@@ -1,0 +1,204 @@
+// Error-model tables from TOML (daemon/error_model_config.hpp).
+#include "daemon/error_model_config.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <fstream>
+#include <map>
+#include <sstream>
+#include <stdexcept>
+
+#include "core/sensor/datasheet.hpp"
+
+namespace imuemu::scene {
+namespace {
+
+struct Where {
+  const std::string& file;
+  [[noreturn]] void fail(const toml::source_region& at, const std::string& key, const std::string& what) const {
+    throw SceneError(file, at.begin.line, at.begin.column, key, what);
+  }
+};
+
+std::string dotted(const std::string& path, std::string_view key) {
+  return path.empty() ? std::string(key) : path + "." + std::string(key);
+}
+
+std::vector<double> numbers_of(const Where& w, const toml::node& n, const std::string& key) {
+  auto number = [&](const toml::node& e) {
+    if (e.is_integer()) return static_cast<double>(e.as_integer()->get());
+    if (e.is_floating_point()) return e.as_floating_point()->get();
+    w.fail(e.source(), key, "expected a number or an array of numbers");
+  };
+  std::vector<double> out;
+  if (const toml::array* a = n.as_array()) {
+    for (const toml::node& e : *a) out.push_back(number(e));
+  } else {
+    out.push_back(number(n));
+  }
+  for (double v : out)
+    if (!std::isfinite(v)) w.fail(n.source(), key, "expected finite numbers");
+  return out;
+}
+
+void parse_triad(const Where& w, const toml::table& t, const std::string& path, sensor::Triad triad,
+                 sensor::SensorModelSpec& spec) {
+  std::map<std::string, std::string> term_set_by;  // term -> key: two keys of one term are ambiguous
+  std::vector<std::pair<const toml::key*, const toml::node*>> entries;
+  for (auto&& [key, value] : t) entries.emplace_back(&key, &value);
+  std::sort(entries.begin(), entries.end(),
+            [](const auto& a, const auto& b) { return a.first->source().begin < b.first->source().begin; });
+  for (const auto& [key, value] : entries) {
+    const std::string k(key->str());
+    const std::string full = dotted(path, k);
+    const std::string term = sensor::term_of(triad, k);
+    if (!term.empty()) {
+      const auto it = term_set_by.find(term);
+      if (it != term_set_by.end())
+        w.fail(key->source(), full, "ambiguous: '" + it->second + "' already sets the " + term + "; give one of them");
+      term_set_by.emplace(term, k);
+    }
+    try {
+      sensor::apply_key(spec, triad, k, numbers_of(w, *value, full));
+    } catch (const std::invalid_argument& e) {
+      w.fail(key->source(), full, e.what());
+    }
+  }
+}
+
+}  // namespace
+
+ErrorModelConfig parse_error_model_table(const toml::table& table, const std::string& file, const std::string& path) {
+  const Where w{file};
+  ErrorModelConfig out;
+  static const std::vector<std::string> allowed = {"preset", "seed", "gyro", "accel", "temperature"};
+  // First unknown key in file order.
+  const toml::key* first_unknown = nullptr;
+  for (auto&& [key, value] : table) {
+    (void)value;
+    if (std::find(allowed.begin(), allowed.end(), key.str()) != allowed.end()) continue;
+    if (first_unknown == nullptr || key.source().begin < first_unknown->source().begin) first_unknown = &key;
+  }
+  if (first_unknown != nullptr) {
+    std::string hint;
+    const std::string k(first_unknown->str());
+    if (!sensor::term_of(sensor::Triad::gyro, k).empty() || !sensor::term_of(sensor::Triad::accel, k).empty())
+      hint = " (per-sensor keys go in [" + dotted(path, "gyro") + "] or [" + dotted(path, "accel") + "])";
+    w.fail(first_unknown->source(), dotted(path, k),
+           "unknown key '" + k + "'" + hint + "; allowed: preset, seed, gyro, accel, temperature");
+  }
+  if (const toml::node* n = table.get("preset")) {
+    if (!n->is_string()) w.fail(n->source(), dotted(path, "preset"), "expected a string (a preset name or \"ideal\")");
+    out.preset = n->as_string()->get();
+    if (out.preset != "ideal") {
+      try {
+        out.spec = sensor::preset_spec(out.preset);
+      } catch (const std::invalid_argument& e) {
+        w.fail(n->source(), dotted(path, "preset"), e.what());
+      }
+    }
+  }
+  if (const toml::node* n = table.get("seed")) {
+    if (!n->is_integer() || n->as_integer()->get() < 0)
+      w.fail(n->source(), dotted(path, "seed"), "expected an integer >= 0");
+    out.spec.seed = static_cast<std::uint64_t>(n->as_integer()->get());
+  }
+  const struct {
+    const char* name;
+    sensor::Triad triad;
+  } triads[] = {{"gyro", sensor::Triad::gyro}, {"accel", sensor::Triad::accel}};
+  for (const auto& tr : triads) {
+    if (const toml::node* n = table.get(tr.name)) {
+      if (!n->is_table()) w.fail(n->source(), dotted(path, tr.name), "expected a table of datasheet keys");
+      parse_triad(w, *n->as_table(), dotted(path, tr.name), tr.triad, out.spec);
+    }
+  }
+  if (const toml::node* n = table.get("temperature")) {
+    if (!n->is_table()) w.fail(n->source(), dotted(path, "temperature"), "expected a table");
+    const toml::table& t = *n->as_table();
+    if (t.contains("constant_c"))
+      for (const char* k : {"start_c", "end_c", "warmup_tau_s"})
+        if (const toml::node* other = t.get(k))
+          w.fail(other->source(), dotted(dotted(path, "temperature"), k), "ambiguous next to constant_c: give a constant or a warm-up");
+    for (auto&& [key, value] : t) {
+      const std::string full = dotted(dotted(path, "temperature"), key.str());
+      const std::vector<double> v = numbers_of(w, value, full);
+      if (v.size() != 1) w.fail(value.source(), full, "expected one number");
+      try {
+        sensor::apply_temperature_key(out.spec, std::string(key.str()), v[0]);
+      } catch (const std::invalid_argument& e) {
+        w.fail(key.source(), full, e.what());
+      }
+    }
+  }
+  try {
+    sensor::validate(out.spec);
+  } catch (const std::invalid_argument& e) {
+    w.fail(table.source(), path, e.what());
+  }
+  return out;
+}
+
+ErrorModelConfig parse_error_model_file(const std::string& path) {
+  std::ifstream in(path, std::ios::binary);
+  if (!in) throw SceneError(path, 0, 0, "", "cannot open the sensor model file");
+  std::ostringstream text;
+  text << in.rdbuf();
+  toml::table root;
+  try {
+    root = toml::parse(text.str(), path);
+  } catch (const toml::parse_error& e) {
+    throw SceneError(path, e.source().begin.line, e.source().begin.column, "", "TOML syntax: " + std::string(e.description()));
+  }
+  return parse_error_model_table(root, path, "");
+}
+
+ErrorModelConfig error_model_from_option(const std::string& preset_or_file, std::int64_t seed) {
+  ErrorModelConfig out;
+  const bool looks_like_file = preset_or_file.find('/') != std::string::npos ||
+                               (preset_or_file.size() > 5 && preset_or_file.ends_with(".toml"));
+  if (looks_like_file) {
+    out = parse_error_model_file(preset_or_file);
+  } else {
+    out.preset = preset_or_file;
+    if (preset_or_file != "ideal") out.spec = sensor::preset_spec(preset_or_file);
+  }
+  if (seed >= 0) out.spec.seed = static_cast<std::uint64_t>(seed);
+  return out;
+}
+
+std::vector<std::string> error_model_lines(const ErrorModelConfig& model, double rate_hz) {
+  std::vector<std::string> out;
+  if (model.ideal()) {
+    out.push_back("ideal (no sensor errors)");
+    return out;
+  }
+  out.push_back("preset " + model.preset + ", seed " + std::to_string(model.spec.seed) + ", terms at " +
+                std::to_string(static_cast<long long>(rate_hz)) + " Hz:");
+  for (const sensor::TermReport& r : sensor::describe(model.spec, rate_hz))
+    out.push_back(r.sensor + " " + r.term + ": " + r.value + (r.discrete.empty() ? "" : " -> " + r.discrete));
+  return out;
+}
+
+std::uint64_t grid_index(TimeNs t0_ns, TimeNs t_ns, std::int64_t rate_hz) {
+  __extension__ typedef __int128 Int128;  // exact product of an int64 time and a rate
+  const Int128 num = static_cast<Int128>(t_ns - t0_ns) * rate_hz;
+  if (num <= 0) return 0;
+  return static_cast<std::uint64_t>((num + kNsPerSecond - 1) / kNsPerSecond);
+}
+
+std::uint64_t apply_error_model(const ErrorModelConfig& model, const std::string& device, std::int64_t rate_hz,
+                                TimeNs t0_ns, std::vector<ImuSample>& samples) {
+  if (model.ideal()) return 0;  // the ideal sensor: no stage at all
+  sensor::SensorModel m(model.spec, static_cast<double>(rate_hz), device);
+  std::uint64_t saturated = 0;
+  for (ImuSample& s : samples) {
+    const sensor::Measurement r = m.measure(grid_index(t0_ns, s.t_ns, rate_hz), s.gyro_rad_s, s.accel_m_s2);
+    s.gyro_rad_s = r.gyro_rad_s;
+    s.accel_m_s2 = r.accel_m_s2;
+    if (r.saturated_axes != 0) ++saturated;
+  }
+  return saturated;
+}
+
+}  // namespace imuemu::scene

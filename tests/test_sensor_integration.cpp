@@ -1,0 +1,313 @@
+// The sensor model in every path (issue 15): `imuemu generate` (batch),
+// `imuemu stream`, and the emission engine imuemud runs give the same bits
+// for one seed and scene; the saturated flag reaches the wire; the
+// [imu.error_model] table is parsed strictly.
+#include <gtest/gtest.h>
+#include <sys/wait.h>
+#include <unistd.h>
+
+#include <chrono>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
+#include <mutex>
+#include <sstream>
+
+#include <nlohmann/json.hpp>
+
+#include "core/pipeline.hpp"
+#include "core/sensor/datasheet.hpp"
+#include "core/sensor/sensor_model.hpp"
+#include "daemon/emission.hpp"
+#include "daemon/error_model_config.hpp"
+#include "daemon/scene_config.hpp"
+#include "daemon/scene_runner.hpp"
+#include "drivers/protocols/stream_protocols.hpp"
+
+namespace imuemu {
+namespace {
+
+namespace fs = std::filesystem;
+using namespace std::chrono_literals;
+
+class Recording final : public drivers::Transport {
+ public:
+  bool write_frame(std::span<const std::byte> frame) override {
+    std::lock_guard lock(mutex_);
+    const auto* p = reinterpret_cast<const std::uint8_t*>(frame.data());
+    bytes_.insert(bytes_.end(), p, p + frame.size());
+    return true;
+  }
+  std::string describe() const override { return "recording"; }
+  drivers::TransportCounters counters() const override { return {}; }
+  std::vector<std::uint8_t> bytes() const {
+    std::lock_guard lock(mutex_);
+    return bytes_;
+  }
+
+ private:
+  mutable std::mutex mutex_;
+  std::vector<std::uint8_t> bytes_;
+};
+
+std::vector<drivers::DecodedSample> decode_native(const std::vector<std::uint8_t>& bytes) {
+  auto decoder = drivers::make_stream_decoder("native");
+  std::vector<drivers::DecodedSample> out;
+  decoder->feed(bytes, [&](const drivers::DecodedSample& s) { out.push_back(s); });
+  return out;
+}
+
+struct Row {
+  TimeNs t_ns;
+  Vec3 gyro, accel;
+};
+// time_ns, 3 gyro, 3 accel[, status]: the CSVs of generate and stream.
+std::vector<Row> read_rows(const std::string& path) {
+  std::ifstream in(path);
+  std::string line;
+  std::vector<Row> rows;
+  while (std::getline(in, line)) {
+    if (line.empty() || line[0] < '0' || line[0] > '9') {
+      if (line.empty() || line[0] != '-') continue;
+    }
+    std::stringstream ss(line);
+    std::string cell;
+    std::vector<std::string> cells;
+    while (std::getline(ss, cell, ',')) cells.push_back(cell);
+    if (cells.size() < 7) continue;
+    Row r{std::stoll(cells[0]), {}, {}};
+    for (int i = 0; i < 3; ++i) {
+      r.gyro[i] = std::strtod(cells[1 + i].c_str(), nullptr);
+      r.accel[i] = std::strtod(cells[4 + i].c_str(), nullptr);
+    }
+    rows.push_back(r);
+  }
+  return rows;
+}
+
+int run_cli(const std::string& args, std::string* output = nullptr) {
+  const std::string cmd = std::string(IMUEMU_CLI_PATH) + " " + args + " 2>&1";
+  FILE* p = ::popen(cmd.c_str(), "r");
+  if (p == nullptr) return -1;
+  char buf[4096];
+  std::string out;
+  std::size_t n;
+  while ((n = std::fread(buf, 1, sizeof buf, p)) > 0) out.append(buf, n);
+  const int status = ::pclose(p);
+  if (output != nullptr) *output = out;
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+class SensorIntegration : public ::testing::Test {
+ protected:
+  void SetUp() override {
+    dir_ = fs::temp_directory_path() / ("imuemu_sensor_" + std::to_string(::getpid()) + "_" +
+                                        ::testing::UnitTest::GetInstance()->current_test_info()->name());
+    fs::create_directories(dir_);
+  }
+  void TearDown() override { fs::remove_all(dir_); }
+  std::string path(const std::string& name) const { return (dir_ / name).string(); }
+  fs::path dir_;
+};
+
+// The yaw rate of the built-in flat circle is 50/500 = 0.1 rad/s = 5.73 deg/s:
+// a gyro range of 5.7 deg/s saturates z on most samples (white noise
+// 0.15 deg/sqrt(h) at 200 Hz is 0.035 deg/s per sample).
+constexpr const char* kScene = R"(
+[scene]
+name = "sensor-test"
+physics = "flat"
+
+[trajectory]
+source = "sample:circle"
+duration_s = 12
+knot_interval_s = 1.0
+
+[[imu]]
+name = "imuA"
+rate_hz = 200
+protocol = "native"
+[imu.transport]
+type = "null"
+[imu.error_model]
+preset = "stim300"
+seed = 9
+[imu.error_model.gyro]
+range_dps = 5.7
+[imu.error_model.temperature]
+start_c = 10
+end_c = 40
+warmup_tau_s = 5
+)";
+
+TEST_F(SensorIntegration, GenerateSceneFileAndTheEmissionEngineGiveTheSameBitsAndSaturationFlags) {
+  { std::ofstream(path("s.toml")) << kScene; }
+  const scene::SceneConfig sc = scene::parse_scene_file(path("s.toml"));
+  const scene::ImuConfig& imu = sc.imus.front();
+  ASSERT_FALSE(imu.error_model.ideal());
+  EXPECT_EQ(imu.error_model.spec.seed, 9u);
+  EXPECT_DOUBLE_EQ(imu.error_model.spec.gyro.range, 5.7 * std::numbers::pi / 180.0);
+  EXPECT_GT(imu.error_model.spec.gyro.bias_instability.x(), 0.0);  // the preset's, kept
+
+  // The batch reference: the CLI, as a user runs it.
+  std::string out;
+  ASSERT_EQ(run_cli("generate --scene-file " + path("s.toml") + " --max-seconds 4 --out " + path("g.csv"), &out), 0) << out;
+  EXPECT_NE(out.find("sigma = N sqrt(fs)"), std::string::npos) << out;  // the discrete sigma is printed
+  const std::vector<Row> batch = read_rows(path("g.csv"));
+  ASSERT_EQ(batch.size(), 800u);
+
+  // What imuemud runs: the scene's device in the emission engine.
+  emission::DeviceOptions dev;
+  dev.name = imu.name;
+  dev.rate_hz = imu.rate_hz;
+  dev.pipeline = scene::pipeline_options(sc, imu);
+  dev.mounting = imu.mounting;
+  dev.sensor_model = imu.error_model.spec;
+  dev.stream_encoder = drivers::make_stream_encoder("native");
+  auto rec = std::make_unique<Recording>();
+  Recording* recording = rec.get();
+  dev.transport = std::move(rec);
+  emission::EngineOptions eo;
+  eo.trajectory = scene::scene_trajectory(sc);
+  eo.drop_late_ticks = false;
+  eo.max_ticks_per_device = 800;
+  eo.ring_capacity = 1024;
+  std::vector<emission::DeviceOptions> devices;
+  devices.push_back(std::move(dev));
+  emission::EmissionEngine engine(std::move(eo), std::move(devices));
+  engine.start();
+  ASSERT_TRUE(engine.wait(20s));
+  engine.stop();
+  const auto wire = decode_native(recording->bytes());
+  ASSERT_EQ(wire.size(), 800u);
+
+  // Independent saturation truth from the sensor model itself on the ideal batch.
+  std::vector<Pose> knots = scene::scene_trajectory(sc);
+  const BatchResult ideal = run_batch(knots, scene::pipeline_options(sc, imu));
+  sensor::SensorModel model(imu.error_model.spec, 200.0, "imuA");
+  std::uint64_t saturated = 0;
+  for (std::size_t k = 0; k < wire.size(); ++k) {
+    EXPECT_EQ(wire[k].t_ns, batch[k].t_ns);
+    ASSERT_EQ(wire[k].gyro_rad_s, batch[k].gyro) << k;
+    ASSERT_EQ(wire[k].accel_m_s2, batch[k].accel) << k;
+    const sensor::Measurement m = model.measure(k, ideal.imu[k].gyro_rad_s, ideal.imu[k].accel_m_s2);
+    ASSERT_EQ(m.gyro_rad_s, batch[k].gyro) << k;
+    const bool sat = m.saturated_axes != 0;
+    saturated += sat ? 1 : 0;
+    EXPECT_EQ((wire[k].status & drivers::kStatusSaturated) != 0, sat) << k;
+    if (sat) {
+      EXPECT_EQ(std::abs(wire[k].gyro_rad_s.z()), 5.7 * (std::numbers::pi / 180.0)) << k;  // range_dps x (pi/180)
+    }
+  }
+  EXPECT_GT(saturated, 100u);
+  EXPECT_LT(saturated, 800u);
+  EXPECT_EQ(engine.stats().devices.front().saturated, saturated);
+  EXPECT_EQ(emission::to_json(engine.stats())["devices"][0]["saturated"], saturated);
+  // The seed matters; the ideal path does not change.
+  ASSERT_EQ(run_cli("generate --scene-file " + path("s.toml") + " --max-seconds 4 --seed 10 --quiet --out " + path("g10.csv")), 0);
+  EXPECT_NE(read_rows(path("g10.csv"))[5].gyro, batch[5].gyro);
+  ASSERT_EQ(run_cli("generate --scene-file " + path("s.toml") + " --max-seconds 4 --sensor ideal --quiet --out " + path("gi.csv")), 0);
+  const auto ideal_rows = read_rows(path("gi.csv"));
+  for (std::size_t k = 0; k < 800; ++k) ASSERT_EQ(ideal_rows[k].gyro, ideal.imu[k].gyro_rad_s) << k;
+}
+
+TEST_F(SensorIntegration, StreamReplayEqualsGenerateWithTheSameSensorAndSeed) {
+  ASSERT_EQ(run_cli("sample-trajectory --kind circle --duration-s 10 --period-s 0.1 --out " + path("c.csv")), 0);
+  std::string out;
+  ASSERT_EQ(run_cli("generate --in " + path("c.csv") + " --out " + path("g.csv") +
+                        " --rate 200 --scene flat --delta 20 --sensor adis16470 --seed 77",
+                    &out),
+            0)
+      << out;
+  const auto reference = read_rows(path("g.csv"));
+  ASSERT_EQ(reference.size(), 2001u);
+  for (const char* speed : {"max", "20"}) {
+    ASSERT_EQ(run_cli("stream --source file:" + path("c.csv") + " --speed " + std::string(speed) +
+                          " --rate 200 --scene flat --knot-interval-s 0.1 --sensor adis16470 --seed 77 --out " + path("s.csv"),
+                      &out),
+              0)
+        << out;
+    const auto rows = read_rows(path("s.csv"));
+    ASSERT_EQ(rows.size(), reference.size()) << speed << "\n" << out;
+    std::size_t differing = 0;
+    for (std::size_t i = 0; i < rows.size(); ++i)
+      if (rows[i].gyro != reference[i].gyro || rows[i].accel != reference[i].accel || rows[i].t_ns != reference[i].t_ns)
+        ++differing;
+    EXPECT_EQ(differing, 0u) << speed;
+  }
+  // A sensor file of its own, with an override and a seed, is the same model.
+  {
+    std::ofstream(path("adis.toml")) << "preset = \"adis16470\"\nseed = 77\n[accel]\nrange_g = 40\n";
+  }
+  ASSERT_EQ(run_cli("generate --in " + path("c.csv") + " --out " + path("f.csv") +
+                    " --rate 200 --scene flat --delta 20 --quiet --sensor " + path("adis.toml")),
+            0);
+  const auto from_file = read_rows(path("f.csv"));
+  ASSERT_EQ(from_file.size(), reference.size());
+  for (std::size_t i = 0; i < from_file.size(); ++i) ASSERT_EQ(from_file[i].gyro, reference[i].gyro) << i;
+}
+
+TEST_F(SensorIntegration, SaturatedFlagReachesTheMipOverrangeField) {
+  auto encoder = drivers::make_stream_encoder("mip");
+  auto decoder = drivers::make_stream_decoder("mip");
+  for (std::uint32_t status : {0u, static_cast<std::uint32_t>(drivers::kStatusSaturated)}) {
+    drivers::ImuFrameInput f;
+    f.t_ns = 1'000'000'000;
+    f.period_ns = 5'000'000;
+    f.gyro_rad_s = Vec3(0.1, 0.0, 0.0);
+    f.accel_m_s2 = Vec3(0.0, 0.0, -9.8);
+    f.status = status;
+    std::vector<std::uint8_t> bytes;
+    encoder->encode(f, bytes);
+    std::vector<drivers::DecodedSample> got;
+    decoder->feed(bytes, [&](const drivers::DecodedSample& s) { got.push_back(s); });
+    ASSERT_EQ(got.size(), 1u);
+    EXPECT_EQ(got[0].status & drivers::kStatusSaturated, status);
+  }
+}
+
+struct BadCase {
+  std::string name, table, key, what;
+  std::uint32_t line;
+};
+
+TEST(ErrorModelConfig, RefusesUnknownUnitlessAndAmbiguousKeysNamingFileLineAndKey) {
+  const std::string head =
+      "[scene]\nname = \"x\"\nphysics = \"flat\"\n[trajectory]\nsource = \"sample:static\"\n"
+      "[[imu]]\nname = \"a\"\nrate_hz = 100\nprotocol = \"native\"\n[imu.transport]\ntype = \"null\"\n"
+      "[imu.error_model]\n";  // line 12
+  const std::vector<BadCase> cases = {
+      {"unknown", "preset = \"adis16470\"\nnoise = 3\n", "imu[0].error_model.noise", "unknown key", 14},
+      {"triad key at the top", "arw_deg_rt_h = 0.1\n", "imu[0].error_model.arw_deg_rt_h", "[imu[0].error_model.gyro]", 13},
+      {"unit-less", "[imu.error_model.gyro]\nnoise_density = 0.01\n", "imu[0].error_model.gyro.noise_density",
+       "has no unit; write one of noise_density_dps_rt_hz", 14},
+      {"ambiguous", "[imu.error_model.gyro]\narw_deg_rt_h = 0.1\nnoise_density_dps_rt_hz = 0.01\n",
+       "imu[0].error_model.gyro.noise_density_dps_rt_hz", "ambiguous", 15},
+      {"accel key in gyro", "[imu.error_model.gyro]\nrange_g = 16\n", "imu[0].error_model.gyro.range_g", "unknown key", 14},
+      {"bad preset", "preset = \"mpu6050\"\n", "imu[0].error_model.preset", "unknown sensor preset", 13},
+      {"negative", "[imu.error_model.accel]\nvrw_m_s_rt_h = -1\n", "imu[0].error_model", "expected finite values >= 0", 12},
+      {"string value", "[imu.error_model.accel]\nrange_g = \"16\"\n", "imu[0].error_model.accel.range_g", "expected a number", 14},
+      {"seed", "seed = -3\n", "imu[0].error_model.seed", "integer >= 0", 13},
+  };
+  for (const BadCase& c : cases) {
+    try {
+      (void)scene::parse_scene_text(head + c.table, "bad.toml", ".");
+      ADD_FAILURE() << c.name << ": accepted";
+    } catch (const scene::SceneError& e) {
+      EXPECT_EQ(e.file(), "bad.toml") << c.name;
+      EXPECT_EQ(e.key(), c.key) << c.name << ": " << e.what();
+      EXPECT_EQ(e.line(), c.line) << c.name << ": " << e.what();
+      EXPECT_NE(std::string(e.what()).find(c.what), std::string::npos) << c.name << ": " << e.what();
+    }
+  }
+  // Overrides replace the preset's term (another key of the same term is not ambiguous across tables).
+  const scene::SceneConfig ok = scene::parse_scene_text(
+      head + "preset = \"adis16470\"\n[imu.error_model.gyro]\narw_deg_rt_h = 0.3\n", "ok.toml", ".");
+  const sensor::SensorModelSpec& s = ok.imus[0].error_model.spec;
+  EXPECT_NEAR(s.gyro.white_density.x(), 0.3 * std::numbers::pi / 180.0 / 60.0, 1e-18);
+  EXPECT_EQ(s.gyro.bias_instability, sensor::preset_spec("adis16470").gyro.bias_instability);
+  EXPECT_TRUE(scene::parse_scene_text(head, "ideal.toml", ".").imus[0].error_model.ideal());
+}
+
+}  // namespace
+}  // namespace imuemu
