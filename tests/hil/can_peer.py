@@ -1,6 +1,6 @@
 #!/usr/bin/python3
-"""Third-party CAN peer of the hil_can_dronecan_j1939_uml test (guest side,
-under tests/hil/uml_run.sh; run with /usr/bin/python3, which has python3-can).
+"""Third-party CAN peer of the hil_can_dronecan_j1939 test (guest side,
+under tests/hil/hil_run.sh; run with /usr/bin/python3, which has python3-can).
 
   can_peer.py capture --channel vcan0 --out FILE [FILE...]
       Receives every frame on the interface with python-can's SocketCAN
@@ -51,7 +51,7 @@ import sys
 
 def capture(args):
     """Captures into args.out[0]; SIGUSR1 moves on to the next file (so that one
-    process, whose start under UML takes seconds, serves several runs). Each
+    process, whose start in an emulated guest takes seconds, serves several runs). Each
     file gets a sibling FILE.ready once frames go into it."""
     import can  # python3-can (Debian), only needed here
 
@@ -355,7 +355,7 @@ def check(args):
     with open(args.emit_stats) as f:
         device = emit_device(json.load(f))
     emitted = device.get("emitted")
-    # Ticks emit itself skipped (late wake-ups under UML's emulated timers are
+    # Ticks emit itself skipped (late wake-ups under UML or TCG are
     # dropped, not sent late): the sample times then jump, counters do not.
     skipped = device.get("ticks", 0) - (emitted or 0)
     listen_samples, summary = read_listen(args.listen)
