@@ -64,7 +64,8 @@ run_protocol() {
   # (started once, slow to start in an emulated guest) says itself when it writes here.
   wait_for "python-can capturing into $out/python.log" test -f "$out/python.log.ready" || return 1
   local base; base=$(raw_receivers)
-  candump -L vcan0 >"$out/candump.log" 2>"$out/candump.err" &
+  # Line-buffered, so the log shows how far candump has read (see drain below).
+  stdbuf -oL candump -L vcan0 >"$out/candump.log" 2>"$out/candump.err" &
   local candump_pid=$!
   pids+=("$candump_pid")
   wait_for "candump bound" more_receivers_than "$base" || return 1
@@ -83,7 +84,18 @@ run_protocol() {
   # Let the receivers drain their socket queues, then stop them: listen
   # prints its summary on SIGINT, candump flushes; the python capture closes
   # this run's log and moves on to the next (SIGUSR1) or ends (SIGTERM).
-  sleep 1
+  # A stopped receiver loses what is still queued for it, and under TCG on a
+  # loaded host it can be seconds behind: so wait until candump has logged
+  # as many frames as emit offered and listen as many samples as emit sent
+  # (both flush every line), bounded; a receiver that really lost frames
+  # then fails the check below.
+  local offered sent
+  offered=$(grep -o '"frames": [0-9]*' "$out/emit.json" | head -n1 | grep -o '[0-9]*$')
+  sent=$(grep -o '"emitted": [0-9]*' "$out/emit.json" | head -n1 | grep -o '[0-9]*$')
+  drained() { (($(wc -l <"$out/candump.log") >= ${offered:-0} && $(grep -c '"type":"sample"' "$out/listen.ndjson") >= ${sent:-0})); }
+  wait_for "candump ($offered frames) and listen ($sent samples) drained" drained ||
+    log "$protocol: stopping the receivers anyway: candump has $(wc -l <"$out/candump.log") frames, listen $(grep -c '"type":"sample"' "$out/listen.ndjson") samples"
+  sleep 0.5
   kill -INT "$listen_pid" "$candump_pid" 2>/dev/null
   wait "$listen_pid"; local listen_rc=$?
   wait "$candump_pid"
