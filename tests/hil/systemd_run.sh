@@ -74,6 +74,12 @@ done
 start_ns=$(date +%s%N)
 hil_choose_backend systemd_run
 if [[ $hil_backend == uml ]]; then uml=$(command -v linux.uml); fi
+# The test's watchdog interval. 3 s was too short on a loaded host (load
+# average 10-15 on 2 cores), under UML and QEMU alike: a reload stops and
+# rebuilds the engine without petting, took longer, and the watchdog killed
+# the daemon mid-reload (3 reload checks failed). 10 s: the checks wait
+# WatchdogSec+1 s and one watchdog timeout longer, no more.
+watchdog_s=10
 if [[ -z $results_dir ]]; then
   results_dir=$(mktemp -d "$PWD/hil_systemd.XXXXXX")
 fi
@@ -127,7 +133,7 @@ cat >"$stage/system/imuemud@hil.service.d/hil.conf" <<EOF2
 # Test only: the stall hook, a short watchdog so the test is quick.
 [Service]
 Environment=IMUEMU_TEST_HOOKS=1
-WatchdogSec=3s
+WatchdogSec=${watchdog_s}s
 RestartSec=1s
 # How each run of the main process ended (systemd.exec(5) ExecStopPost
 # environment); "+": outside the sandbox, so it may write the results.
@@ -150,7 +156,7 @@ SuccessAction=poweroff-force
 FailureAction=poweroff-force
 [Service]
 Type=oneshot
-ExecStart=/bin/bash $guest_check $cli $results_dir
+ExecStart=/bin/bash $guest_check $cli $results_dir $watchdog_s
 StandardOutput=file:$results_dir/check_output.txt
 StandardError=inherit
 EOF2
