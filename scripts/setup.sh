@@ -35,9 +35,10 @@ test_packages=(
   # hardware-in-the-loop fixtures (tests/hil): user-mode Linux with vcan; QEMU
   # booting Debian's kernel (fetched by apt-get download) with a busybox
   # initramfs, the UART, vcan and the gpio_recorder module built against the
-  # headers; the CAN and GPIO tools run inside both
+  # headers; the CAN and GPIO tools run inside both; systemd as PID 1 in the
+  # guest and systemd-analyze (a minbase system has no systemd), ps for its checks
   user-mode-linux kmod iproute2 qemu-system-x86 busybox-static cpio xz-utils
-  linux-headers-amd64 can-utils gpiod python3-can
+  linux-headers-amd64 can-utils gpiod python3-can systemd procps
 )
 
 case "$what" in

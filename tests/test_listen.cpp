@@ -555,7 +555,7 @@ TEST(Listen, TheImuemuBinaryExitsNonZeroNamingAMissingDevice) {
 }
 
 // CAN: needs a SocketCAN interface that is up (a vcan, e.g. under the HIL
-// fixture tests/hil/uml_run.sh, or `ip link add dev vcan0 type vcan && ip
+// fixture tests/hil/hil_run.sh, or `ip link add dev vcan0 type vcan && ip
 // link set up vcan0`). Named by IMUEMU_TEST_CAN_INTERFACE, else the first
 // vcan* found; skipped when there is none (this host's kernel may have no
 // vcan module).

@@ -20,6 +20,16 @@
 #   --results DIR      keep the results here (default: a temporary directory
 #                      removed on exit)
 #   --timeout SECONDS  whole boot+run+poweroff (default 240); --mem SIZE (512M)
+#   --host-root INIT   after the setup below, switch to the host's own root
+#                      file system (read-only over virtio-9p, under a tmpfs
+#                      overlay, so writes stay in the guest) and exec INIT (a
+#                      host path) there as PID 1 instead of running CMD; /dev,
+#                      /proc, /sys come along, vcan0 and the modules stay.
+#                      INIT writes its own results (through --share) and
+#                      powers off; this script then exits 0, or 125 if the
+#                      switch failed or the guest did not power off in time.
+#   --share DIR        with --host-root: DIR is writable in the guest at the
+#                      same path, its writes land on the host (repeatable)
 #
 # Inside the guest (busybox, PID 1 script, root; the initramfs itself is the
 # writable root file system): /proc, /sys, /dev, /sys/kernel/debug; lo and vcan0 (MTU 72, CAN FD) up;
@@ -50,8 +60,9 @@ seconds_since() { awk -v a="$1" -v b="$(now_ns)" 'BEGIN { printf "%.2f", (b - a)
 
 here=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
 repo=$(cd "$here/../.." && pwd)
-includes=() fetches=() envs=()
-serial1="" results_dir="" timeout_s=240 mem=512M
+includes=() fetches=() envs=() shares=()
+serial1="" results_dir="" timeout_s=240 mem=512M host_root_init=""
+
 while (($#)); do
   case "$1" in
     --include) includes+=("$2"); shift 2 ;;
@@ -61,17 +72,36 @@ while (($#)); do
     --results) results_dir=$2; shift 2 ;;
     --timeout) timeout_s=$2; shift 2 ;;
     --mem) mem=$2; shift 2 ;;
+    --host-root) host_root_init=$2; shift 2 ;;
+    --share) shares+=("$2"); shift 2 ;;
     -h|--help) usage ;;
     --) shift; break ;;
     -*) echo "qemu_run: unknown option $1" >&2; usage ;;
     *) break ;;
   esac
 done
+if [[ -n $host_root_init ]]; then
+  [[ $host_root_init == /* && -x $host_root_init ]] || fail "--host-root wants the absolute path of an executable init, got '$host_root_init'"
+  (($#)) && fail "--host-root runs INIT, not a command: drop '$*'"
+  set -- true
+  for d in "${shares[@]}"; do
+    [[ $d == /* && -d $d && $d != *,* ]] || fail "--share wants an absolute directory path without commas, got '$d'"
+  done
+elif ((${#shares[@]})); then
+  fail "--share needs --host-root"
+fi
 (($#)) || { echo "qemu_run: no command given" >&2; usage; }
 for v in ASAN_OPTIONS UBSAN_OPTIONS LSAN_OPTIONS; do
   [[ -n ${!v:-} ]] && envs+=("$v=${!v}")
 done
 
+# shellcheck source=hil_backend.sh
+source "$here/hil_backend.sh"
+case ${IMUEMU_HIL_BACKEND:-auto} in
+  auto|qemu) [[ -n $host_root_init ]] || log "backend qemu" ;;
+  uml) log "backend qemu (this scenario needs what only QEMU's kernel offers: the 8250 UART, the GPIO chip or the host root over 9p; IMUEMU_HIL_BACKEND=uml does not apply)" ;;
+  *) fail "IMUEMU_HIL_BACKEND='$IMUEMU_HIL_BACKEND': expected auto, uml or qemu" ;;
+esac
 start_ns=$(now_ns)
 need() { # command, Debian package
   command -v "$1" >/dev/null || fail "'$1' not found: install the Debian package $2 (scripts/setup.sh)"
@@ -81,6 +111,7 @@ need cpio cpio
 need gpioset gpiod
 need candump can-utils
 need make build-essential
+need modinfo kmod
 need apt-get apt
 if [[ ! -x /bin/busybox ]] || ldd /bin/busybox >/dev/null 2>&1; then
   fail "/bin/busybox is missing or not static: install the Debian package busybox-static"
@@ -100,9 +131,12 @@ mkdir -p "$cache"
 
 # --- cached pieces, built under a lock (parallel ctest runs share them) ---
 build_cache() {
-  # The kernel and the CAN modules, straight from Debian's package.
+  # The kernel and the CAN modules, straight from Debian's package, and for
+  # --host-root virtio-pci, 9p and overlay (all modules in Debian's kernel),
+  # listed in load order in host-root.order (each after what it depends on,
+  # from modinfo).
   can_modules=(kernel/net/can/can.ko kernel/net/can/can-raw.ko kernel/drivers/net/can/dev/can-dev.ko kernel/drivers/net/can/vcan.ko)
-  if [[ ! -f $cache/kernel/vmlinuz ]]; then
+  if [[ ! -f $cache/kernel/vmlinuz || ! -f $cache/kernel/modules/host-root.order ]]; then
     local t0 dl; t0=$(now_ns)
     rm -rf "$cache/download" "$cache/kernel"; mkdir -p "$cache/download"
     (cd "$cache/download" && apt-get download "$image_pkg" >apt.log 2>&1) ||
@@ -110,9 +144,22 @@ build_cache() {
     dl=$(ls "$cache/download"/*.deb)
     mkdir -p "$cache/download/x"
     dpkg-deb --fsys-tarfile "$dl" | tar -x -C "$cache/download/x" --wildcards "./boot/vmlinuz-$kver" \
-      "${can_modules[@]/#/./lib/modules/$kver/}" || fail "extracting the kernel and CAN modules from $dl"
+      "${can_modules[@]/#/./lib/modules/$kver/}" "./lib/modules/$kver/kernel/drivers/virtio/*" \
+      "./lib/modules/$kver/kernel/net/9p/*" "./lib/modules/$kver/kernel/fs/*" || fail "extracting the kernel and modules from $dl"
     mkdir -p "$cache/kernel/modules"
     cp "$cache/download/x/lib/modules/$kver/"{kernel/net/can/can.ko,kernel/net/can/can-raw.ko,kernel/drivers/net/can/dev/can-dev.ko,kernel/drivers/net/can/vcan.ko} "$cache/kernel/modules/"
+    local -A module_path=() loaded=()
+    local ko order=()
+    while IFS= read -r ko; do module_path[$(basename "$ko" .ko)]=$ko; done < <(find "$cache/download/x/lib/modules" -name '*.ko')
+    add_module() { # $1 = module name (dashes or underscores), after its dependencies
+      local name=${1//-/_} dep
+      [[ -n ${loaded[$name]:-} ]] && return 0
+      [[ -n ${module_path[$name]:-} ]] || fail "module $name (needed for --host-root) is not in $dl"
+      for dep in $(modinfo -F depends "${module_path[$name]}" | tr ',' ' '); do add_module "$dep"; done
+      loaded[$name]=1; order+=("$name"); cp "${module_path[$name]}" "$cache/kernel/modules/$name.ko"
+    }
+    for ko in virtio_pci 9pnet_virtio 9p overlay; do add_module "$ko"; done
+    printf '%s\n' "${order[@]}" >"$cache/kernel/modules/host-root.order"
     basename "$dl" >"$cache/kernel/package"
     mv "$cache/download/x/boot/vmlinuz-$kver" "$cache/kernel/vmlinuz"
     rm -rf "$cache/download"
@@ -122,6 +169,7 @@ build_cache() {
   # the uncompressed ELF directly through its PVH entry point (CONFIG_PVH;
   # ELF note XEN_ELFNOTE_PHYS32_ENTRY = 0x12) in ~1 s. Falls back, saying so.
   if [[ ! -f $cache/kernel/vmlinux && ! -f $cache/kernel/no-pvh ]]; then
+    need readelf binutils
     extract_pvh_vmlinux "$cache/kernel/vmlinuz" "$cache/kernel/vmlinux" ||
       { log "no PVH-bootable vmlinux in $kver's bzImage: booting the compressed kernel (slower)"; touch "$cache/kernel/no-pvh"; }
   fi
@@ -139,7 +187,7 @@ build_cache() {
   fi
 
   # The base initramfs: busybox, the tools, the modules and /init.
-  local base_sum; base_sum=$( { guest_init; sha256sum "$cache/gpio_recorder/gpio_recorder.ko" "$cache/kernel/vmlinuz";
+  local base_sum; base_sum=$( { guest_init; sha256sum "$cache/gpio_recorder/gpio_recorder.ko" "$cache/kernel/vmlinuz" "$cache/kernel/modules/"*;
     dpkg-query -W busybox-static gpiod can-utils libc6 libgpiod2; } | sha256sum | cut -c1-16)
   if [[ ! -f $cache/base.cpio.gz || $(cat "$cache/base.sum" 2>/dev/null) != "$base_sum" ]]; then
     local t0 stage; t0=$(now_ns)
@@ -152,7 +200,7 @@ build_cache() {
     for tool in gpioset gpioget gpioinfo gpiodetect gpiomon gpiofind candump cansend cangen; do
       stage_with_libs "$stage" "$(command -v "$tool")"
     done
-    cp "$cache/kernel/modules/"*.ko "$cache/gpio_recorder/gpio_recorder.ko" "$stage/lib/modules/hil/"
+    cp "$cache/kernel/modules/"*.ko "$cache/kernel/modules/host-root.order" "$cache/gpio_recorder/gpio_recorder.ko" "$stage/lib/modules/hil/"
     guest_init >"$stage/init"; chmod 755 "$stage/init"
     (cd "$stage" && find . -mindepth 1 | LC_ALL=C sort | cpio -o -H newc -R 0:0 --quiet | gzip -1) >"$cache/base.cpio.gz.tmp"
     mv "$cache/base.cpio.gz.tmp" "$cache/base.cpio.gz"
@@ -225,6 +273,23 @@ HIL_GPIOCHIP=/dev/$(gpiodetect | awk '/\[gpio-recorder\]/ { print $1; exit }')
 export HIL_GPIOCHIP
 [ -f /hil/run.sh ] || setup_failed "no /hil/run.sh in the initramfs"
 . /hil/run.sh
+if [ -n "${hil_host_root_init:-}" ]; then
+  # The host's root, read-only over virtio-9p (cache=loose: nothing changes
+  # it during a run), under a tmpfs overlay so the guest may write anywhere;
+  # the --share directories (9p, uncached) on top at their host paths.
+  for m in $(cat /lib/modules/hil/host-root.order); do
+    insmod /lib/modules/hil/$m.ko 2>>"$setup_log" || setup_failed "insmod $m.ko (for the host root)"
+  done
+  mkdir -p /hil/lower /hil/rw /hil/root
+  mount -t 9p -o ro,trans=virtio,version=9p2000.L,msize=512000,cache=loose hil_root /hil/lower 2>>"$setup_log" ||
+    setup_failed "mounting the host root over virtio-9p"
+  mount -t tmpfs -o mode=755 tmpfs /hil/rw && mkdir -p /hil/rw/upper /hil/rw/work &&
+    mount -t overlay -o lowerdir=/hil/lower,upperdir=/hil/rw/upper,workdir=/hil/rw/work overlay /hil/root 2>>"$setup_log" ||
+    setup_failed "the tmpfs overlay over the host root"
+  hil_mount_shares /hil/root 2>>"$setup_log" || setup_failed "mounting the --share directories"
+  for d in dev proc sys; do mount --move /$d /hil/root/$d 2>>"$setup_log" || setup_failed "moving /$d to the host root"; done
+  exec switch_root /hil/root "$hil_host_root_init"
+fi
 (cd "$hil_cwd" && hil_command) </dev/null >"$HIL_OUT/output.txt" 2>&1
 echo $? >"$HIL_OUT/rc"
 cat /sys/kernel/debug/gpio_recorder/events >"$HIL_OUT/gpio_recorder.txt"
@@ -259,6 +324,13 @@ squote() { local s=${1//\'/\'\\\'\'}; printf "'%s'" "$s"; }
   echo "hil_cwd=$(squote "$PWD")"
   for e in "${envs[@]}"; do echo "export $(squote "$e")"; done
   printf 'hil_command() {'; for a in "$@"; do printf ' %s' "$(squote "$a")"; done; printf '; }\n'
+  [[ -n $host_root_init ]] && echo "hil_host_root_init=$(squote "$host_root_init")"
+  echo 'hil_mount_shares() {'
+  echo '  :'
+  for i in "${!shares[@]}"; do
+    echo "  mount -t 9p -o trans=virtio,version=9p2000.L,msize=512000 hil_share$i \"\$1\"$(squote "${shares[i]}") || return 1"
+  done
+  echo '}'
   echo 'hil_fetch() {'
   echo '  :'
   for p in "${fetches[@]}"; do
@@ -278,6 +350,15 @@ base_size=$(stat -c %s "$cache/base.cpio.gz")
 kernel_image=$cache/kernel/vmlinux
 [[ -f $kernel_image ]] || kernel_image=$cache/kernel/vmlinuz
 if [[ -z $serial1 ]]; then serial1="file,path=$results_dir/ttyS1.out"; fi
+virtfs=()
+if [[ -n $host_root_init ]]; then
+  # multidevs=remap: the host's root spans several file systems (/dev/shm,
+  # /tmp, ...); remapped inode numbers stay unique in the guest.
+  virtfs+=(-virtfs "local,path=/,mount_tag=hil_root,security_model=none,readonly=on,multidevs=remap")
+  for i in "${!shares[@]}"; do
+    virtfs+=(-virtfs "local,path=${shares[i]},mount_tag=hil_share$i,security_model=none,multidevs=remap")
+  done
+fi
 boot_t0=$(now_ns)
 qemu_rc=0
 # TCG, not KVM: the nested KVM guest hung at boot on these machines. -cpu max
@@ -288,8 +369,9 @@ timeout --kill-after=5 "$timeout_s" qemu-system-x86_64 \
   -serial stdio \
   -chardev "$serial1,id=hil_serial1" -serial chardev:hil_serial1 \
   -chardev "file,id=hil_results,path=$work/results.tar" -serial chardev:hil_results \
+  "${virtfs[@]}" \
   -kernel "$kernel_image" -initrd "$work/initrd" \
-  -append "console=ttyS0 panic=-1 oops=panic edd=off quiet" \
+  -append "console=ttyS0 panic=-1 oops=panic edd=off quiet mitigations=off" \
   </dev/null >"$results_dir/console.log" 2>&1 &
 qemu_pid=$!
 wait "$qemu_pid" || qemu_rc=$?
@@ -300,14 +382,33 @@ if [[ -s $work/results.tar ]]; then
   tar -x -f "$work/results.tar" -C "$results_dir" 2>"$work/untar.log" ||
     { log "results archive from the guest is damaged: $(cat "$work/untar.log")"; rm -f "$results_dir/rc"; }
 fi
+# On a failed run: whatever the guest's setup logged, the console lines that
+# show the cause, and where the whole console is (kept even without --results).
+report_failure() {
+  ((qemu_rc == 124 || qemu_rc == 137)) && log "the guest did not power off within ${timeout_s} s"
+  [[ -s $results_dir/guest_setup.txt ]] && sed 's/^/qemu_run: /' "$results_dir/guest_setup.txt"
+  local console=$results_dir/console.log
+  if [[ $results_dir == "$work"/* ]]; then
+    console=$(mktemp "${TMPDIR:-/tmp}/qemu_run.console.XXXXXX")
+    cp "$results_dir/console.log" "$console"
+  fi
+  log "qemu-system-x86_64 exited with status $qemu_rc; the console's lines that show the cause:"
+  hil_console_cause "$results_dir/console.log" | sed 's/^/  /'
+  log "whole console: $console"
+}
+if [[ -n $host_root_init ]]; then
+  # The initramfs sends results over ttyS2 only when it fails before the
+  # switch; after it, INIT reports through its --share directories.
+  if [[ -s $work/results.tar ]] || ((qemu_rc != 0)); then
+    report_failure >&2
+    fail "the guest did not switch to the host root and power off (${elapsed} s)"
+  fi
+  log "kernel $kver: cache check $(awk -v a="$lock_t0" -v b="$boot_t0" 'BEGIN { printf "%.2f", (b - a) / 1e9 }') s, boot+host root init+poweroff ${elapsed} s"
+  exit 0
+fi
 if [[ -s $results_dir/output.txt ]]; then cat "$results_dir/output.txt"; fi
 if [[ ! -f $results_dir/rc ]]; then
-  {
-    ((qemu_rc == 124 || qemu_rc == 137)) && log "the guest did not power off within ${timeout_s} s"
-    [[ -s $results_dir/guest_setup.txt ]] && sed 's/^/qemu_run: /' "$results_dir/guest_setup.txt"
-    log "qemu-system-x86_64 exited with status $qemu_rc; last console lines:"
-    tail -n 40 "$results_dir/console.log"; echo
-  } >&2
+  report_failure >&2
   fail "the command did not run to completion inside QEMU (${elapsed} s)"
 fi
 [[ -s $results_dir/fetch_errors.txt ]] && sed 's/^/qemu_run: fetch: /' "$results_dir/fetch_errors.txt" >&2

@@ -1,9 +1,10 @@
 #!/bin/sh
-# Guest side of the hil_smoke_uml_vcan test (run by tests/hil/uml_run.sh):
+# Guest side of the hil_smoke_vcan test (tests/hil/hil_run.sh, either backend)
+# and part of hil_smoke_qemu_uart_gpio_vcan (qemu_run.sh's busybox guest):
 # a classic CAN frame and a 16-byte CAN FD frame sent with cansend on vcan0
 # must reach a candump listening on the same interface, unchanged.
 set -u
-rx=${HIL_OUT:?run me through tests/hil/uml_run.sh}/candump.log
+rx=${HIL_OUT:?run me through tests/hil/hil_run.sh}/candump.log
 check_frame() { # $1 = cansend frame, $2 = the candump -L text expected for it
   : >"$rx"
   candump -L -n 1 -T 5000 vcan0 >"$rx" &
