@@ -778,12 +778,12 @@ void StreamPipeline::check_chart_span(const Pose& knot, bool new_run) const {
     const double angle_rad = so3::angle(it->attitude.transpose() * knot.attitude);
     if (angle_rad > kMaxChartAngleRad) {
       const auto index = knots_pushed_ - 1 - static_cast<std::size_t>(it - recent_.rbegin());
-      throw std::invalid_argument(knot_name(knots_pushed_, knot.t_ns) + ": its attitude is " +
-                                  std::to_string(angle_rad) + " rad from that of " + knot_name(index, it->t_ns) +
-                                  ", within one smoothing half-window (" +
+      throw std::invalid_argument(knot_name(knots_pushed_, knot.t_ns) + ": the smoothing window would span more "
+                                  "rotation than a chart can hold (> " + std::to_string(kMaxChartAngleRad) +
+                                  " rad): its attitude is " + std::to_string(angle_rad) + " rad from that of " +
+                                  knot_name(index, it->t_ns) + ", within one smoothing half-window (" +
                                   std::to_string(static_cast<double>(span_ns) * 1e-9) +
-                                  " s), more rotation than a chart can hold (> " + std::to_string(kMaxChartAngleRad) +
-                                  " rad): a glitch, or reduce Delta, or add knots");
+                                  " s); a glitch, or reduce Delta, or add knots");
     }
   }
 }
