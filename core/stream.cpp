@@ -778,7 +778,7 @@ void StreamPipeline::check_chart_span(const Pose& knot, bool new_run) const {
     const double angle_rad = so3::angle(it->attitude.transpose() * knot.attitude);
     if (angle_rad > kMaxChartAngleRad) {
       const auto index = knots_pushed_ - 1 - static_cast<std::size_t>(it - recent_.rbegin());
-      throw std::invalid_argument(knot_name(knots_pushed_, knot.t_ns) + ": the smoothing window would span more "
+      throw std::invalid_argument(knot_name(knots_pushed_, knot.t_ns) + ": the smoothing window spans more "
                                   "rotation than a chart can hold (> " + std::to_string(kMaxChartAngleRad) +
                                   " rad): its attitude is " + std::to_string(angle_rad) + " rad from that of " +
                                   knot_name(index, it->t_ns) + ", within one smoothing half-window (" +
