@@ -6,16 +6,14 @@
 
 #include "core/smoothing.hpp"
 #include "core/so3.hpp"
+#include "core/time_arith.hpp"
 
 namespace imuemu::live {
 
 namespace {
 
-// to - from for to >= from, for any int64 pair: the unsigned difference is
-// the true one (it lies in [0, 2^64)), where the signed one could overflow.
-std::uint64_t ns_after(TimeNs from_ns, TimeNs to_ns) {
-  return static_cast<std::uint64_t>(to_ns) - static_cast<std::uint64_t>(from_ns);
-}
+// to - from for to >= from, exactly (core/time_arith.hpp).
+std::uint64_t ns_after(TimeNs from_ns, TimeNs to_ns) { return ns_between(from_ns, to_ns); }
 double seconds_after(TimeNs from_ns, TimeNs to_ns) { return static_cast<double>(ns_after(from_ns, to_ns)) * 1e-9; }
 
 bool finite(const Vec3& v) { return v.allFinite(); }

@@ -10,6 +10,7 @@
 
 #include "core/derivatives.hpp"
 #include "core/so3.hpp"
+#include "core/time_arith.hpp"
 
 namespace imuemu {
 namespace {
@@ -54,13 +55,16 @@ class KernelMoments {
 std::vector<Pose> extend(const Pose& from, const Pose& towards, const Pose& beyond, bool quadratic, TimeNs pad_ns) {
   std::vector<Pose> out;
   const bool before = towards.t_ns > from.t_ns;
-  const TimeNs h = std::abs(towards.t_ns - from.t_ns);
+  const TimeNs h = static_cast<TimeNs>(ns_between(std::min(from.t_ns, towards.t_ns), std::max(from.t_ns, towards.t_ns)));
   const Vec3 xi = so3::log(towards.attitude.transpose() * from.attitude);  // one step away from `towards`
   const double t1 = seconds_between(from.t_ns, towards.t_ns), t2 = seconds_between(from.t_ns, beyond.t_ns);
   const Vec3 y1 = towards.position_m - from.position_m, y2 = beyond.position_m - from.position_m;
   for (std::int64_t k = 1; k * h < pad_ns + h; ++k) {
     const double kd = static_cast<double>(k);
-    const TimeNs t_ns = from.t_ns + (before ? -k * h : k * h);
+    // The caller refused knots whose padding leaves int64 (StreamPipeline::push),
+    // so these are exact; saturating keeps them defined regardless.
+    const TimeNs step_ns = saturating_mul_ns(k, h);
+    const TimeNs t_ns = before ? saturating_sub_ns(from.t_ns, step_ns) : saturating_add_ns(from.t_ns, step_ns);
     const double t = seconds_between(from.t_ns, t_ns);
     // Lagrange through (0, 0), (t1, y1), (t2, y2), relative to `from`.
     const Vec3 offset = quadratic ? Vec3(t * (t - t2) / (t1 * (t1 - t2)) * y1 + t * (t - t1) / (t2 * (t2 - t1)) * y2)
@@ -139,15 +143,95 @@ class StreamPipeline::Run {
     }
   }
 
-  // Knot already validated against the previous one by the caller.
+  // Knot already validated against the previous one by the caller. Strong
+  // guarantee: if it throws (a smoothing window that would span more rotation
+  // than a chart holds), the run is as before the call. Everything a push
+  // changes before the blocks are solved (the builder, the new segments and
+  // dense samples, the scalars below) is restored from a checkpoint; the
+  // blocks are planned (the only check that throws) before any is solved.
   void push(const Pose& knot) {
+    Checkpoint saved{builder_,  segments_.size(), dense_.size(), dense_count_, real_count_, k0_,
+                     t_first_,  t_last_,          head_done_,    head_,        tail_};
+    try {
+      push_knot(knot);
+      plan_blocks();
+    } catch (...) {
+      builder_ = std::move(saved.builder);
+      segments_.resize(saved.segments);
+      dense_.resize(saved.dense);
+      dense_count_ = saved.dense_count;
+      real_count_ = saved.real_count;
+      k0_ = saved.k0;
+      t_first_ = saved.t_first;
+      t_last_ = saved.t_last;
+      head_done_ = saved.head_done;
+      head_ = std::move(saved.head);
+      tail_ = saved.tail;
+      throw;
+    }
+    solve_blocks();
+  }
+
+  // Ns of the smoothing half-window (Delta samples): two knots closer than
+  // this share a window.
+  TimeNs window_half_ns() const {
+    return saturating_mul_ns(kernel_.delta(), kNsPerSecond) / opt_.rate_hz;
+  }
+  TimeNs pad_ns() const { return saturating_mul_ns(pad_s_, kNsPerSecond); }
+
+ private:
+  struct Checkpoint {
+    interp::SegmentBuilder builder;
+    std::size_t segments, dense, dense_count, real_count;
+    std::int64_t k0;
+    TimeNs t_first, t_last;
+    bool head_done;
+    std::vector<Pose> head;
+    std::array<Pose, 3> tail;
+  };
+
+  // The blocks solve_blocks() would solve now, with their chart check
+  // (solve()'s) only: throws what solve_blocks would, changes nothing.
+  void plan_blocks() const {
+    if (global_ || finished_) return;
+    std::size_t begin = next_begin_;
+    while (begin < dense_count_ && begin + nominal_ + reach_ <= dense_count_) {
+      std::size_t length = nominal_;
+      while (!fits_chart(begin, begin + length)) {
+        if (length == 1) throw_chart_error(begin);
+        length = (length + 1) / 2;
+      }
+      begin += length;
+    }
+  }
+  // solve()'s test: every sample its window reads within kMaxChartAngleRad
+  // of the block's reference (the same arithmetic, so the same verdict).
+  bool fits_chart(std::size_t begin, std::size_t end) const {
+    const std::size_t n = dense_count_;
+    const Mat3 R_ref = dense(begin + (end - begin) / 2).attitude;
+    const std::size_t lo = begin > reach_ ? begin - reach_ : 0;
+    const std::size_t hi = std::min(n, end + reach_);
+    for (std::size_t j = lo; j < hi; ++j) {
+      const Vec3 rho = so3::log(R_ref.transpose() * dense(j).attitude);
+      if (rho.norm() > kMaxChartAngleRad) return false;
+    }
+    return true;
+  }
+  [[noreturn]] static void throw_chart_error(std::size_t sample) {
+    throw std::invalid_argument("the smoothing window around output sample " + std::to_string(sample) +
+                                " spans more rotation than a chart can hold (> " + std::to_string(kMaxChartAngleRad) +
+                                " rad from its centre): reduce Delta or the kernel width, or add knots");
+  }
+
+ public:
+  void push_knot(const Pose& knot) {
     if (real_count_ == 0) {
       t_first_ = knot.t_ns;
       // The first grid index at or after t_first - pad, on the stream's grid
       // (origin + floor(k 1e9 / rate)): every run of a split stream stays on
       // the first run's grid. For the first run it is exactly -pad_s * rate.
-      const TimeNs start = t_first_ - pad_s_ * kNsPerSecond;
-      const TimeNs d = start - origin_ns_;
+      const TimeNs start = saturating_sub_ns(t_first_, pad_ns());  // exact: the caller checked the padding
+      const TimeNs d = saturating_sub_ns(start, origin_ns_);
       const std::int64_t rem = floor_mod(d, kNsPerSecond);
       k0_ = (d - rem) / kNsPerSecond * opt_.rate_hz + rem * opt_.rate_hz / kNsPerSecond;  // floor(d rate / 1e9)
       while (absolute_time(k0_) < start) ++k0_;
@@ -178,9 +262,9 @@ class StreamPipeline::Run {
       const Pose& last = tail_[2];
       const Pose& prev = tail_[1];
       const bool quadratic = real_count_ > 2;
-      dense_end_ns_ = t_last_ + pad_s_ * kNsPerSecond;
+      dense_end_ns_ = saturating_add_ns(t_last_, pad_ns());
       end_known_ = true;
-      for (const Pose& v : extend(last, prev, quadratic ? tail_[0] : prev, quadratic, pad_s_ * kNsPerSecond)) feed(v);
+      for (const Pose& v : extend(last, prev, quadratic ? tail_[0] : prev, quadratic, pad_ns())) feed(v);
     } else {
       dense_end_ns_ = t_last_;
       end_known_ = true;
@@ -202,16 +286,17 @@ class StreamPipeline::Run {
     head_done_ = true;
     const bool quadratic = head_.size() > 2;
     std::vector<Pose> virtual_knots =
-        extend(head_[0], head_[1], quadratic ? head_[2] : head_[1], quadratic, pad_s_ * kNsPerSecond);
+        extend(head_[0], head_[1], quadratic ? head_[2] : head_[1], quadratic, pad_ns());
     for (auto it = virtual_knots.rbegin(); it != virtual_knots.rend(); ++it) builder_.push(*it);
     for (const Pose& k : head_) feed(k);
     head_.clear();
   }
 
+  // During push() the blocks are solved once, after planning (see push).
   void feed(const Pose& knot) {
     builder_.push(knot);
     take_segments();
-    solve_blocks();
+    if (finished_ || end_known_) solve_blocks();
   }
 
   // Grid instant of dense index g: integer ns and the sub-ns fraction.
@@ -225,7 +310,10 @@ class StreamPipeline::Run {
   TimeNs absolute_time(std::int64_t k) const {
     const std::int64_t r = floor_mod(k, opt_.rate_hz);
     const std::int64_t whole = (k - r) / opt_.rate_hz;
-    return origin_ns_ + whole * kNsPerSecond + r * kNsPerSecond / opt_.rate_hz;
+    // Saturating: one grid instant past a run that ends within a period of
+    // INT64_MAX compares as "beyond the end" instead of wrapping.
+    return saturating_add_ns(saturating_add_ns(origin_ns_, saturating_mul_ns(whole, kNsPerSecond)),
+                             r * kNsPerSecond / opt_.rate_hz);
   }
 
   // Interpolates the dense samples of every segment the builder has ready.
@@ -583,17 +671,26 @@ StreamPipeline::StreamPipeline(const PipelineOptions& options) : options_(option
 
 StreamPipeline::~StreamPipeline() = default;
 
+namespace {
+std::string knot_name(std::size_t index, TimeNs t_ns) {
+  return "knot " + std::to_string(index) + " (t=" + knot_time(t_ns) + ")";
+}
+}  // namespace
+
 void StreamPipeline::push(const Pose& knot) {
   if (finished_) throw std::logic_error("StreamPipeline::push after finish");
+  // Every knot-level rule first; nothing changes until they all pass.
   interp::check_knot_finite(knot, knots_pushed_);
+  bool gap = false;
   if (knots_pushed_ > 0) {
     interp::check_next_knot(last_knot_, knot, knots_pushed_);
-    const auto max_gap_ns = static_cast<TimeNs>(std::min(options_.max_gap_s, 1e9) * 1e9);
-    if (knot.t_ns - last_knot_.t_ns > max_gap_ns) {
+    const auto max_gap_ns = static_cast<std::uint64_t>(std::min(options_.max_gap_s, 1e9) * 1e9);
+    const std::uint64_t step_ns = ns_between(last_knot_.t_ns, knot.t_ns);  // exact for any ordered pair
+    if (step_ns > max_gap_ns) {
       if (options_.gap_policy == GapPolicy::error)
         throw GapError("knots " + std::to_string(knots_pushed_ - 1) + " (t=" + knot_time(last_knot_.t_ns) + ") and " +
                        std::to_string(knots_pushed_) + " (t=" + knot_time(knot.t_ns) + ") are " +
-                       knot_time(knot.t_ns - last_knot_.t_ns) + " apart, more than the " +
+                       std::to_string(static_cast<double>(step_ns) * 1e-9) + " s apart, more than the " +
                        std::to_string(options_.max_gap_s) +
                        " s gap limit: raise the limit or split the trajectory at gaps");
       // GapPolicy::split: the stretch before the gap ends here, with its own
@@ -601,21 +698,93 @@ void StreamPipeline::push(const Pose& knot) {
       if (run_->real_knots() < 2)
         throw GapError("knot " + std::to_string(run_first_knot_) + " (t=" + knot_time(last_knot_.t_ns) +
                        ") is isolated between two gaps: a segment needs at least two knots");
-      run_->finish();
-      run_ = std::make_unique<Run>(options_, out_, first_knot_ns_);
-      run_first_knot_ = knots_pushed_;
+      gap = true;
     }
   }
-  if (knots_pushed_ == 0) {
-    first_knot_ns_ = knot.t_ns;
-    run_ = std::make_unique<Run>(options_, out_, knot.t_ns);  // the output grid starts at the first knot
+  const bool new_run = knots_pushed_ == 0 || gap;
+  check_padding(knot, new_run);
+  check_chart_span(knot, new_run);
+
+  // The knot is acceptable on its own; what is left can only fail inside the
+  // run (a window spanning too much rotation), which Run::push rolls back.
+  // A gap's split finishes the old run first, so that one is kept aside.
+  std::unique_ptr<Run> old_run;
+  const std::size_t out_before = out_.size();
+  try {
+    if (gap) {
+      old_run = std::make_unique<Run>(*run_);
+      run_->finish();
+      run_ = std::make_unique<Run>(options_, out_, first_knot_ns_);
+    } else if (knots_pushed_ == 0) {
+      run_ = std::make_unique<Run>(options_, out_, knot.t_ns);  // the output grid starts at the first knot
+    }
+    run_->push(knot);
+  } catch (...) {
+    if (old_run) run_ = std::move(old_run);
+    if (knots_pushed_ == 0) run_ = std::make_unique<Run>(options_, out_, 0);
+    out_.resize(out_before);
+    throw;
   }
-  run_->push(knot);
+  // Commit.
+  if (knots_pushed_ == 0) first_knot_ns_ = knot.t_ns;
+  if (new_run) {
+    run_first_knot_ = knots_pushed_;
+    recent_.clear();
+  }
+  recent_.push_back(knot);
+  while (recent_.size() > 1 && ns_between(recent_.front().t_ns, knot.t_ns) > static_cast<std::uint64_t>(run_->window_half_ns()))
+    recent_.pop_front();
   last_knot_ = knot;
   ++knots_pushed_;
   if (!out_.empty()) {
     newest_output_ns_ = out_.back().kinematics.t_ns;
     any_output_ = true;
+  }
+}
+
+// Ends::extrapolate pads pad_ns, plus one knot interval h, before a run's
+// first knot and after its last (virtual knots, see extend()); a knot whose
+// padding would leave int64 is refused here rather than overflow there. Every
+// knot is checked as if it were the last; the second knot of a run also
+// checks the head padding of the first, which uses the first interval.
+void StreamPipeline::check_padding(const Pose& knot, bool new_run) const {
+  if (options_.ends != Ends::extrapolate) return;
+  const TimeNs pad_ns = run_->pad_ns();
+  const auto refuse = [&](std::size_t index, TimeNs t_ns, TimeNs reach_ns, const char* side) {
+    throw interp::InterpolationError(knot_name(index, t_ns) + ": the end extrapolation reaches " +
+                                     std::to_string(static_cast<double>(reach_ns) * 1e-9) + " s " + side +
+                                     " it, beyond the int64 nanosecond time range; move the trajectory's times "
+                                     "away from +-9.22e9 s");
+  };
+  const TimeNs h_ns = new_run ? 0 : knot.t_ns - last_knot_.t_ns;  // <= the gap limit: no overflow
+  const TimeNs reach_ns = saturating_add_ns(pad_ns, h_ns);
+  if (!checked_add_ns(knot.t_ns, reach_ns)) refuse(knots_pushed_, knot.t_ns, reach_ns, "after");
+  if (new_run && !checked_sub_ns(knot.t_ns, pad_ns)) refuse(knots_pushed_, knot.t_ns, pad_ns, "before");
+  if (!new_run && run_->real_knots() == 1 && !checked_sub_ns(last_knot_.t_ns, reach_ns))
+    refuse(run_first_knot_, last_knot_.t_ns, reach_ns, "before");
+}
+
+// Knot-level form of the chart rule (kMaxChartAngleRad): two knots within one
+// smoothing half-window of each other share windows, and a window holding
+// attitudes more than kMaxChartAngleRad apart fits no chart. Refusing the knot
+// that brings such an attitude (a heading glitch) keeps the stream going;
+// without this the run would only fail later, at some good knot's push, and
+// then at every one after it.
+void StreamPipeline::check_chart_span(const Pose& knot, bool new_run) const {
+  if (options_.chart == Chart::global || new_run) return;
+  const auto span_ns = static_cast<std::uint64_t>(run_->window_half_ns());
+  for (auto it = recent_.rbegin(); it != recent_.rend(); ++it) {
+    if (ns_between(it->t_ns, knot.t_ns) > span_ns) break;
+    const double angle_rad = so3::angle(it->attitude.transpose() * knot.attitude);
+    if (angle_rad > kMaxChartAngleRad) {
+      const auto index = knots_pushed_ - 1 - static_cast<std::size_t>(it - recent_.rbegin());
+      throw std::invalid_argument(knot_name(knots_pushed_, knot.t_ns) + ": the smoothing window spans more "
+                                  "rotation than a chart can hold (> " + std::to_string(kMaxChartAngleRad) +
+                                  " rad): its attitude is " + std::to_string(angle_rad) + " rad from that of " +
+                                  knot_name(index, it->t_ns) + ", within one smoothing half-window (" +
+                                  std::to_string(static_cast<double>(span_ns) * 1e-9) +
+                                  " s); a glitch, or reduce Delta, or add knots");
+    }
   }
 }
 
@@ -664,7 +833,8 @@ TimeNs StreamPipeline::lookahead_ns(const PipelineOptions& output_options, TimeN
   const bool tangents = options.interpolation.method == interp::Method::hermite ||
                         options.interpolation.method == interp::Method::park_ravani;
   const std::int64_t knots = 1 + (tangents ? options.interpolation.spline_window_knots : 0);
-  return samples * kNsPerSecond / options.rate_hz + knots * knot_interval_ns;
+  return saturating_add_ns(saturating_mul_ns(samples, kNsPerSecond) / options.rate_hz,
+                           saturating_mul_ns(knot_interval_ns, knots));
 }
 
 }  // namespace imuemu

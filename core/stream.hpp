@@ -32,10 +32,13 @@ class StreamPipeline {
 
   // Appends a knot (a pose in the scene frame). Throws
   // interp::InterpolationError for a knot that cannot follow the previous one
-  // (not later, not finite, antipodal step) and GapError for a gap the policy
-  // refuses; a refused knot changes nothing, so a live caller may count it and
-  // go on. std::invalid_argument if a smoothing window spans more rotation
-  // than a chart holds.
+  // (not later, not finite, antipodal step) or whose end extrapolation
+  // (Ends::extrapolate) would leave the int64 ns range, and GapError for a gap
+  // the policy refuses; std::invalid_argument for a knot whose attitude is
+  // more than kMaxChartAngleRad from a knot within one smoothing half-window
+  // (Chart::local), or if a smoothing window spans more rotation than a chart
+  // holds. Strong guarantee: a refused knot changes nothing (no output, no
+  // counter), so a live caller may count it and go on.
   void push(const Pose& knot);
   // End of input: computes the end of the trajectory (Ends policy). Throws
   // GapError for a last run of a single knot, std::invalid_argument for a
@@ -66,6 +69,8 @@ class StreamPipeline {
 
  private:
   class Run;  // one gap-free stretch of knots
+  void check_padding(const Pose& knot, bool new_run) const;
+  void check_chart_span(const Pose& knot, bool new_run) const;
   PipelineOptions options_;
   std::unique_ptr<Run> run_;
   std::deque<StreamSample> out_;
@@ -73,6 +78,7 @@ class StreamPipeline {
   std::size_t run_first_knot_ = 0;
   TimeNs first_knot_ns_ = 0;
   Pose last_knot_;
+  std::deque<Pose> recent_;  // this run's knots within one smoothing half-window of the newest
   TimeNs newest_output_ns_ = 0;
   bool any_output_ = false;
   bool finished_ = false;

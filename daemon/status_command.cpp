@@ -1,5 +1,6 @@
 #include "daemon/status_command.hpp"
 
+#include <sys/socket.h>
 #include <sys/stat.h>
 #include <grp.h>
 
@@ -8,6 +9,7 @@
 #include <cmath>
 #include <iostream>
 #include <ostream>
+#include <thread>
 
 #include <CLI/CLI.hpp>
 #include <boost/asio/buffers_iterator.hpp>
@@ -125,11 +127,35 @@ nlohmann::json query_control_socket(const std::string& socket_path, const std::s
   }
   asio::io_context io;
   stream_protocol::socket socket(io);
-  // connect() on a Unix socket completes at once (or fails at once); only the
-  // reply can take long, and that is bounded by run_for below.
+  // The timeout covers the connect too: a blocking connect() on a Unix socket
+  // whose listen backlog is full (a stopped or hung daemon) waits forever.
+  // Non-blocking, it fails with EAGAIN at once; retried until the deadline.
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
   boost::system::error_code ec;
-  socket.connect(stream_protocol::endpoint(socket_path), ec);
+  socket.open();
+  socket.non_blocking(true);
+  for (;;) {
+    socket.connect(stream_protocol::endpoint(socket_path), ec);
+    if (ec != asio::error::would_block && ec != asio::error::try_again && ec != asio::error::in_progress &&
+        ec != asio::error::no_buffer_space)  // ENOBUFS: the backlog is full too (Linux, non-blocking AF_UNIX)
+      break;
+    if (std::chrono::steady_clock::now() >= deadline)
+      throw ControlClientError("cannot connect to control socket " + socket_path + " within " +
+                               std::to_string(timeout.count()) +
+                               " ms: its connection backlog is full (daemon stopped, hung or overloaded)");
+    if (ec == asio::error::in_progress) {
+      // Not for AF_UNIX on Linux, but POSIX allows it: wait until writable.
+      socket.wait(stream_protocol::socket::wait_write, ec);
+      int error = 0;
+      socklen_t length = sizeof error;
+      if (::getsockopt(socket.native_handle(), SOL_SOCKET, SO_ERROR, &error, &length) != 0) error = errno;
+      ec = boost::system::error_code(error, boost::system::system_category());
+      break;
+    }
+    std::this_thread::sleep_for(std::chrono::milliseconds(10));
+  }
   if (ec) fail_connect(socket_path, ec);
+  const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
 
   const std::string line = command + "\n";
   asio::streambuf reply(kMaxReplyBytes);
@@ -147,7 +173,7 @@ nlohmann::json query_control_socket(const std::string& socket_path, const std::s
       done = true;
     });
   });
-  io.run_for(timeout);
+  io.run_for(std::max(left, std::chrono::milliseconds(1)));
   if (!done) {
     throw ControlClientError("imuemud did not respond on control socket " + socket_path + " within " +
                              std::to_string(timeout.count()) + " ms (daemon hung or overloaded)");

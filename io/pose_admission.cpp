@@ -5,6 +5,7 @@
 #include <utility>
 
 #include "core/so3.hpp"
+#include "core/time_arith.hpp"
 #include "io/decimal_time.hpp"
 
 namespace imuemu::io {
@@ -25,35 +26,50 @@ SequenceTracker::Arrival SequenceTracker::observe(std::uint64_t s, TimeNs t_ns) 
     begin(s, t_ns);
     return Arrival::first;
   }
-  if (s > highest_) {
-    const std::uint64_t skipped = s - highest_ - 1;
+  // Distances modulo 2^64: ahead = s - highest, behind = highest - s.
+  const std::uint64_t ahead = s - highest_, behind = highest_ - s;
+  if (ahead != 0 && ahead <= kMaxSequenceJump) {
+    candidate_run_ = 0;
+    const std::uint64_t skipped = ahead - 1;
     gaps_ += skipped;
     // The numbers entering the window (highest, s] are unseen, except s.
     if (skipped + 1 >= kSequenceWindow) {
       seen_.reset();
     } else {
-      for (std::uint64_t k = highest_ + 1; k < s; ++k) seen_.reset(k % kSequenceWindow);
+      for (std::uint64_t k = 1; k < ahead; ++k) seen_.reset((highest_ + k) % kSequenceWindow);
     }
     seen_.set(s % kSequenceWindow);
     highest_ = s;
     highest_t_ns_ = t_ns;
     return skipped == 0 ? Arrival::next : Arrival::jump;
   }
-  // Not above the highest. A sender's times grow with its numbers, so a later
-  // time means the sender started counting again (docs/pose-wire-format.md §3.2).
-  if (t_ns > highest_t_ns_) {
+  if (behind < kSequenceWindow) {
+    // Not above the highest. A sender's times grow with its numbers, so a
+    // later time means the sender started counting again
+    // (docs/pose-wire-format.md §3.2).
+    if (!(t_ns > highest_t_ns_)) {
+      candidate_run_ = 0;
+        if (seen_.test(s % kSequenceWindow)) return Arrival::repeat;
+      seen_.set(s % kSequenceWindow);
+      ++late_;
+      return Arrival::late;
+    }
+  }
+  // Outside the plausibility window, or not above the highest with a later
+  // time: one stray number (2^64 - 1, or one from another sender) must not
+  // count 1.8e19 losses nor move the stream; a run of confirm_run
+  // consecutive such numbers is a restarted sender.
+  candidate_run_ = candidate_run_ > 0 && s == candidate_ + 1 ? candidate_run_ + 1 : 1;
+  candidate_ = s;
+  if (candidate_run_ >= confirm_run_) {
+    stale_ -= candidate_run_ - 1;  // counted stale while unconfirmed: they were the restart's first numbers
     ++restarts_;
+    candidate_run_ = 0;
     begin(s, t_ns);
     return Arrival::restart;
   }
-  if (highest_ - s >= kSequenceWindow) {
-    ++stale_;
-    return Arrival::stale;
-  }
-  if (seen_.test(s % kSequenceWindow)) return Arrival::repeat;
-  seen_.set(s % kSequenceWindow);
-  ++late_;
-  return Arrival::late;
+  ++stale_;
+  return Arrival::stale;
 }
 
 // ---------------------------------------------------------------- logging
@@ -154,7 +170,11 @@ PoseAdmission::PoseAdmission(const PoseSourceOptions& options)
     : name_(options.name),
       max_attitude_step_rad_(options.max_attitude_step_rad),
       converter_(options.physics),
-      log_(options.log, options.log_interval_ns) {}
+      sequence_(options.resync_poses),
+      log_(options.log, options.log_interval_ns),
+      max_chart_angle_rad_(options.max_chart_angle_rad),
+      max_time_step_ns_(std::max<TimeNs>(1, options.max_time_step_ns)),
+      resync_poses_(std::max<std::size_t>(1, options.resync_poses)) {}
 
 void PoseAdmission::log(std::string_view key, std::string_view message) {
   std::string line = name_;
@@ -219,15 +239,85 @@ std::string where(std::size_t line, std::optional<std::uint64_t> sequence) {
 
 }  // namespace
 
+bool PoseAdmission::consistent(const Pose& from, const Pose& to) const {
+  if (!(to.t_ns > from.t_ns) || ns_between(from.t_ns, to.t_ns) > static_cast<std::uint64_t>(max_time_step_ns_))
+    return false;
+  const double step_rad = so3::angle(from.attitude.transpose() * to.attitude);
+  return step_rad < max_attitude_step_rad_ && !(step_rad > max_chart_angle_rad_);
+}
+
+// Candidates that never made a stream: strays.
+void PoseAdmission::drop_candidates() {
+  if (candidates_.empty()) return;
+  add(kTimeJump, candidates_.size());
+  counters_[kHeld].store(0, std::memory_order_relaxed);
+  candidates_.clear();
+}
+
+void PoseAdmission::release(const Pose& pose, std::optional<std::uint64_t> sequence, TimeNs receive_ns,
+                            std::size_t line) {
+  SourcedPose item;
+  item.pose = pose;
+  item.sequence = sequence;
+  item.receive_ns = receive_ns;
+  item.line = line;
+  released_.push_back(item);
+  last_accepted_ = pose;
+  last_receive_ns_ = receive_ns;
+  add(kAccepted);
+}
+
+// The candidates become the stream, shifted by offset_ns (a stream acquired
+// at the start keeps its times: offset 0).
+bool PoseAdmission::release_candidates(TimeNs offset_ns, SourcedPose& out) {
+  for (const Candidate& c : candidates_) {
+    if (!checked_add_ns(c.pose.t_ns, offset_ns)) {  // cannot happen within kMaxPoseTimeNs; refuse, never wrap
+      drop_candidates();
+      return false;
+    }
+  }
+  offset_ns_ = offset_ns;
+  locked_ = true;
+  for (const Candidate& c : candidates_) {
+    Pose p = c.pose;
+    p.t_ns += offset_ns;
+    release(p, c.sequence, c.receive_ns, c.line);
+  }
+  last_sender_ns_ = candidates_.back().pose.t_ns;
+  candidates_.clear();
+  counters_[kHeld].store(0, std::memory_order_relaxed);
+  return take_released(out);
+}
+
+bool PoseAdmission::take_released(SourcedPose& out) {
+  if (released_.empty()) return false;
+  out = released_.front();
+  released_.pop_front();
+  return true;
+}
+
 bool PoseAdmission::admit(const TrajectoryRecord& record, std::optional<std::uint64_t> sequence, TimeNs receive_ns,
                           SourcedPose& out) {
-  // Ordering first: a late or repeated pose is dropped before any work on it.
-  if (last_accepted_ && record.t_ns <= last_accepted_->t_ns) {
-    const bool equal = record.t_ns == last_accepted_->t_ns;
+  // A time the live path cannot map (time 0 is fine; INT64_MIN or near
+  // INT64_MAX is not): refused before any work on it.
+  if (record.t_ns > kMaxPoseTimeNs || record.t_ns < -kMaxPoseTimeNs) {
+    reject(kTimeRange, "time_out_of_range",
+           where(record.line, sequence) + ": time " + format_decimal_seconds(record.t_ns) +
+               " s is outside +-2^62 ns (+-146 years around the epoch)");
+    return false;
+  }
+  // Ordering within the stream first: a late or repeated pose is dropped
+  // before any work on it. Beyond max_time_step_ns either way it is not
+  // reordering but a jump of the sender's times (below).
+  const bool near_stream = locked_ && ns_between(std::min(record.t_ns, last_sender_ns_),
+                                                 std::max(record.t_ns, last_sender_ns_)) <=
+                                          static_cast<std::uint64_t>(max_time_step_ns_);
+  if (near_stream && record.t_ns <= last_sender_ns_) {
+    const bool equal = record.t_ns == last_sender_ns_;
     reject(equal ? kDuplicate : kOutOfOrder, equal ? "duplicate" : "out_of_order",
            where(record.line, sequence) + ": time " + format_decimal_seconds(record.t_ns) + " s is " +
                (equal ? "equal to" : "before") + " the last accepted pose's " +
-               format_decimal_seconds(last_accepted_->t_ns) + " s");
+               format_decimal_seconds(last_sender_ns_) + " s");
     return false;
   }
   Pose pose;
@@ -243,7 +333,7 @@ bool PoseAdmission::admit(const TrajectoryRecord& record, std::optional<std::uin
     reject(kSceneRefused, "scene_refused", where(record.line, sequence) + ": the pose is not finite in the scene frame");
     return false;
   }
-  if (last_accepted_) {
+  if (near_stream) {
     // The interpolation needs a unique geodesic between consecutive knots
     // (thesis §3.6.1: Tr(R_{i-1}^T R_i) != -1); core/interpolation refuses
     // the same steps, so refusing them here keeps the stream going.
@@ -255,14 +345,55 @@ bool PoseAdmission::admit(const TrajectoryRecord& record, std::optional<std::uin
                  " rad (not representable at the knot rate)");
       return false;
     }
+    // The smoother's chart rule (StreamPipeline::push): more rotation from
+    // the previous knot than a smoothing chart holds is a glitch.
+    if (step_rad > max_chart_angle_rad_) {
+      reject(kChartSpan, "chart_span",
+             where(record.line, sequence) + ": attitude step of " + detail::format_double(step_rad) +
+                 " rad from the last accepted pose is more than a smoothing chart holds (" +
+                 detail::format_double(max_chart_angle_rad_) + " rad): a glitch");
+      return false;
+    }
+    drop_candidates();  // a stray that did not start a stream
+    last_sender_ns_ = record.t_ns;
+    Pose shifted = pose;
+    shifted.t_ns += offset_ns_;  // |t| <= 2^62 and the offset is bounded the same way (release_candidates)
+    release(shifted, sequence, receive_ns, record.line);
+    return take_released(out);
   }
-  last_accepted_ = pose;
-  out.pose = pose;
-  out.sequence = sequence;
-  out.receive_ns = receive_ns;
-  out.line = record.line;
-  add(kAccepted);
-  return true;
+  // Not part of the locked stream (or none yet): a candidate for a new one.
+  Pose sender_pose = pose;
+  sender_pose.t_ns = record.t_ns;
+  if (!candidates_.empty() && !consistent(candidates_.back().pose, sender_pose)) drop_candidates();
+  candidates_.push_back({sender_pose, sequence, receive_ns, record.line});
+  counters_[kHeld].store(candidates_.size(), std::memory_order_relaxed);
+  if (candidates_.size() < resync_poses_) {
+    if (locked_)
+      log("time_jump", where(record.line, sequence) + ": time " + format_decimal_seconds(record.t_ns) +
+                           " s is more than " + format_decimal_seconds(max_time_step_ns_) +
+                           " s from the stream's " + format_decimal_seconds(last_sender_ns_) +
+                           " s: held until " + std::to_string(resync_poses_) + " consistent poses re-acquire it");
+    return false;
+  }
+  if (!locked_) return release_candidates(0, out);  // acquired: the sender's own times
+  // Re-acquisition: the new stream continues the output timeline where real
+  // time says it should (the receive time elapsed since the last accepted
+  // pose), and at least one gap limit later, so that the smoother starts a
+  // new segment instead of interpolating across the discontinuity.
+  const TimeNs elapsed_ns = std::max<TimeNs>(saturating_sub_ns(candidates_.front().receive_ns, last_receive_ns_), 0);
+  const TimeNs first_out_ns =
+      saturating_add_ns(last_accepted_->t_ns, std::max(elapsed_ns, saturating_add_ns(max_time_step_ns_, 1)));
+  const std::optional<TimeNs> offset_ns = checked_sub_ns(first_out_ns, candidates_.front().pose.t_ns);
+  const TimeNs from_ns = last_sender_ns_, to_ns = candidates_.front().pose.t_ns;
+  if (!offset_ns) {
+    drop_candidates();
+    return false;
+  }
+  add(kResyncs);
+  log("resync", "times jumped from " + format_decimal_seconds(from_ns) + " s to " + format_decimal_seconds(to_ns) +
+                    " s (" + std::to_string(resync_poses_) + " consistent poses): stream re-acquired, its times "
+                    "shifted by " + format_decimal_seconds(*offset_ns) + " s onto the running timeline");
+  return release_candidates(*offset_ns, out);
 }
 
 PoseSourceCounters PoseAdmission::counters() const noexcept {
@@ -277,6 +408,11 @@ PoseSourceCounters PoseAdmission::counters() const noexcept {
   c.duplicate = get(kDuplicate);
   c.out_of_order = get(kOutOfOrder);
   c.attitude_step = get(kAttitudeStep);
+  c.chart_span = get(kChartSpan);
+  c.time_out_of_range = get(kTimeRange);
+  c.time_jump = get(kTimeJump);
+  c.held = get(kHeld);
+  c.resyncs = get(kResyncs);
   c.overflow_dropped = get(kOverflowDropped);
   c.backpressure_events = get(kBackpressureEvents);
   c.sequence_gaps = get(kSequenceGaps);
@@ -303,6 +439,7 @@ bool PoseLineStream::next(SourcedPose& out) {
   LineError error = LineError::bad_record;
   std::string message;
   std::string_view line;
+  if (admission_.take_released(out)) return true;  // held poses a (re-)acquisition released
   for (;;) {
     switch (framer_.next(line)) {
       case LineFramer::Next::none: return false;

@@ -7,6 +7,8 @@
 #include <array>
 #include <atomic>
 #include <bitset>
+#include <deque>
+#include <vector>
 #include <cstddef>
 #include <cstdint>
 #include <map>
@@ -33,6 +35,11 @@ class SequenceTracker {
     stale,    // more than kSequenceWindow below the highest: unknown whether seen
     restart,  // not above the highest but with a later time: the sender restarted
   };
+  // Numbers compare modulo 2^64 (highest + 1 after 2^64 - 1 is 0). A number
+  // more than kMaxSequenceJump ahead or kSequenceWindow behind is a
+  // discontinuity: counted stale and nothing else until confirm_run
+  // consecutive numbers follow it, which then count as a restart (no gaps).
+  explicit SequenceTracker(std::size_t confirm_run = 2) : confirm_run_(confirm_run < 1 ? 1 : confirm_run) {}
   Arrival observe(std::uint64_t sequence, TimeNs t_ns) noexcept;
 
   std::uint64_t gaps() const noexcept { return gaps_; }
@@ -45,10 +52,15 @@ class SequenceTracker {
   void begin(std::uint64_t sequence, TimeNs t_ns) noexcept;
 
   bool started_ = false;
+  // A discontinuity being confirmed: the last number of the run of
+  // consecutive numbers outside the window, and its length.
+  std::uint64_t candidate_ = 0;
+  std::size_t candidate_run_ = 0;
   std::uint64_t highest_ = 0;
   TimeNs highest_t_ns_ = 0;
   std::bitset<kSequenceWindow> seen_;  // bit s % window: s in (highest - window, highest] arrived
   std::uint64_t gaps_ = 0, late_ = 0, stale_ = 0, restarts_ = 0;
+  std::size_t confirm_run_;
 };
 
 // At most one line per key per interval; the next line of a key reports how
@@ -102,11 +114,15 @@ class PoseAdmission {
   void reject_line(LineError reason, std::string_view message);
   void reject_datagram(DatagramError reason, std::string_view message);
 
-  // Ordering (duplicate, out_of_order), scene conversion (scene_refused) and
-  // attitude step rules against the last accepted pose. True: `out` holds
-  // the pose to queue and it counted as accepted.
+  // Time range (time_out_of_range), scene conversion (scene_refused), live
+  // time acquisition and resynchronisation (time_jump, resyncs; see
+  // PoseSourceOptions::resync_poses), ordering (duplicate, out_of_order),
+  // attitude step and chart rules against the last accepted pose. True: `out`
+  // holds the first pose to queue, counted accepted; a (re-)acquisition
+  // releases the held poses too: take them with take_released() until false.
   bool admit(const TrajectoryRecord& record, std::optional<std::uint64_t> sequence, TimeNs receive_ns,
              SourcedPose& out);
+  bool take_released(SourcedPose& out);
 
   // Loss statistics of an intact datagram (call before admit()).
   void observe_sequence(std::uint64_t sequence, TimeNs t_ns);
@@ -138,6 +154,11 @@ class PoseAdmission {
     kDuplicate,
     kOutOfOrder,
     kAttitudeStep,
+    kChartSpan,
+    kTimeRange,
+    kTimeJump,
+    kHeld,
+    kResyncs,
     kOverflowDropped,
     kBackpressureEvents,
     kSequenceGaps,
@@ -160,7 +181,29 @@ class PoseAdmission {
   ScenePoseConverter converter_;
   SequenceTracker sequence_;
   RateLimitedLog log_;
-  std::optional<Pose> last_accepted_;
+  // Live time (admit): the stream is locked once resync_poses consistent
+  // poses arrived; candidates_ are poses of a possible new stream (held).
+  struct Candidate {
+    Pose pose;  // sender time
+    std::optional<std::uint64_t> sequence;
+    TimeNs receive_ns;
+    std::size_t line;
+  };
+  bool consistent(const Pose& from, const Pose& to) const;
+  void drop_candidates();
+  bool release_candidates(TimeNs offset_ns, SourcedPose& out);
+  void release(const Pose& pose, std::optional<std::uint64_t> sequence, TimeNs receive_ns, std::size_t line);
+
+  double max_chart_angle_rad_;
+  TimeNs max_time_step_ns_;
+  std::size_t resync_poses_;
+  bool locked_ = false;
+  TimeNs offset_ns_ = 0;        // output time = sender time + offset (changed by a resync)
+  TimeNs last_sender_ns_ = 0;   // sender time of the last accepted pose
+  TimeNs last_receive_ns_ = 0;  // its receive time
+  std::vector<Candidate> candidates_;
+  std::deque<SourcedPose> released_;
+  std::optional<Pose> last_accepted_;  // output time
   std::array<std::atomic<std::uint64_t>, kSlotCount> counters_{};
 };
 

@@ -5,6 +5,7 @@
 #include <time.h>
 
 #include <cmath>
+#include <limits>
 #include <numeric>
 #include <stdexcept>
 #include <utility>
@@ -90,7 +91,7 @@ std::size_t PoseQueue::size() const {
 std::uint64_t PoseSourceCounters::rejected() const noexcept {
   return std::accumulate(line_errors.begin(), line_errors.end(), std::uint64_t{0}) +
          std::accumulate(datagram_errors.begin(), datagram_errors.end(), std::uint64_t{0}) + scene_refused +
-         duplicate + out_of_order + attitude_step;
+         duplicate + out_of_order + attitude_step + chart_span + time_out_of_range + time_jump;
 }
 
 // ---------------------------------------------------------------- source base
@@ -202,6 +203,10 @@ std::unique_ptr<PoseSource> make_file_replay_source(const std::string& path, con
                                 detail::format_double(replay.speed));
   }
   if (options.name.empty()) options.name = path;
+  // A validated file has one timeline (strictly increasing times, checked
+  // above): no live-time acquisition or resynchronisation, its gaps are its own.
+  options.resync_poses = 1;
+  options.max_time_step_ns = std::numeric_limits<TimeNs>::max();
   Trajectory trajectory = read_trajectory_csv(path);
   // Every record of a file has the same kinds, so if the first has a meaning
   // in the scene, all have: refuse a mismatched file now, not record by record.

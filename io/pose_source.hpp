@@ -29,6 +29,7 @@
 #include <vector>
 
 #include "core/interpolation.hpp"
+#include "core/pipeline.hpp"
 #include "core/trajectory.hpp"
 #include "io/pose_wire.hpp"
 
@@ -86,6 +87,11 @@ struct PoseSourceCounters {
   std::uint64_t duplicate = 0;       // time equal to the last accepted pose's
   std::uint64_t out_of_order = 0;    // time before the last accepted pose's
   std::uint64_t attitude_step = 0;   // rotation from the last accepted pose >= max_attitude_step_rad
+  std::uint64_t chart_span = 0;      // rotation from the last accepted pose > max_chart_angle_rad (a glitch)
+  std::uint64_t time_out_of_range = 0;  // |t| > kMaxPoseTimeNs
+  std::uint64_t time_jump = 0;       // more than max_time_step_ns from the stream and never confirmed (stray)
+  std::uint64_t held = 0;            // now: poses waiting for resync_poses consistent ones (a gauge)
+  std::uint64_t resyncs = 0;         // the stream re-acquired after a jump or restart of its times
 
   std::uint64_t overflow_dropped = 0;     // accepted, then dropped as the oldest queued (UDP burst)
   std::uint64_t backpressure_events = 0;  // times reading stopped because the queue was full (TCP, stdin, file)
@@ -94,7 +100,8 @@ struct PoseSourceCounters {
   std::uint64_t sequence_gaps = 0;      // sequence numbers skipped by forward jumps
   std::uint64_t late = 0;               // skipped numbers that arrived afterwards (within kSequenceWindow)
   std::uint64_t stale = 0;              // arrived more than kSequenceWindow below the highest seen
-  std::uint64_t sequence_restarts = 0;  // sender restarts: number not above the highest, time after its time
+  std::uint64_t sequence_restarts = 0;  // sender restarts: number not above the highest with a later time, or
+                                        // resync_poses consecutive numbers outside the plausibility window
 
   std::uint64_t connections = 0;          // TCP clients served
   std::uint64_t connections_refused = 0;  // TCP clients closed at once because one was connected
@@ -105,6 +112,12 @@ struct PoseSourceCounters {
 };
 
 inline constexpr std::uint64_t kSequenceWindow = 1024;
+// A forward sequence jump beyond this is not a loss but a discontinuity (a
+// stray or a restarted sender): docs/pose-wire-format.md §3.2.
+inline constexpr std::uint64_t kMaxSequenceJump = 1'000'000;
+// Pose times beyond +-2^62 ns (+-146 years around the epoch) are refused:
+// every sum of a pose time and a bounded offset then stays inside int64.
+inline constexpr TimeNs kMaxPoseTimeNs = TimeNs{1} << 62;
 
 struct PoseSourceOptions {
   std::string name;  // in messages and log lines; empty: a default like "udp 127.0.0.1:5005"
@@ -114,6 +127,18 @@ struct PoseSourceOptions {
   // pose is rejected (attitude_step): the interpolation's own limit, where
   // the geodesic between two knots stops being unique (core/interpolation.hpp).
   double max_attitude_step_rad = std::numbers::pi - interp::kAntipodalMarginRad;
+  // The smoother's chart rule (core/pipeline.hpp kMaxChartAngleRad, checked by
+  // StreamPipeline::push for knots within one smoothing half-window): a pose
+  // rotated more than this from the last accepted one is a glitch (chart_span).
+  double max_chart_angle_rad = kMaxChartAngleRad;
+  // Live time resynchronisation (docs/streaming.md "Live time"): a pose more
+  // than max_time_step_ns away (either way) from the last accepted one is a
+  // time jump; resync_poses consecutive consistent poses (each 0 < step <=
+  // max_time_step_ns after the previous, attitude rules met) are needed to
+  // acquire a stream at the start and to re-acquire it after a jump. The
+  // default step equals the smoother's default gap limit (max_gap_s = 10 s).
+  TimeNs max_time_step_ns = 10 * kNsPerSecond;
+  std::size_t resync_poses = 2;
   // Receives each log line (without '\n'); empty: written to stderr.
   std::function<void(std::string_view)> log;
   // At most one log line per rejection reason per interval; the next line

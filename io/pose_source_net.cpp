@@ -88,8 +88,10 @@ class UdpPoseSource final : public PoseSource {
       sender_name_ = sender_.address().to_string() + ":" + std::to_string(sender_.port());
     }
     if (!admission_->receive_datagram(std::span(buffer_.data(), size), receive_ns, sender_name_, pose)) return;
-    // A burst beyond the queue: the freshest poses matter most.
-    if (queue_.push_or_drop_oldest(pose)) admission_->overflow_dropped();
+    do {  // an acquisition releases the held poses too
+      // A burst beyond the queue: the freshest poses matter most.
+      if (queue_.push_or_drop_oldest(pose)) admission_->overflow_dropped();
+    } while (admission_->take_released(pose));
   }
 
   asio::io_context io_;

@@ -110,6 +110,7 @@ bool CsvLineReader::next() {
         newline != nullptr ? static_cast<std::size_t>(static_cast<const char*>(newline) - text_.data())
                            : text_.size();
     pos_ = end + 1;
+    unterminated_ = newline == nullptr;
     ++line_number_;
     if (split_csv_line(text_.substr(begin, end - begin), fields_)) return true;
   }
@@ -529,6 +530,14 @@ Trajectory parse_trajectory_csv(std::string_view text, const std::string& source
   bool have_previous = false;
   TrajectoryLineParser::Predecessor previous;
   while (reader.next()) {
+    // As for pose lines (docs/pose-wire-format.md §1): a last line without
+    // its newline may be a number cut short (`2.` of `2.900`), which would
+    // parse; a file still being written must not yield a wrong knot.
+    if (reader.unterminated()) {
+      fail(file, reader.line_number(), "", 0, "a line ending in a newline",
+           "the file ends inside this record (no final newline): it is cut off or still being written; a "
+           "partial record is not used (add the newline if the line is complete)");
+    }
     TrajectoryRecord& record = trajectory.records.emplace_back();
     parser.parse_record(reader.fields(), reader.line_number(), record, have_previous ? &previous : nullptr);
     have_previous = true;

@@ -220,9 +220,13 @@ class CsvLineReader {
   bool next();
   std::size_t line_number() const noexcept { return line_number_; }  // 1-based
   const std::vector<std::string_view>& fields() const noexcept { return fields_; }
+  // The current line is the last and has no final '\n' (a file cut off, or
+  // still being written).
+  bool unterminated() const noexcept { return unterminated_; }
 
  private:
   std::string_view text_;
+  bool unterminated_ = false;
   std::size_t pos_ = 0;
   std::size_t line_number_ = 0;
   std::vector<std::string_view> fields_;

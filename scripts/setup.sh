@@ -29,9 +29,6 @@ test_packages=(
   libgtest-dev libgmock-dev libbenchmark-dev clang libclang-rt-14-dev
   # plots and the Python test peers (run under Debian's /usr/bin/python3)
   python3 python3-numpy python3-matplotlib
-  # systemd-analyze (tests/systemd unit checks) and /lib/systemd/systemd (the
-  # unit under systemd as PID 1): a minbase system has no systemd at all
-  systemd
   # hardware-in-the-loop fixtures (tests/hil): user-mode Linux with vcan; QEMU
   # booting Debian's kernel (fetched by apt-get download) with a busybox
   # initramfs, the UART, vcan and the gpio_recorder module built against the

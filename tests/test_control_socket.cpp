@@ -12,6 +12,7 @@
 #include <unistd.h>
 
 #include <array>
+#include <cerrno>
 #include <atomic>
 #include <chrono>
 #include <cstdio>
@@ -23,6 +24,7 @@
 #include <iostream>
 #include <sstream>
 #include <thread>
+#include <vector>
 
 #include <boost/asio/executor_work_guard.hpp>
 #include <boost/asio/io_context.hpp>
@@ -372,4 +374,43 @@ TEST(StatusSummary, AnEngineNotRunningIsSaidSo) {
   imuemu::cli::print_status_summary(status, out);
   EXPECT_NE(out.str().find("emitter NOT progressing"), std::string::npos);
   EXPECT_NE(out.str().find("no emission engine running (waiting for a device to appear)"), std::string::npos);
+}
+
+// Issue 13 H2: a daemon whose listen backlog is full (stopped, hung) made
+// `imuemu status --timeout-s 1` block in connect() forever. The timeout now
+// covers the connect: the query gives up with a clear error.
+TEST(ControlClient, FullBacklogTimesOutInsteadOfBlocking) {
+  TempDir dir;
+  const std::string path = dir.path + "/full.sock";
+  const int listener = ::socket(AF_UNIX, SOCK_STREAM, 0);
+  ASSERT_GE(listener, 0);
+  sockaddr_un address{};
+  address.sun_family = AF_UNIX;
+  std::strncpy(address.sun_path, path.c_str(), sizeof address.sun_path - 1);
+  ASSERT_EQ(::bind(listener, reinterpret_cast<sockaddr*>(&address), sizeof address), 0);
+  ASSERT_EQ(::listen(listener, 0), 0);  // never accepts
+  // Fill the backlog with non-blocking clients until one would block.
+  std::vector<int> fillers;
+  for (int i = 0; i < 64; ++i) {
+    const int fd = ::socket(AF_UNIX, SOCK_STREAM | SOCK_NONBLOCK, 0);
+    ASSERT_GE(fd, 0);
+    fillers.push_back(fd);
+    if (::connect(fd, reinterpret_cast<sockaddr*>(&address), sizeof address) != 0) break;
+  }
+  ASSERT_EQ(errno, EAGAIN) << std::strerror(errno);
+  std::atomic<bool> returned{false};
+  std::string error;
+  std::thread client([&] {
+    error = error_of(path, "status", std::chrono::milliseconds(200));
+    returned = true;
+  });
+  // Generous: the verdict is "returns at all", not how fast.
+  for (int i = 0; i < 300 && !returned; ++i) std::this_thread::sleep_for(std::chrono::milliseconds(100));
+  const bool returned_in_time = returned;
+  ::close(listener);  // unblocks a connect() stuck in the backlog (the unfixed client), so the thread ends
+  client.join();
+  for (const int fd : fillers) ::close(fd);
+  EXPECT_TRUE(returned_in_time) << "query_control_socket blocked in connect() past its 200 ms timeout";
+  EXPECT_NE(error.find("within 200 ms"), std::string::npos) << error;
+  EXPECT_NE(error.find(path), std::string::npos) << error;
 }

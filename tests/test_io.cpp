@@ -330,7 +330,7 @@ TEST(TrajectoryCsv, ParsesGeodeticHprWithCommentsSpacesCrLfAndBom) {
       "   # indented comment\r\n"
       "1700000000.123456789, 41.5, 2.25, 120.0, 90, -90, 180\r\n"
       "\r\n"
-      "1700000000.2, -90, -720, -5e2, -45.5, 90, +0.5";  // no final newline
+      "1700000000.2, -90, -720, -5e2, -45.5, 90, +0.5\n";  // (without the newline: refused, issue 13 F2)
   const Trajectory t = parse_trajectory_csv(text, "mem.csv");
   EXPECT_EQ(t.source, "mem.csv");
   EXPECT_EQ(t.position_kind, PositionKind::geodetic);
@@ -922,6 +922,27 @@ TEST(KinematicsCsv, WriterRefusesBadStates) {
   EXPECT_THROW(write_trajectory_csv(path, states, Physics::flat), std::invalid_argument);
   EXPECT_THROW(write_trajectory_csv(path, {}, Physics::flat), std::invalid_argument);
   EXPECT_TRUE(dir.files().empty());
+}
+
+}  // namespace
+}  // namespace imuemu::io
+
+namespace imuemu::io {
+namespace {
+
+// Issue 13 F2: a file cut inside its last field without a final newline
+// (`...,2.` of `2.900`, a file still being written) parses as a number; it is
+// refused naming file:line, as pose lines refuse an unterminated line. The
+// same line with its newline is a record.
+TEST(TrajectoryCsv, UnterminatedLastRecordIsRefusedNamingItsLine) {
+  const std::string complete =
+      "time_s,north_m,east_m,down_m,heading_deg,pitch_deg,roll_deg\n0,0,0,0,0,0,0\n1,1,0,0,0,0,0\n2,2.5,2.900,0,0,0,0\n";
+  EXPECT_EQ(parse_trajectory_csv(complete, "traj.csv").records.size(), 3u);
+  const std::string cut = complete.substr(0, complete.find("2.900") + 2);  // "...,2.5,2."
+  expect_error(cut, 4, "", 0, {"no final newline", "cut off or still being written"});
+  // A trailing comment or blank line without a newline is harmless.
+  EXPECT_EQ(parse_trajectory_csv(complete + "# done", "traj.csv").records.size(), 3u);
+  EXPECT_EQ(parse_trajectory_csv(complete + "   ", "traj.csv").records.size(), 3u);
 }
 
 }  // namespace

@@ -30,6 +30,7 @@
 #include "core/attitude.hpp"
 #include "core/earth.hpp"
 #include "core/so3.hpp"
+#include "core/stream.hpp"
 #include "io/decimal_time.hpp"
 #include "io/pose_admission.hpp"
 #include "io/pose_source.hpp"
@@ -609,9 +610,11 @@ TEST(SequenceTracker, GapsLateRepeatsStaleAndRestarts) {
   EXPECT_EQ(s.observe(2020 - kSequenceWindow + 1, t(2020 - kSequenceWindow + 1)), A::late);
   EXPECT_EQ(s.late(), 4u);
   EXPECT_EQ(s.stale(), 1u);
-  // The sender restarts at 0 with later times.
-  EXPECT_EQ(s.observe(0, t(5000)), A::restart);
-  EXPECT_EQ(s.observe(1, t(5001)), A::next);
+  // The sender restarts at 0 with later times: confirmed by the second
+  // consecutive number (a single stray would not move the stream).
+  EXPECT_EQ(s.observe(0, t(5000)), A::stale);
+  EXPECT_EQ(s.observe(1, t(5001)), A::restart);
+  EXPECT_EQ(s.observe(2, t(5002)), A::next);
   EXPECT_EQ(s.restarts(), 1u);
   EXPECT_EQ(s.gaps(), 4u + 1999u);
   // Wrap-free u64 at the top.
@@ -659,6 +662,7 @@ TEST(PoseAdmission, OrderingSceneAndAttitudeStepRules) {
   PoseSourceOptions options;
   options.name = "unit";
   options.log = log.sink();
+  options.resync_poses = 1;  // the ordering rules alone (acquisition: LiveTime tests)
   PoseAdmission a(options);
   SourcedPose out;
   auto admit = [&](const TrajectoryRecord& r) {
@@ -724,6 +728,179 @@ TEST(PoseAdmission, OrderingSceneAndAttitudeStepRules) {
   far.position = Vec3(1.7e308, 1.7e308, 1.7e308);
   EXPECT_FALSE(f.admit(far, std::nullopt, 0, out));
   EXPECT_EQ(f.counters().scene_refused, 1u);
+}
+
+// ---------------------------------------------------------------- live time (issue 13 W3/W4/C1)
+
+namespace {
+
+// A circle at 10 m/s, yawing 0.2 rad/s, one pose every 10 ms from t0_ns.
+TrajectoryRecord circle_record(TimeNs t0_ns, int k) {
+  const double t_s = 0.01 * k;
+  return ned_quaternion_record(t0_ns + static_cast<TimeNs>(k) * 10'000'000,
+                               Vec3(50.0 * std::sin(0.2 * t_s), 50.0 * (1.0 - std::cos(0.2 * t_s)), 0.0), 0.2 * t_s);
+}
+
+// Admits every record (receive time = 10 ms per record) and collects what is released.
+std::vector<SourcedPose> admit_all(PoseAdmission& a, const std::vector<TrajectoryRecord>& records) {
+  std::vector<SourcedPose> got;
+  SourcedPose out;
+  for (std::size_t i = 0; i < records.size(); ++i) {
+    a.received();
+    if (a.admit(records[i], std::nullopt, static_cast<TimeNs>(i) * 10'000'000, out)) {
+      got.push_back(out);
+      while (a.take_released(out)) got.push_back(out);
+    }
+  }
+  return got;
+}
+
+// The smoother's output for the released poses; every push must be accepted.
+std::vector<StreamSample> smooth(const std::vector<SourcedPose>& poses, std::size_t& refused) {
+  PipelineOptions o;
+  o.rate_hz = 100;
+  o.kernel.delta = 20;
+  o.gap_policy = GapPolicy::split;
+  StreamPipeline engine(o);
+  std::vector<StreamSample> samples;
+  StreamSample x;
+  refused = 0;
+  for (const SourcedPose& p : poses) {
+    try {
+      engine.push(p.pose);
+    } catch (const std::exception&) {
+      ++refused;
+    }
+    while (engine.pop(x)) samples.push_back(x);
+  }
+  if (engine.knots_pushed() >= 2) engine.finish();
+  while (engine.pop(x)) samples.push_back(x);
+  return samples;
+}
+
+}  // namespace
+
+// One stray first datagram (time 0, INT64_MIN, near INT64_MAX, 1 h in the
+// future), then the real stream: the stray never reaches the smoother, the
+// stream is acquired after resync_poses consistent poses and smooths exactly
+// as without the stray.
+TEST(LiveTime, AStrayFirstPoseDoesNotBlockTheStream) {
+  const TimeNs t0 = 1'700'000'000 * kNsPerSecond;
+  std::vector<TrajectoryRecord> real;
+  for (int k = 0; k < 200; ++k) real.push_back(circle_record(t0, k));
+  PoseSourceOptions options;
+  options.name = "unit";
+  PoseAdmission clean(options);
+  std::size_t refused = 0;
+  const std::vector<SourcedPose> clean_poses = admit_all(clean, real);
+  ASSERT_EQ(clean_poses.size(), real.size());
+  const std::vector<StreamSample> expected = smooth(clean_poses, refused);
+  ASSERT_EQ(refused, 0u);
+  ASSERT_GT(expected.size(), 150u);
+  for (const TimeNs stray_t : {TimeNs{0}, std::numeric_limits<TimeNs>::min(), std::numeric_limits<TimeNs>::max() - 1,
+                               t0 + 3600 * kNsPerSecond}) {
+    SCOPED_TRACE("stray time " + std::to_string(stray_t));
+    LogCapture log;
+    options.log = log.sink();
+    PoseAdmission a(options);
+    std::vector<TrajectoryRecord> records = {ned_quaternion_record(stray_t, Vec3(1e5, -3e4, 7.0), 2.0)};
+    records.insert(records.end(), real.begin(), real.end());
+    const std::vector<SourcedPose> poses = admit_all(a, records);
+    ASSERT_EQ(poses.size(), real.size());
+    EXPECT_EQ(poses.front().pose.t_ns, t0);
+    const PoseSourceCounters c = a.counters();
+    EXPECT_EQ(c.accepted, real.size());
+    EXPECT_EQ(c.time_out_of_range + c.time_jump, 1u);
+    EXPECT_EQ(c.held, 0u);
+    expect_accounted(c);
+    const std::vector<StreamSample> got = smooth(poses, refused);
+    EXPECT_EQ(refused, 0u);
+    ASSERT_EQ(got.size(), expected.size());
+    for (std::size_t i = 0; i < got.size(); ++i) {
+      ASSERT_EQ(got[i].imu.t_ns, expected[i].imu.t_ns);
+      ASSERT_EQ(got[i].imu.gyro_rad_s, expected[i].imu.gyro_rad_s);
+      ASSERT_EQ(got[i].imu.accel_m_s2, expected[i].imu.accel_m_s2);
+    }
+  }
+}
+
+// A stray 1 h ahead in the middle of a stream is dropped (time_jump); a
+// sender restart (times back to 0) is re-acquired after resync_poses poses,
+// counted and logged, on the running timeline: the released times keep
+// increasing, one gap limit or more after the last, so the smoother starts a
+// new segment and never refuses a pose.
+TEST(LiveTime, JumpsAndRestartsAreReacquiredOnTheRunningTimeline) {
+  const TimeNs t0 = 1'700'000'000 * kNsPerSecond;
+  std::vector<TrajectoryRecord> records;
+  for (int k = 0; k < 100; ++k) records.push_back(circle_record(t0, k));
+  records.push_back(circle_record(t0 + 3600 * kNsPerSecond, 100));  // stray, 1 h ahead
+  for (int k = 100; k < 200; ++k) records.push_back(circle_record(t0, k));
+  for (int k = 0; k < 150; ++k) records.push_back(circle_record(0, k));  // the sender restarted: t from 0
+  LogCapture log;
+  PoseSourceOptions options;
+  options.name = "unit";
+  options.log = log.sink();
+  PoseAdmission a(options);
+  const std::vector<SourcedPose> poses = admit_all(a, records);
+  const PoseSourceCounters c = a.counters();
+  EXPECT_EQ(c.time_jump, 1u);
+  EXPECT_EQ(c.resyncs, 1u);
+  EXPECT_EQ(c.out_of_order + c.duplicate, 0u);
+  EXPECT_EQ(c.accepted, 350u);
+  ASSERT_EQ(poses.size(), 350u);
+  for (std::size_t i = 1; i < poses.size(); ++i) ASSERT_LT(poses[i - 1].pose.t_ns, poses[i].pose.t_ns) << i;
+  // The restarted stream: its own spacing, shifted past one gap limit.
+  EXPECT_GT(poses[200].pose.t_ns - poses[199].pose.t_ns, options.max_time_step_ns);
+  EXPECT_EQ(poses[201].pose.t_ns - poses[200].pose.t_ns, 10'000'000);
+  expect_accounted(c);
+  EXPECT_TRUE(log.contains("stream re-acquired"));
+  std::size_t refused = 0;
+  const std::vector<StreamSample> got = smooth(poses, refused);
+  EXPECT_EQ(refused, 0u);
+  for (const StreamSample& x : got) ASSERT_TRUE(x.imu.gyro_rad_s.allFinite() && x.imu.accel_m_s2.allFinite());
+}
+
+// W2 through admission: a 179 deg heading glitch is below pi (not an
+// antipodal step) but more than a smoothing chart holds: dropped, counted,
+// logged, and the stream goes on.
+TEST(LiveTime, AHeadingGlitchIsDroppedCountedAndLogged) {
+  LogCapture log;
+  PoseSourceOptions options;
+  options.name = "unit";
+  options.log = log.sink();
+  PoseAdmission a(options);
+  std::vector<TrajectoryRecord> records;
+  for (int k = 0; k < 100; ++k) records.push_back(circle_record(0, k));
+  TrajectoryRecord glitch = circle_record(0, 50);
+  glitch.t_ns += 5'000'000;
+  glitch.attitude = Eigen::Vector4d(std::cos(kPi * 179.0 / 360.0), 0.0, 0.0, std::sin(kPi * 179.0 / 360.0));
+  records.insert(records.begin() + 51, glitch);
+  const std::vector<SourcedPose> poses = admit_all(a, records);
+  EXPECT_EQ(poses.size(), 100u);
+  EXPECT_EQ(a.counters().chart_span, 1u);
+  EXPECT_TRUE(log.contains("dropped (chart_span)"));
+  std::size_t refused = 0;
+  (void)smooth(poses, refused);
+  EXPECT_EQ(refused, 0u);
+}
+
+// Sequence numbers modulo 2^64 with a plausibility window: one datagram
+// numbered 2^64 - 1 in a stream must not make lost() read 1.8e19.
+TEST(SequenceTracker, OneStrayNumberDoesNotCountLosses) {
+  using A = SequenceTracker::Arrival;
+  SequenceTracker s;
+  auto t = [](std::uint64_t seq) { return static_cast<TimeNs>(seq) * 1'000'000; };
+  for (std::uint64_t k = 1000; k < 1010; ++k) s.observe(k, t(k));
+  EXPECT_EQ(s.observe(std::numeric_limits<std::uint64_t>::max(), t(1010)), A::stale);
+  EXPECT_EQ(s.observe(1000 + 2'000'000, t(1010)), A::stale);
+  EXPECT_EQ(s.observe(1010, t(1010)), A::next);
+  EXPECT_EQ(s.gaps(), 0u);
+  EXPECT_EQ(s.restarts(), 0u);
+  // Modulo 2^64: the successor of 2^64 - 1 is 0.
+  SequenceTracker top;
+  top.observe(std::numeric_limits<std::uint64_t>::max(), 1);
+  EXPECT_EQ(top.observe(0, 2), A::next);
+  EXPECT_EQ(top.gaps(), 0u);
 }
 
 TEST(ScenePoseConverter, FirstEarthFixedRecordIsTheFlatOrigin) {
@@ -803,9 +980,12 @@ TEST(UdpPoseSource, LoopbackCountsEveryDropDuplicateReorderAndCorruption) {
   }());
   const std::string garbage = "hello world";
   const Bytes garbage_bytes(garbage.begin(), garbage.end());
-  // After 11, the sender restarts at sequence 0 with a later time.
+  // After 11, the sender restarts at sequence 0 with a later time (the
+  // second consecutive number confirms the restart).
   const Bytes restarted =
       datagram(0, ned_quaternion_record(2'000'000'000, Vec3(0, 0, 0)));
+  const Bytes restarted_next =
+      datagram(1, ned_quaternion_record(2'010'000'000, Vec3(0, 0, 0)));
 
   const TimeNs before_ns = monotonic_now_ns();
   {
@@ -813,14 +993,14 @@ TEST(UdpPoseSource, LoopbackCountsEveryDropDuplicateReorderAndCorruption) {
     for (const Bytes& d : {pose_datagram(0), pose_datagram(1), pose_datagram(2), /* 3 lost */ pose_datagram(4),
                            pose_datagram(4) /* duplicated */, pose_datagram(6), pose_datagram(5) /* reordered */,
                            corrupted, pose_datagram(8), garbage_bytes, bad_latitude, pose_datagram(10),
-                           pose_datagram(11), restarted}) {
+                           pose_datagram(11), restarted, restarted_next}) {
       sender.send(d);
     }
   }
-  ASSERT_TRUE(wait_until([&] { return source->counters().received == 14; })) << source->counters().received;
+  ASSERT_TRUE(wait_until([&] { return source->counters().received == 15; })) << source->counters().received;
   const TimeNs after_ns = monotonic_now_ns();
   const PoseSourceCounters c = source->counters();
-  EXPECT_EQ(c.accepted, 9u);  // 0 1 2 4 6 8 10 11 and the restarted 0
+  EXPECT_EQ(c.accepted, 10u);  // 0 1 2 4 6 8 10 11 and the restarted 0 1
   EXPECT_EQ(c.duplicate, 1u);
   EXPECT_EQ(c.out_of_order, 1u);  // 5 came after 6
   EXPECT_EQ(datagram_error(c, DatagramError::bad_checksum), 1u);
@@ -838,8 +1018,8 @@ TEST(UdpPoseSource, LoopbackCountsEveryDropDuplicateReorderAndCorruption) {
 
   std::vector<SourcedPose> poses;
   source->queue().drain(poses);
-  ASSERT_EQ(poses.size(), 9u);
-  const std::vector<std::uint64_t> expected_sequences = {0, 1, 2, 4, 6, 8, 10, 11, 0};
+  ASSERT_EQ(poses.size(), 10u);
+  const std::vector<std::uint64_t> expected_sequences = {0, 1, 2, 4, 6, 8, 10, 11, 0, 1};
   TimeNs previous_receive_ns = before_ns;
   for (std::size_t i = 0; i < poses.size(); ++i) {
     const SourcedPose& p = poses[i];
@@ -860,7 +1040,7 @@ TEST(UdpPoseSource, LoopbackCountsEveryDropDuplicateReorderAndCorruption) {
   EXPECT_TRUE(log.contains("dropped datagram (bad_checksum): from 127.0.0.1:"));
   EXPECT_TRUE(log.contains("1 datagram(s) missing before sequence 4"));
   EXPECT_TRUE(log.contains("(lat_deg): expected a latitude in [-90, 90] degrees, got 95"));
-  EXPECT_TRUE(log.contains("sender restarted: sequence 0 after 11"));
+  EXPECT_TRUE(log.contains("sender restarted: sequence 1 after 11"));
 }
 
 TEST(UdpPoseSource, BurstBeyondTheQueueDropsTheOldest) {

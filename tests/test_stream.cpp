@@ -8,6 +8,7 @@
 #include <algorithm>
 #include <cmath>
 #include <iostream>
+#include <limits>
 #include <numbers>
 
 #include "core/reference_motion.hpp"
@@ -403,4 +404,102 @@ TEST(Stream, SelfConsistencyAtEcefOverFourHours) {
     EXPECT_LE(r.gyro_rad_s, 1e-9);
     EXPECT_LE(r.accel_m_s2, c.accel_bound_m_s2);
   }
+}
+
+// Issue 13, "times within ~1 s of the int64 limits": the end extrapolation
+// pads pad_s (and one knot interval) beyond the first and last knot; a knot
+// whose padding leaves int64 is refused at its push, naming that knot (an
+// index in the input) and why, instead of overflowing (UB) into virtual knots
+// the message would then name.
+TEST(Stream, KnotsWhosePaddingLeavesInt64AreRefusedNamingTheKnot) {
+  const reference::Circle circle(50.0, 20.0);
+  std::vector<Pose> knots = reference::sample_knots(circle, kNsPerSecond / 10);
+  knots.resize(30);
+  PipelineOptions o = flight_options(Physics::flat, 100);
+  o.kernel.delta = 20;
+  // Last knot 0.3 s below INT64_MAX: the padding (>= 1 s) does not fit.
+  std::vector<Pose> late = knots;
+  const TimeNs shift_late = std::numeric_limits<TimeNs>::max() - 300'000'000 - knots.back().t_ns;
+  for (Pose& p : late) p.t_ns += shift_late;
+  try {
+    (void)run_batch(late, o);
+    ADD_FAILURE() << "accepted a trajectory whose end padding leaves int64";
+  } catch (const std::exception& e) {
+    const std::string what = e.what();
+    std::cout << "  refused: " << what << "\n";
+    // A knot of the file: every knot is checked as if it were the last, so
+    // the first one within the padding of the limit is named.
+    const std::size_t at = what.find("knot ");
+    ASSERT_NE(at, std::string::npos) << what;
+    EXPECT_LT(std::stoul(what.substr(at + 5)), late.size()) << what;
+    EXPECT_NE(what.find("int64"), std::string::npos) << what;
+  }
+  // First knot 0.3 s above INT64_MIN: the head padding does not fit.
+  std::vector<Pose> early = knots;
+  const TimeNs shift_early = std::numeric_limits<TimeNs>::min() + 300'000'000 - knots.front().t_ns;
+  for (Pose& p : early) p.t_ns += shift_early;
+  try {
+    (void)run_batch(early, o);
+    ADD_FAILURE() << "accepted a trajectory whose start padding leaves int64";
+  } catch (const std::exception& e) {
+    const std::string what = e.what();
+    std::cout << "  refused: " << what << "\n";
+    EXPECT_TRUE(what.find("knot 0 ") != std::string::npos || what.find("knot 1 ") != std::string::npos) << what;
+    EXPECT_NE(what.find("int64"), std::string::npos) << what;
+  }
+  // 10 s inside the limits both ends work and give the t = 0 samples shifted.
+  std::vector<Pose> inside = knots;
+  const TimeNs shift_inside = std::numeric_limits<TimeNs>::max() - 10 * kNsPerSecond - knots.back().t_ns;
+  for (Pose& p : inside) p.t_ns += shift_inside;
+  const BatchResult a = run_batch(knots, o), b = run_batch(inside, o);
+  ASSERT_EQ(a.imu.size(), b.imu.size());
+  for (std::size_t i = 0; i < a.imu.size(); ++i) EXPECT_EQ(a.imu[i].t_ns + shift_inside, b.imu[i].t_ns);
+}
+
+// Issue 13 W2: one knot with a 179 deg heading glitch (a step below pi, so
+// not antipodal, but more rotation than a smoothing chart holds,
+// kMaxChartAngleRad) is refused at its own push, and since a refused knot
+// changes nothing, the output is bit for bit that of the stream without it.
+TEST(Stream, AHeadingGlitchIsRefusedAndTheRestStreamsAsWithoutIt) {
+  const reference::Circle circle(50.0, 20.0);
+  std::vector<Pose> knots = reference::sample_knots(circle, kNsPerSecond / 10);
+  knots.resize(120);
+  PipelineOptions o = flight_options(Physics::flat, 100);
+  o.kernel.delta = 20;
+  StreamPipeline engine(o);
+  std::vector<StreamSample> got;
+  StreamSample x;
+  std::size_t refused = 0, refused_good = 0;
+  for (std::size_t k = 0; k < knots.size(); ++k) {
+    try {
+      engine.push(knots[k]);
+    } catch (const std::exception& e) {
+      ++refused_good;
+      std::cout << "  good knot " << k << " refused: " << e.what() << "\n";
+    }
+    if (k == 50) {
+      Pose glitch = knots[k];
+      glitch.t_ns += kNsPerSecond / 20;  // between knots 50 and 51
+      glitch.attitude = knots[k].attitude * so3::exp(Vec3(0.0, 0.0, 179.0 * std::numbers::pi / 180.0));
+      try {
+        engine.push(glitch);
+      } catch (const std::exception& e) {
+        ++refused;
+        std::cout << "  glitch refused: " << e.what() << "\n";
+      }
+    }
+    while (engine.pop(x)) got.push_back(x);
+  }
+  try {
+    engine.finish();
+  } catch (const std::exception& e) {
+    ADD_FAILURE() << "finish: " << e.what();
+  }
+  while (engine.pop(x)) got.push_back(x);
+  EXPECT_EQ(refused, 1u);
+  EXPECT_EQ(refused_good, 0u);
+  EXPECT_EQ(engine.knots_pushed(), knots.size());
+  const Difference d = compare(got, run_batch(knots, o));
+  EXPECT_EQ(d.count_a, d.count_b);
+  EXPECT_EQ(d.relative, 0.0);
 }
