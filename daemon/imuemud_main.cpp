@@ -19,7 +19,7 @@
 //
 // Test hook: with IMUEMU_TEST_HOOKS=1 in the environment the control socket
 // also offers "stall-emitter" (the emission thread stops making progress
-// while staying alive), which tests/hil/uml_systemd_run.sh uses to prove the
+// while staying alive), which tests/hil/systemd_run.sh uses to prove the
 // watchdog restarts a stalled daemon. Never set in the shipped unit.
 #include <sys/mman.h>
 #include <unistd.h>
