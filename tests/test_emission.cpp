@@ -690,8 +690,10 @@ TEST_F(EmitCommand, PtySamplesEqualTheBatchAndSigtermStopsWithASummary) {
     drivers::ByteStreamReader reader(dir_ + "/tty");
     auto decoder = drivers::make_stream_decoder("native");
     std::vector<std::uint8_t> buffer(4096);
-    const auto until = std::chrono::steady_clock::now() + 1500ms;
-    while (std::chrono::steady_clock::now() < until) {
+    // Until 300 samples (1.5 s at 200 Hz) are in, however slow the host is
+    // to start the emitter; the 60-s bound only turns a hang into a failure.
+    const auto until = std::chrono::steady_clock::now() + 60s;
+    while (samples.size() < 300 && std::chrono::steady_clock::now() < until) {
       const drivers::ReadResult r = reader.read_some(buffer, 100ms);
       if (r.end_of_stream) break;
       decoder->feed(std::span<const std::uint8_t>(buffer.data(), r.bytes),
