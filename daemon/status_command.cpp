@@ -155,7 +155,8 @@ nlohmann::json query_control_socket(const std::string& socket_path, const std::s
     std::this_thread::sleep_for(std::chrono::milliseconds(10));
   }
   if (ec) fail_connect(socket_path, ec);
-  const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+  // Rounded up, never down: the reply gets the whole timeout, not 1 ms less.
+  const auto left = std::chrono::ceil<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
 
   const std::string line = command + "\n";
   asio::streambuf reply(kMaxReplyBytes);

@@ -169,6 +169,12 @@ def main():
             if dev["underruns"] != 0 and name != "live-udp":
                 failures.append(f"{name}: {dev['underruns']} producer underruns on a file/sample trajectory")
             figures["transport"] = dev["transport"]
+            # Why a tick was not sent, when one was not: the emitter's own
+            # counters (gap, paused, waiting, underrun events) and the
+            # producer's lateness (underruns: no sample ready at the deadline).
+            figures["live"] = dev.get("live")
+            figures["underruns"] = dev["underruns"]
+            figures["not_sent"] = dev["not_sent"]
             figures.update({"scene": name, "protocol": protocol, "rate_hz": rate, "daemon_emitted": dev["emitted"],
                             "deadline_misses_sent_late": dev["deadline_misses"], "extrapolated": dev["samples"]["extrapolated"],
                             "lateness_p99_us": dev["lateness"]["p99_ns"] / 1000})
