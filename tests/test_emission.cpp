@@ -22,6 +22,7 @@
 #include <fstream>
 #include <numbers>
 
+#include "tests/support/spawn.hpp"
 #include "core/attitude.hpp"
 #include "core/mounting.hpp"
 #include "core/pipeline.hpp"
@@ -652,21 +653,7 @@ class EmitCommand : public ::testing::Test {
   void TearDown() override { std::system(("rm -rf " + dir_).c_str()); }
 
   pid_t spawn(const std::vector<std::string>& args) {
-    // Everything allocated before fork: the child only calls async-signal-safe functions.
-    const std::string log_path = dir_ + "/emit.log";
-    std::vector<char*> argv;
-    argv.push_back(const_cast<char*>(IMUEMU_CLI_PATH));
-    for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-    argv.push_back(nullptr);
-    const pid_t pid = ::fork();
-    if (pid == 0) {
-      const int log = ::open(log_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-      ::dup2(log, 1);
-      ::dup2(log, 2);
-      ::execv(IMUEMU_CLI_PATH, argv.data());
-      ::_exit(127);
-    }
-    return pid;
+    return ::imuemu::test::spawn_logged(IMUEMU_CLI_PATH, args, dir_ + "/emit.log");
   }
   static int exit_status(pid_t pid) {
     int status = 0;

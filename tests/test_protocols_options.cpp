@@ -21,6 +21,7 @@
 #include <string>
 #include <vector>
 
+#include "tests/support/spawn.hpp"
 #include "daemon/scene_config.hpp"
 #include "drivers/byte_stream_reader.hpp"
 #include "drivers/protocols/protocol_options.hpp"
@@ -272,18 +273,7 @@ TEST(ProtocolOptionTable, EmitFlagsReachTheWire) {
                                          "--protocol", "mavlink2", "--mavlink-system-id", "7",
                                          "--mavlink-component-id", "9", "--mavlink-hil-sensor", "false",
                                          "--mavlink-highres-imu", "true", "--device", "pty:" + tty};
-  std::vector<char*> argv;
-  argv.push_back(const_cast<char*>(IMUEMU_CLI_PATH));
-  for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-  argv.push_back(nullptr);
-  const pid_t pid = ::fork();
-  if (pid == 0) {
-    const int log = ::open(log_path.c_str(), O_WRONLY | O_CREAT | O_TRUNC, 0644);
-    ::dup2(log, 1);
-    ::dup2(log, 2);
-    ::execv(IMUEMU_CLI_PATH, argv.data());
-    ::_exit(127);
-  }
+  const pid_t pid = imuemu::test::spawn_logged(IMUEMU_CLI_PATH, args, log_path);
   ASSERT_GT(pid, 0);
   using namespace std::chrono_literals;
   for (int i = 0; i < 3000 && ::access(tty.c_str(), F_OK) != 0; ++i) std::this_thread::sleep_for(10ms);
