@@ -19,9 +19,12 @@ run_flavour() {
 # run under user-mode Linux, and the fixtures test kernels and wires, not
 # memory safety (the same code runs under ASan in the unit tests). So do the
 # 60-s loopback runs (label loopback): they test delivery at the exact rate.
+# The long numeric runs (label heavy, tests/heavy_tests.cmake) run in Release
+# only: under ASan at -O1 they cost 12 of the flavour's 16 test minutes and
+# exercise no code path the short tests do not.
 run_flavour release
 # The parsers' libFuzzer targets, bounded in time (FUZZ_SECONDS per target).
 echo "=== fuzz"
 bash scripts/fuzz.sh "${FUZZ_SECONDS:-30}" || status=1
-run_flavour asan -LE "hil|loopback"
+run_flavour asan -LE "hil|loopback|heavy"
 exit $status

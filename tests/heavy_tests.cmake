@@ -1,0 +1,20 @@
+# Read by ctest after the GoogleTest discovery files (TEST_INCLUDE_FILES, see
+# tests/CMakeLists.txt): labels `heavy` the long numeric runs. Each takes 3-30 s
+# in Release but 1-5 minutes under ASan+UBSan at -O1, where it exercises no
+# code path that a short test does not also run under the sanitizers. So
+# scripts/test.sh runs them in the Release flavour only (ctest -LE heavy in the
+# ASan flavour). ctest ignores a name that matches no test, so the test
+# heavy_tests_all_exist (tests/check_heavy_tests.cmake) fails when one here is stale.
+set(IMUEMU_HEAVY_TESTS
+  Stream.AttitudeNodesMatchPerSampleSmoothing
+  Stream.SelfConsistencyAtEcefOverFourHours
+  Stream.EveryOptionStreamsLikeBatch
+  Stream.OneHourFlightStreamedEqualsBatchBitForBit
+  FlightAccuracy.EcefAllMethods
+  Pipeline.ClosedFormPositionSmoothingEqualsTheDenseSum
+  Cli.ClosedLoopOneHourFlightDriftStaysWithinBounds
+  AllanEstimate.NinetyPercentIntervalsCoverTheTruthNinetyPercentOfTheTime
+)
+if(NOT IMUEMU_HEAVY_LIST_ONLY)
+  set_tests_properties(${IMUEMU_HEAVY_TESTS} PROPERTIES LABELS heavy)
+endif()
