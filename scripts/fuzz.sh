@@ -1,32 +1,46 @@
 #!/usr/bin/env bash
-# Builds the libFuzzer targets with clang (ASan+UBSan) and runs each for a
-# bounded time from the seed corpora in tests/fuzz/corpus (copied, so the
-# repository is never modified). Exits non-zero on the first crash.
+# Builds the libFuzzer targets (in the clang ASan+UBSan tree, build/asan) and
+# runs each for a bounded time from the seed corpora in tests/fuzz/corpus
+# (copied, so the repository is never modified), two at a time (one per core).
+# Runs every target; exits non-zero if any crashed, naming each and its input.
 #   scripts/fuzz.sh [SECONDS_PER_TARGET]   (default 30)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 seconds=${1:-${FUZZ_SECONDS:-30}}
-cmake -S . -B build/fuzz -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_COMPILER=clang++ \
-  -DIMUEMU_FUZZ=ON >/dev/null
-cmake --build build/fuzz -j "$(nproc)"
+targets=(trajectory_csv imu_csv decimal_time pose_line pose_datagram)
+IMUEMU_BUILD_QUIET=${IMUEMU_BUILD_QUIET:-1} bash scripts/build.sh asan "${targets[@]/#/fuzz_}"
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
-targets=(trajectory_csv imu_csv decimal_time pose_line pose_datagram)
-for target in "${targets[@]}"; do
+root=$PWD
+run_target() {
+  local target=$1 max_len=4096
   mkdir -p "$work/$target"
   cp -r "tests/fuzz/corpus/$target/." "$work/$target/"
-  echo "=== fuzz_$target: ${seconds}s"
-  status=0
   # pose_line: longer than its 4096-byte line limit, so line_too_long is reachable.
-  max_len=4096
   [ "$target" = pose_line ] && max_len=9000
-  (cd "$work" && "$OLDPWD/build/fuzz/tests/fuzz/fuzz_$target" -max_total_time="$seconds" -max_len="$max_len" \
-     -print_final_stats=1 "$work/$target" >"$work/$target.log" 2>&1) || status=$?
-  tail -n 6 "$work/$target.log"
-  if [ "$status" -ne 0 ]; then
-    echo "fuzz_$target FAILED (exit $status); the crashing input is in the log above:"
-    grep -E "ERROR|SUMMARY|crash-|Test unit written" "$work/$target.log" | head -20
-    exit 1
+  (cd "$work" && "$root/build/asan/tests/fuzz/fuzz_$target" -max_total_time="$seconds" -max_len="$max_len" \
+     -print_final_stats=1 "$work/$target" >"$work/$target.log" 2>&1)
+}
+pids=() failed=()
+for target in "${targets[@]}"; do
+  run_target "$target" & pids+=("$!:$target")
+  if ((${#pids[@]} == 2)); then
+    entry=${pids[0]}; pids=("${pids[@]:1}")
+    wait "${entry%%:*}" || failed+=("${entry#*:}")
   fi
 done
-echo "fuzz: ${#targets[@]} passed, 0 failed"
+for entry in "${pids[@]}"; do wait "${entry%%:*}" || failed+=("${entry#*:}"); done
+for target in "${targets[@]}"; do
+  echo "=== fuzz_$target: ${seconds}s"
+  tail -n 6 "$work/$target.log"
+done
+if ((${#failed[@]})); then
+  mkdir -p build/asan/fuzz_crashes
+  cp "$work"/crash-* "$work"/timeout-* "$work"/oom-* build/asan/fuzz_crashes/ 2>/dev/null || true
+fi
+for target in "${failed[@]}"; do
+  echo "fuzz_$target FAILED; its log (inputs kept in build/asan/fuzz_crashes):"
+  grep -E "ERROR|SUMMARY|crash-|Test unit written" "$work/$target.log" | head -20
+done
+echo "fuzz: $((${#targets[@]} - ${#failed[@]})) passed, ${#failed[@]} failed"
+((${#failed[@]} == 0))

@@ -1,7 +1,7 @@
 #!/usr/bin/env bash
-# Installs everything, builds the Release and the ASan+UBSan flavours and runs
-# the whole test suite in both, plus the parsers' fuzz targets for a bounded
-# time. This is what CI runs (.ci/run).
+# Installs everything, builds the Release and the ASan+UBSan (clang) flavours
+# and runs the whole test suite in both, plus the fuzz targets (built in the
+# ASan tree) for a bounded time. This is what CI runs (.ci/run).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup.sh
@@ -18,13 +18,13 @@ run_flavour() {
 # tests/hil/README.md) run once, on the release binaries: ASan binaries cannot
 # run under user-mode Linux, and the fixtures test kernels and wires, not
 # memory safety (the same code runs under ASan in the unit tests). So do the
-# 60-s loopback runs (label loopback): they test delivery at the exact rate.
+# 30-s loopback runs (label loopback): they test delivery at the exact rate.
 # The long numeric runs (label heavy, tests/heavy_tests.cmake) run in Release
 # only: under ASan at -O1 they cost 12 of the flavour's 16 test minutes and
 # exercise no code path the short tests do not.
 run_flavour release
-# The parsers' libFuzzer targets, bounded in time (FUZZ_SECONDS per target).
+run_flavour asan -LE "hil|loopback|heavy"
+# The libFuzzer targets, bounded in time (FUZZ_SECONDS per target).
 echo "=== fuzz"
 bash scripts/fuzz.sh "${FUZZ_SECONDS:-30}" || status=1
-run_flavour asan -LE "hil|loopback|heavy"
 exit $status
