@@ -11,7 +11,7 @@ cmake -S . -B build/fuzz -G Ninja -DCMAKE_BUILD_TYPE=RelWithDebInfo -DCMAKE_CXX_
 cmake --build build/fuzz -j "$(nproc)"
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
-targets=(trajectory_csv imu_csv decimal_time pose_line pose_datagram)
+targets=(trajectory_csv imu_csv decimal_time pose_line pose_datagram live_path)
 for target in "${targets[@]}"; do
   mkdir -p "$work/$target"
   cp -r "tests/fuzz/corpus/$target/." "$work/$target/"
