@@ -23,7 +23,8 @@
 // Input: byte 0 is flags (bit 0: recompute each datagram's CRC so the fuzzer
 // reaches the checks behind it; bit 1: write magic and version 1; bit 2: the
 // ecef scene, otherwise flat; bit 3: underrun policy pause instead of
-// extrapolate; bit 4: the scene default's kernel oversampling). Then records of [length code][advance][bytes]: length code
+// extrapolate; bit 4: the scene default's kernel oversampling; bit 5: the
+// input ends, finish()). Then records of [length code][advance][bytes]: length code
 // >= 128 means a full 84-byte datagram, otherwise that many bytes (a short or
 // long datagram; what is left of the input if less); advance is the real
 // time, in milliseconds, that passes before this datagram arrives (ticks
@@ -202,9 +203,11 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     if (c.late > c.sequence_gaps) __builtin_trap();
   }
 
-  // End of input: the engine computes its end; the remaining ticks up to the
-  // last knot go out (bounded).
-  if (path.engine.knots_pushed() >= 2) {
+  // Bit 5: the input ends (as a finite stdin stream does; a UDP source never
+  // ends): the engine computes its end and the remaining ticks up to the
+  // last knot go out (bounded). Off by default: finish()'s end extrapolation
+  // costs more than the whole sequence before it.
+  if ((flags & 32) != 0 && path.engine.knots_pushed() >= 2) {
     try {
       path.engine.finish();
     } catch (const std::exception&) {

@@ -9,7 +9,7 @@ import os
 import struct
 import sys
 
-CRC_FLAG, MAGIC_FLAG, ECEF_FLAG, PAUSE_FLAG = 1, 2, 4, 8
+CRC_FLAG, MAGIC_FLAG, ECEF_FLAG, PAUSE_FLAG, OVERSAMPLE_FLAG, FINISH_FLAG = 1, 2, 4, 8, 16, 32
 
 
 def crc32c(data):
@@ -49,12 +49,13 @@ def main():
     os.makedirs(out, exist_ok=True)
     seeds = {}
     seeds["clean"] = bytes([0]) + b"".join(stream(40))
+    seeds["clean_finish_oversampled"] = bytes([FINISH_FLAG | OVERSAMPLE_FLAG]) + b"".join(stream(20))
     g = stream(15)
     g[5:5] = [record(b"garbage!" * 3), record(b"\x00" * 84), record(b"IMUP\x01" + b"\xff" * 79), record(b"")]
     seeds["garbage"] = bytes([0]) + b"".join(g)
     seeds["jump_forward_back"] = bytes([0]) + b"".join(
         stream(10) + stream(3, t0_ns=3600 * 10**9, seq0=10) + stream(10, t0_ns=10 * 20_000_000, seq0=13))
-    seeds["restart"] = bytes([0]) + b"".join(stream(20, t0_ns=50 * 10**9) + stream(20))
+    seeds["restart"] = bytes([FINISH_FLAG]) + b"".join(stream(20, t0_ns=50 * 10**9) + stream(20))
     glitch = stream(20)
     bad = bytearray(flight(10, 10 * 20_000_000 + 1))
     h = struct.unpack_from("<d", bad, 48)[0]
