@@ -59,7 +59,7 @@ from loopback_checks import memory_dir  # noqa: E402
 
 RATE_HZ = 400
 A_SECONDS = 40
-B_SECONDS = 34
+B_SECONDS = 36
 G = 9.80665
 # The live sender's circle (flat NED, level, heading along the track).
 RADIUS_M = 50.0
