@@ -89,6 +89,7 @@ struct StreamArgs {
   std::string speed = "1";      // replay speed factor ("2.5", "1/3"), or "max" (file: as fast as possible)
   std::int64_t rate_hz = 400;
   double knot_interval_s = 1.0;  // expected pose spacing: sets the default window and the look-ahead
+  double tcp_idle_timeout_s = 5.0;  // tcp: a client silent this long is closed (0: never)
   int delta = -1;               // < 0: one knot interval of output samples
   std::string scene = "ecef";
   double gravity_m_s2 = 9.80665;

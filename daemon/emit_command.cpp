@@ -176,7 +176,11 @@ int emit(const EmitArgs& a) {
       so.physics = scene.physics;
       so.log = [](std::string_view line) { std::cerr << line << "\n"; };
       if (a.source.rfind("udp:", 0) == 0) source = io::make_udp_pose_source(endpoint_of(a.source, "udp"), so);
-      else if (a.source.rfind("tcp:", 0) == 0) source = io::make_tcp_pose_source(endpoint_of(a.source, "tcp"), so);
+      else if (a.source.rfind("tcp:", 0) == 0) {
+        io::NetEndpoint ep = endpoint_of(a.source, "tcp");
+        ep.tcp_idle_timeout_ns = static_cast<TimeNs>(std::llround(a.tcp_idle_timeout_s * 1e9));  // 0..86400 s (CLI range)
+        source = io::make_tcp_pose_source(ep, so);
+      }
       else if (a.source == "stdin") source = io::make_fd_pose_source(0, so);
       else throw std::invalid_argument("--source '" + a.source + "': expected udp:ADDR:PORT, tcp:ADDR:PORT or stdin");
       dev.pipeline.gap_policy = GapPolicy::split;
@@ -326,6 +330,8 @@ void add_emit_command(CLI::App& app, int& exit_code) {
   c->add_option("--duration-s", a.sample_duration_s, "--sample: trajectory duration")->capture_default_str()->check(CLI::PositiveNumber);
   c->add_option("--sample-period-s", a.sample_period_s, "--sample: knot period")->capture_default_str()->check(CLI::PositiveNumber);
   c->add_option("--source", a.source, "Live poses instead: udp:ADDR:PORT | tcp:ADDR:PORT | stdin (as imuemu stream)");
+  c->add_option("--tcp-idle-timeout-s", a.tcp_idle_timeout_s, "--source tcp: close a client that sent nothing for this long (0: never)")
+      ->capture_default_str()->check(CLI::Range(0.0, 86400.0));
   c->add_option("--knot-interval-s", a.knot_interval_s, "--source: expected pose spacing (window, look-ahead)")->capture_default_str()->check(CLI::PositiveNumber);
   c->add_option("--margin-s", a.margin_s, "--source: extra delay beyond the engine's look-ahead")->capture_default_str()->check(CLI::NonNegativeNumber);
   c->add_option("--scene", a.scene, "ecef or flat")->capture_default_str()->check(CLI::IsMember({"ecef", "flat"}));

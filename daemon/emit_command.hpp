@@ -20,6 +20,7 @@ struct EmitArgs {
   double sample_period_s = 1.0;
   std::string source;           // udp:ADDR:PORT | tcp:ADDR:PORT | stdin
   double knot_interval_s = 1.0; // live source: expected pose spacing (window, look-ahead)
+  double tcp_idle_timeout_s = 5.0;  // tcp source: a client silent this long is closed (0: never)
   double margin_s = 0.1;        // live source: extra delay beyond the engine's look-ahead
 
   std::string scene = "ecef";

@@ -81,6 +81,7 @@ int main(int argc, char** argv) {
   st->add_option("--speed", str.speed, "Replay speed factor (2.5, 1/3), or max for a file as fast as possible")->capture_default_str();
   st->add_option("--rate", str.rate_hz, "Output rate in Hz")->capture_default_str()->check(CLI::Range(1, 1000000));
   st->add_option("--knot-interval-s", str.knot_interval_s, "Expected pose spacing: default window and look-ahead")->capture_default_str()->check(CLI::PositiveNumber);
+  st->add_option("--tcp-idle-timeout-s", str.tcp_idle_timeout_s, "tcp: close a client that sent nothing for this long (0: never); a new client replaces one idle for 1 s")->capture_default_str()->check(CLI::Range(0.0, 86400.0));
   st->add_option("--delta", str.delta, "Window half-length Delta (samples); default one knot interval")->check(CLI::Range(1, 1000000));
   st->add_option("--scene", str.scene, "ecef or flat")->capture_default_str()->check(CLI::IsMember({"ecef", "flat"}));
   st->add_option("--gravity", str.gravity_m_s2, "flat scene gravity (m/s^2)")->capture_default_str();

@@ -267,7 +267,7 @@ void parse_endpoint(const Table& t, const std::string& rest, TrajectoryConfig& o
 }
 
 void parse_trajectory_section(const Table& t, const SceneConfig& scene, TrajectoryConfig& out) {
-  t.allow_only({"source", "duration_s", "speed", "knot_interval_s", "loop", "start"});
+  t.allow_only({"source", "duration_s", "speed", "knot_interval_s", "loop", "start", "tcp_idle_timeout_s"});
   const std::string usage = "expected file:PATH, udp:ADDR:PORT, tcp:ADDR:PORT, stdin or sample:flight|circle|static";
   out.source = t.required_string("source", usage);
   const std::string& s = out.source;
@@ -342,6 +342,8 @@ void parse_trajectory_section(const Table& t, const SceneConfig& scene, Trajecto
     t.fail_at(t.has("knot_interval_s") ? "knot_interval_s" : "duration_s",
               "duration_s / knot_interval_s gives more than 10 million built-in knots; use a longer knot interval");
   out.loop = t.boolean("loop", false);
+  if (out.kind == SourceKind::tcp) out.tcp_idle_timeout_s = t.number("tcp_idle_timeout_s", 5.0, 0.0, 86400.0);
+  else t.forbid("tcp_idle_timeout_s", "applies to tcp: sources only");
   out.start = t.choice("start", "now", {"now", "next-second"}) == "now" ? StartAlignment::now : StartAlignment::next_second;
 }
 

@@ -60,6 +60,7 @@ struct TrajectoryConfig {
   live::SpeedFactor speed;                     // replay factor (file, sample)
   double knot_interval_s = 1.0;  // expected pose spacing (sample: the knot period)
   bool loop = false;             // file, sample: replay again from the start at the end
+  double tcp_idle_timeout_s = 5.0;  // tcp: a client silent this long is closed (0: never; io/pose_source.hpp)
   StartAlignment start = StartAlignment::now;
 };
 

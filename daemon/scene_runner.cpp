@@ -102,6 +102,7 @@ BuiltEngine build_engine(const SceneConfig& scene, const RunnerOptions& options)
     so.physics = scene.physics.physics;
     so.log = options.log;
     io::NetEndpoint endpoint{scene.trajectory.address, scene.trajectory.port, 0};
+    endpoint.tcp_idle_timeout_ns = seconds_to_ns(scene.trajectory.tcp_idle_timeout_s);
     if (scene.trajectory.kind == SourceKind::udp) built.source = io::make_udp_pose_source(endpoint, so);
     else if (scene.trajectory.kind == SourceKind::tcp) built.source = io::make_tcp_pose_source(endpoint, so);
     else built.source = io::make_fd_pose_source(0, so);

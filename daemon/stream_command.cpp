@@ -11,6 +11,7 @@
 #include <cerrno>
 #include <cstring>
 #include <charconv>
+#include <cmath>
 #include <cstdio>
 #include <iostream>
 #include <memory>
@@ -120,7 +121,9 @@ int stream(const StreamArgs& args) {
     } else if (args.source.rfind("udp:", 0) == 0) {
       source = io::make_udp_pose_source(endpoint_of(args.source, "udp"), so);
     } else if (args.source.rfind("tcp:", 0) == 0) {
-      source = io::make_tcp_pose_source(endpoint_of(args.source, "tcp"), so);
+      io::NetEndpoint ep = endpoint_of(args.source, "tcp");
+      ep.tcp_idle_timeout_ns = static_cast<TimeNs>(std::llround(args.tcp_idle_timeout_s * 1e9));  // 0..86400 s (CLI range)
+      source = io::make_tcp_pose_source(ep, so);
     } else if (args.source == "stdin") {
       source = io::make_fd_pose_source(0, so);
     } else {

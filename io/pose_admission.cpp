@@ -421,6 +421,8 @@ PoseSourceCounters PoseAdmission::counters() const noexcept {
   c.sequence_restarts = get(kSequenceRestarts);
   c.connections = get(kConnections);
   c.connections_refused = get(kConnectionsRefused);
+  c.connections_idle_closed = get(kConnectionsIdleClosed);
+  c.connections_replaced = get(kConnectionsReplaced);
   return c;
 }
 

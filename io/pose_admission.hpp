@@ -137,6 +137,8 @@ class PoseAdmission {
   void backpressure_event() noexcept { add(kBackpressureEvents); }
   void connection() noexcept { add(kConnections); }
   void connection_refused() noexcept { add(kConnectionsRefused); }
+  void connection_idle_closed() noexcept { add(kConnectionsIdleClosed); }
+  void connection_replaced() noexcept { add(kConnectionsReplaced); }
 
   void log(std::string_view key, std::string_view message);  // rate limited, prefixed with the source name
   void flush_log() { log_.flush(); }
@@ -167,6 +169,8 @@ class PoseAdmission {
     kSequenceRestarts,
     kConnections,
     kConnectionsRefused,
+    kConnectionsIdleClosed,
+    kConnectionsReplaced,
     kLineErrorsFirst,
     kDatagramErrorsFirst = kLineErrorsFirst + kLineErrorCount,
     kSlotCount = kDatagramErrorsFirst + kDatagramErrorCount,

@@ -105,6 +105,8 @@ struct PoseSourceCounters {
 
   std::uint64_t connections = 0;          // TCP clients served
   std::uint64_t connections_refused = 0;  // TCP clients closed at once because one was connected
+  std::uint64_t connections_idle_closed = 0;  // TCP clients closed after tcp_idle_timeout_ns of silence
+  std::uint64_t connections_replaced = 0;     // idle TCP clients closed for a new client (tcp_takeover_idle_ns)
 
   std::uint64_t rejected() const noexcept;  // every rejection counter above (wire + admission)
   // Datagrams that never arrived intact (exact when reordering stays within kSequenceWindow).
@@ -213,6 +215,21 @@ struct NetEndpoint {
   std::string address = "0.0.0.0";  // IPv4 or IPv6 literal to bind
   std::uint16_t port = 0;           // 0: an ephemeral port (see local_port())
   int receive_buffer_bytes = 0;     // SO_RCVBUF for UDP; 0 keeps the system default
+  // TCP only (the one-client slot, issue 13 H1). A client from which nothing
+  // arrived for tcp_idle_timeout_ns while the source waited for its bytes is
+  // closed (connections_idle_closed); 0 never closes a silent client. A
+  // backpressure stall (the source not reading) is not idleness.
+  TimeNs tcp_idle_timeout_ns = 5 * kNsPerSecond;
+  // A new client replaces the connected one when the connected one has been
+  // idle (as above) for at least this long (connections_replaced), and is
+  // refused otherwise: a sender streaming at >= 1 Hz keeps its slot, while a
+  // sender reconnecting after its old connection went half-open (peer gone
+  // without a FIN, so nothing more arrives on it) gets the slot back within
+  // this time instead of waiting for the idle timeout or forever.
+  TimeNs tcp_takeover_idle_ns = kNsPerSecond;
+  // SO_KEEPALIVE with probes after 2 s of silence, every 1 s, 3 unanswered:
+  // a peer that vanished is detected in ~5 s even with the idle timeout off.
+  bool tcp_keepalive = true;
 };
 // Pose datagrams v1 (docs/pose-wire-format.md §2) on a bound UDP socket. A
 // burst beyond the queue drops the oldest queued pose (overflow_dropped):
@@ -220,7 +237,9 @@ struct NetEndpoint {
 // if the address cannot be bound.
 std::unique_ptr<PoseSource> make_udp_pose_source(const NetEndpoint& endpoint, PoseSourceOptions options);
 // Pose lines (docs/pose-wire-format.md §1) from one TCP client at a time;
-// other clients are closed at once while one is connected. While the queue is
+// other clients are closed at once while one is connected and active (see
+// NetEndpoint::tcp_takeover_idle_ns for when a new client replaces it, and
+// tcp_idle_timeout_ns for when a silent one is closed). While the queue is
 // full the source stops reading, so TCP flow control slows the sender.
 std::unique_ptr<PoseSource> make_tcp_pose_source(const NetEndpoint& endpoint, PoseSourceOptions options);
 // Pose lines from a file descriptor (stdin: 0; a pipe, a tty or a regular

@@ -5,6 +5,10 @@
 #include <boost/asio/ip/tcp.hpp>
 #include <boost/asio/ip/udp.hpp>
 #include <boost/asio/steady_timer.hpp>
+#include <netinet/in.h>
+#include <netinet/tcp.h>
+#include <sys/socket.h>
+
 #include <optional>
 #include <stdexcept>
 #include <utility>
@@ -112,7 +116,13 @@ class TcpPoseSource final : public PoseSource {
         acceptor_(io_),
         retry_timer_(io_),
         accept_retry_timer_(io_),
-        read_buffer_(kReadBytes) {
+        idle_timer_(io_),
+        read_buffer_(kReadBytes),
+        idle_timeout_ns_(endpoint.tcp_idle_timeout_ns),
+        takeover_idle_ns_(endpoint.tcp_takeover_idle_ns),
+        keepalive_(endpoint.tcp_keepalive) {
+    if (idle_timeout_ns_ < 0 || takeover_idle_ns_ < 0)
+      throw std::invalid_argument("tcp pose source: tcp_idle_timeout_ns and tcp_takeover_idle_ns must be >= 0");
     const asio::ip::tcp::endpoint local(parse_address(endpoint, "tcp"), endpoint.port);
     error_code ec;
     acceptor_.open(local.protocol(), ec);
@@ -131,12 +141,51 @@ class TcpPoseSource final : public PoseSource {
   // While the queue is full the source polls it at this period (the
   // consumer drains at its own pace; Asio has no wake-up from the queue).
   static constexpr auto kBackpressureRetry = std::chrono::milliseconds(1);
+  // Keepalive probing (NetEndpoint::tcp_keepalive): first probe after 2 s of
+  // silence, then every 1 s; 3 unanswered probes reset the connection.
+  static constexpr int kKeepaliveIdleS = 2, kKeepaliveIntervalS = 1, kKeepaliveProbes = 3;
 
   void run() override {
     accept_next();
     io_.run();
   }
   void wake() override { io_.stop(); }
+
+  static std::string peer_name(const asio::ip::tcp::socket& socket) {
+    error_code ignored;
+    const auto peer = socket.remote_endpoint(ignored);
+    return peer.address().to_string() + ":" + std::to_string(peer.port());
+  }
+
+  // How long the connected client has been silent while the source waited
+  // for its bytes; 0 while the source is not reading (backpressure stall).
+  TimeNs client_idle_ns(TimeNs now_ns) const { return reading_ ? now_ns - waiting_since_ns_ : 0; }
+
+  void set_keepalive(asio::ip::tcp::socket& socket) {
+    error_code ec;
+    socket.set_option(asio::socket_base::keep_alive(true), ec);
+    const int fd = socket.native_handle();
+    const int values[] = {kKeepaliveIdleS, kKeepaliveIntervalS, kKeepaliveProbes};
+    const int names[] = {TCP_KEEPIDLE, TCP_KEEPINTVL, TCP_KEEPCNT};
+    bool ok = !ec;
+    for (std::size_t i = 0; i < 3 && ok; ++i) ok = ::setsockopt(fd, IPPROTO_TCP, names[i], &values[i], sizeof(int)) == 0;
+    if (!ok) admission_->log("keepalive", "cannot enable TCP keepalive on " + client_name_ + " (the idle timeout still applies)");
+  }
+
+  // Ends the current client's stream (its unterminated last line counted).
+  // key: the rate-limited log's key ("connection" for an ordinary end).
+  void drop_client(std::string_view key, const std::string& why) {
+    stream_->finish();
+    admission_->log(key, "client disconnected: " + client_name_ + why);
+    error_code ignored;
+    client_->close(ignored);  // a pending read completes with operation_aborted
+    client_.reset();
+    stream_.reset();
+    pending_.reset();  // only set while stalled, and a stalled client is never dropped for idleness
+    stalled_ = false;
+    reading_ = false;
+    idle_timer_.cancel();
+  }
 
   void accept_next() {
     acceptor_.async_accept([this](const error_code& ec, asio::ip::tcp::socket socket) {
@@ -151,44 +200,63 @@ class TcpPoseSource final : public PoseSource {
         });
         return;
       }
+      const TimeNs now_ns = monotonic_now_ns();
+      if (client_ && client_idle_ns(now_ns) >= takeover_idle_ns_) {
+        // The connected client is silent: most likely the sender's previous
+        // connection, gone half-open; the new one takes the slot.
+        admission_->connection_replaced();
+        drop_client("connection_replaced", " (idle for " + std::to_string(client_idle_ns(now_ns) / 1'000'000) +
+                    " ms, replaced by a new client " + peer_name(socket) + ")");
+      }
       if (client_) {
         // One client at a time: a second stream would interleave with the
         // first's poses. Closing tells the client at once.
         admission_->connection_refused();
+        admission_->log("connection_refused", "refused client " + peer_name(socket) + ": another client is connected");
         error_code ignored;
-        const auto peer = socket.remote_endpoint(ignored);
-        admission_->log("connection_refused", "refused client " + peer.address().to_string() + ":" +
-                                                  std::to_string(peer.port()) + ": another client is connected");
         socket.close(ignored);
       } else {
         admission_->connection();
         ++connection_number_;
-        error_code ignored;
-        const auto peer = socket.remote_endpoint(ignored);
         // The admission's log lines start with the source's name; messages
         // add the connection and its line numbers.
-        client_name_ = "connection " + std::to_string(connection_number_) + " (" + peer.address().to_string() + ":" +
-                       std::to_string(peer.port()) + ")";
+        client_name_ = "connection " + std::to_string(connection_number_) + " (" + peer_name(socket) + ")";
         admission_->log("connection", "client connected: " + client_name_);
         client_.emplace(std::move(socket));
+        if (keepalive_) set_keepalive(*client_);
         stream_.emplace(*admission_, client_name_);
         read_next();
+        arm_idle_timer(idle_timeout_ns_);
       }
       accept_next();
     });
   }
 
+  // Checks the idle timeout after `after_ns`; re-arms for the rest of it.
+  void arm_idle_timer(TimeNs after_ns) {
+    if (idle_timeout_ns_ == 0) return;
+    idle_timer_.expires_after(std::chrono::nanoseconds(after_ns));
+    idle_timer_.async_wait([this](const error_code& ec) {
+      if (ec == asio::error::operation_aborted || !client_) return;
+      const TimeNs idle_ns = client_idle_ns(monotonic_now_ns());
+      if (idle_ns >= idle_timeout_ns_) {
+        admission_->connection_idle_closed();
+        drop_client("idle_timeout", " (nothing received for " + std::to_string(idle_ns / 1'000'000) + " ms: idle timeout " +
+                    std::to_string(idle_timeout_ns_ / 1'000'000) + " ms)");
+        return;
+      }
+      arm_idle_timer(idle_timeout_ns_ - idle_ns);
+    });
+  }
+
   void read_next() {
+    reading_ = true;
+    waiting_since_ns_ = monotonic_now_ns();
     client_->async_read_some(asio::buffer(read_buffer_), [this](const error_code& ec, std::size_t size) {
       if (ec == asio::error::operation_aborted) return;
+      reading_ = false;
       if (ec) {
-        stream_->finish();
-        admission_->log("connection", "client disconnected: " + client_name_ +
-                                          (ec == asio::error::eof ? std::string() : " (" + ec.message() + ")"));
-        error_code ignored;
-        client_->close(ignored);
-        client_.reset();
-        stream_.reset();
+        drop_client("connection", ec == asio::error::eof ? std::string() : " (" + ec.message() + ")");
         return;
       }
       stream_->append(read_buffer_.data(), size, monotonic_now_ns());
@@ -207,7 +275,7 @@ class TcpPoseSource final : public PoseSource {
           }
           retry_timer_.expires_after(kBackpressureRetry);
           retry_timer_.async_wait([this](const error_code& ec) {
-            if (ec != asio::error::operation_aborted) process();
+            if (ec != asio::error::operation_aborted && client_) process();
           });
           return;
         }
@@ -225,14 +293,20 @@ class TcpPoseSource final : public PoseSource {
   asio::ip::tcp::acceptor acceptor_;
   asio::steady_timer retry_timer_;
   asio::steady_timer accept_retry_timer_;
+  asio::steady_timer idle_timer_;
   std::optional<asio::ip::tcp::socket> client_;
   std::optional<PoseLineStream> stream_;
   std::optional<SourcedPose> pending_;
   bool stalled_ = false;
+  bool reading_ = false;         // a read of the client is pending (the source waits for its bytes)
+  TimeNs waiting_since_ns_ = 0;  // when that read was issued
   std::vector<char> read_buffer_;
   std::uint64_t connection_number_ = 0;
   std::string client_name_;
   std::uint16_t port_ = 0;
+  TimeNs idle_timeout_ns_;
+  TimeNs takeover_idle_ns_;
+  bool keepalive_;
 };
 
 }  // namespace

@@ -1199,6 +1199,89 @@ TEST(TcpPoseSource, LoopbackOneClientAtATimeWithBackpressure) {
   source->stop();
 }
 
+// Issue 13 H1: a client that connects and sends nothing held the only slot
+// forever (no idle timeout), and a sender whose old connection went half-open
+// could never reconnect. Now a silent client is closed after the idle timeout
+// and a new client replaces one that has been idle for the takeover time.
+TEST(TcpPoseSource, SilentClientIsClosedAfterTheIdleTimeout) {
+  LogCapture log;
+  PoseSourceOptions options;
+  options.log = log.sink();
+  NetEndpoint endpoint{"127.0.0.1", 0};
+  endpoint.tcp_idle_timeout_ns = 200'000'000;
+  endpoint.tcp_takeover_idle_ns = 3600 * kNsPerSecond;  // only the idle timeout frees the slot here
+  auto source = make_tcp_pose_source(endpoint, options);
+  source->start();
+  TcpClient silent(source->local_port());
+  ASSERT_TRUE(silent.connected());
+  EXPECT_TRUE(silent.closed_by_peer());  // within 5 s; before: never
+  EXPECT_TRUE(wait_until([&] { return source->counters().connections_idle_closed == 1; }));
+  EXPECT_TRUE(log.contains(source->name() + ": client disconnected: connection 1 (127.0.0.1:"));
+  EXPECT_TRUE(log.contains("idle timeout 200 ms)"));
+  // The slot is free: the real sender is served.
+  TcpClient sender(source->local_port());
+  ASSERT_TRUE(sender.connected());
+  sender.send("time_s,north_m,east_m,down_m,heading_deg,pitch_deg,roll_deg\n" + ned_line(0.1, 1) + ned_line(0.2, 2));
+  EXPECT_TRUE(wait_until([&] { return source->counters().accepted == 2; }));
+  const PoseSourceCounters c = source->counters();
+  EXPECT_EQ(c.connections, 2u);
+  EXPECT_EQ(c.connections_refused, 0u);
+  EXPECT_EQ(c.connections_replaced, 0u);
+  expect_accounted(c);
+  source->stop();
+}
+
+TEST(TcpPoseSource, NewClientReplacesAnIdleOneAndIsRefusedByAnActiveOne) {
+  LogCapture log;
+  PoseSourceOptions options;
+  options.log = log.sink();
+  NetEndpoint endpoint{"127.0.0.1", 0};
+  endpoint.tcp_idle_timeout_ns = 0;  // never closed for idleness: only the takeover frees the slot
+  endpoint.tcp_takeover_idle_ns = 100'000'000;
+  auto source = make_tcp_pose_source(endpoint, options);
+  source->start();
+  const std::string header = "time_s,north_m,east_m,down_m,heading_deg,pitch_deg,roll_deg\n";
+  // The old connection: one pose, then silence, as a connection whose peer
+  // vanished without a FIN looks from the server.
+  TcpClient old_connection(source->local_port());
+  ASSERT_TRUE(old_connection.connected());
+  old_connection.send(header + ned_line(0.1, 1) + ned_line(0.2, 1));  // two: the stream is acquired (resync_poses)
+  ASSERT_TRUE(wait_until([&] { return source->counters().accepted == 2; }));
+  std::this_thread::sleep_for(1000ms);  // >> the 100 ms takeover time
+  TcpClient reconnected(source->local_port());
+  ASSERT_TRUE(reconnected.connected());
+  reconnected.send(header + ned_line(0.3, 2));
+  EXPECT_TRUE(wait_until([&] { return source->counters().accepted == 3; }));  // before: refused, stays 2
+  EXPECT_TRUE(old_connection.closed_by_peer());
+  PoseSourceCounters c = source->counters();
+  EXPECT_EQ(c.connections, 2u);
+  EXPECT_EQ(c.connections_replaced, 1u);
+  EXPECT_EQ(c.connections_refused, 0u);
+  EXPECT_TRUE(log.contains("ms, replaced by a new client 127.0.0.1:"));
+
+  // A client that keeps streaming keeps its slot: a third one is refused.
+  // (Each pose arrives well within the takeover time; the refusal does not
+  // depend on the host's speed as long as the sender is not stalled 100 ms.)
+  std::atomic<bool> streaming{true};
+  std::thread feeder([&] {
+    for (int i = 4; streaming; ++i) {
+      reconnected.send(ned_line(0.1 * i, i));
+      std::this_thread::sleep_for(5ms);
+    }
+  });
+  ASSERT_TRUE(wait_until([&] { return source->counters().accepted >= 6; }));
+  TcpClient intruder(source->local_port());
+  ASSERT_TRUE(intruder.connected());
+  EXPECT_TRUE(intruder.closed_by_peer());
+  streaming = false;
+  feeder.join();
+  c = source->counters();
+  EXPECT_EQ(c.connections_refused, 1u);
+  EXPECT_EQ(c.connections_replaced, 1u);
+  expect_accounted(c);
+  source->stop();
+}
+
 // ---------------------------------------------------------------- stdin (a pipe)
 
 TEST(FdPoseSource, PipeWithBackpressureLongLinesAndEndOfInput) {
