@@ -601,37 +601,23 @@ nlohmann::json allan_json(const AllanInput& in, const std::vector<allan::Analysi
   return j;
 }
 
-int run_allan(const AllanArgs& args, std::ostream& out, std::ostream& err) {
+allan::AnalysisOptions allan_options(const AllanArgs& args) {
   allan::AnalysisOptions opt;
-  AllanInput in;
-  try {
-    opt.terms = parse_terms(args.terms);
-    opt.points_per_decade = args.points_per_decade;
-    opt.max_tau_fraction = args.max_tau_fraction;
-    opt.confidence = args.confidence;
-    opt.fit_min_tau_s = args.fit_min_tau_s;
-    opt.fit_max_tau_s = args.fit_max_tau_s;
-    (void)allan::log_spaced_factors(1000, opt.points_per_decade, opt.max_tau_fraction);  // option checks
-    if (!(opt.confidence > 0.0 && opt.confidence < 1.0)) throw std::invalid_argument("--confidence must be in (0, 1)");
-  } catch (const std::invalid_argument& e) {
-    err << "imuemu allan: " << e.what() << "\n";
-    return kUsageError;
-  }
-  try {
-    in = read_allan_input(args.path, args.axes, args.rate_hz);
-  } catch (const io::CsvFormatError& e) {
-    err << "imuemu allan: " << e.what() << "\n";
-    return kBadInput;
-  } catch (const std::invalid_argument& e) {
-    err << "imuemu allan: " << e.what() << "\n";
-    return kUsageError;
-  } catch (const std::bad_alloc&) {
-    err << "imuemu allan: " << args.path << ": not enough memory to hold the samples (try --axes gyro or accel)\n";
-    return kCannotProcess;
-  }
+  opt.terms = parse_terms(args.terms);
+  opt.points_per_decade = args.points_per_decade;
+  opt.max_tau_fraction = args.max_tau_fraction;
+  opt.confidence = args.confidence;
+  opt.fit_min_tau_s = args.fit_min_tau_s;
+  opt.fit_max_tau_s = args.fit_max_tau_s;
+  (void)allan::log_spaced_factors(1000, opt.points_per_decade, opt.max_tau_fraction);  // option checks
+  if (!(opt.confidence > 0.0 && opt.confidence < 1.0)) throw std::invalid_argument("--confidence must be in (0, 1)");
+  return opt;
+}
+
+std::vector<allan::Analysis> analyse_allan_input(AllanInput& in, const allan::AnalysisOptions& opt) {
   // The axes are independent: two workers (the machine's cores), each
   // freeing an axis' samples once analysed. Exceptions are carried out of
-  // the threads and reported here.
+  // the threads and the first one rethrown here.
   std::vector<allan::Analysis> analyses(in.series.size());
   std::vector<std::exception_ptr> failures(in.series.size());
   std::atomic<std::size_t> next{0};
@@ -655,17 +641,41 @@ int run_allan(const AllanArgs& args, std::ostream& out, std::ostream& err) {
     work();
     if (helper.joinable()) helper.join();
   }
-  for (const std::exception_ptr& f : failures) {
-    if (!f) continue;
-    try {
-      std::rethrow_exception(f);
-    } catch (const std::invalid_argument& e) {
-      err << "imuemu allan: " << args.path << ": " << e.what() << "\n";
-      return kCannotProcess;
-    } catch (const std::exception& e) {
-      err << "imuemu allan: internal error: " << e.what() << "\n";
-      return kInternalError;
-    }
+  for (const std::exception_ptr& f : failures)
+    if (f) std::rethrow_exception(f);
+  return analyses;
+}
+
+int run_allan(const AllanArgs& args, std::ostream& out, std::ostream& err) {
+  allan::AnalysisOptions opt;
+  AllanInput in;
+  try {
+    opt = allan_options(args);
+  } catch (const std::invalid_argument& e) {
+    err << "imuemu allan: " << e.what() << "\n";
+    return kUsageError;
+  }
+  try {
+    in = read_allan_input(args.path, args.axes, args.rate_hz);
+  } catch (const io::CsvFormatError& e) {
+    err << "imuemu allan: " << e.what() << "\n";
+    return kBadInput;
+  } catch (const std::invalid_argument& e) {
+    err << "imuemu allan: " << e.what() << "\n";
+    return kUsageError;
+  } catch (const std::bad_alloc&) {
+    err << "imuemu allan: " << args.path << ": not enough memory to hold the samples (try --axes gyro or accel)\n";
+    return kCannotProcess;
+  }
+  std::vector<allan::Analysis> analyses;
+  try {
+    analyses = analyse_allan_input(in, opt);
+  } catch (const std::invalid_argument& e) {
+    err << "imuemu allan: " << args.path << ": " << e.what() << "\n";
+    return kCannotProcess;
+  } catch (const std::exception& e) {
+    err << "imuemu allan: internal error: " << e.what() << "\n";
+    return kInternalError;
   }
   const nlohmann::json j = allan_json(in, analyses, args);
   if (args.json) {
