@@ -7,6 +7,7 @@
 #include <unistd.h>
 
 #include <array>
+#include <bit>
 #include <atomic>
 #include <exception>
 #include <thread>
@@ -67,6 +68,22 @@ long double pow10_exact(int e) {
   return table[static_cast<std::size_t>(e)];
 }
 
+// SWAR digit parsing (eight ASCII bytes in one little-endian word; the
+// method of Lemire, "Number parsing at a gigabyte per second", Software:
+// Practice and Experience 51(8), 2021, section 4): all eight are '0'..'9'...
+constexpr bool eight_digits(std::uint64_t chunk) noexcept {
+  return ((chunk & 0xF0F0F0F0F0F0F0F0u) | (((chunk + 0x0606060606060606u) & 0xF0F0F0F0F0F0F0F0u) >> 4)) ==
+         0x3333333333333333u;
+}
+// ... and their value, the first byte the most significant digit.
+constexpr std::uint64_t eight_digit_value(std::uint64_t chunk) noexcept {
+  chunk = (chunk & 0x0F0F0F0F0F0F0F0Fu) * 2561u >> 8;
+  chunk = (chunk & 0x00FF00FF00FF00FFu) * 6553601u >> 16;
+  return ((chunk & 0x0000FFFF0000FFFFu) * 42949672960001u >> 32) & 0xFFFFFFFFu;
+}
+static_assert(eight_digit_value(0x3837363534333231u) == 12345678u);  // "12345678" little-endian
+static_assert(eight_digits(0x3837363534333231u) && !eight_digits(0x383736352E333231u) && !eight_digits(0x3837363534333A31u));
+
 }  // namespace
 
 bool parse_plain_decimal(std::string_view text, double& out) noexcept {
@@ -91,6 +108,24 @@ bool parse_plain_decimal(std::string_view text, double& out) noexcept {
   if (p != end && *p == '.') {
     for (++p; p != end && *p >= '0' && *p <= '9'; ++p) {
       any_digit = true;
+      if (mantissa == 0 && *p == '0') {
+        --exponent10;
+        continue;
+      }
+      // Eight digits at a time once the leading zeros are behind (the same
+      // digits, in the same order, as the loop below takes one by one).
+      if constexpr (std::endian::native == std::endian::little) {
+        while (mantissa != 0 && digits + 8 <= 19 && end - p >= 8) {
+          std::uint64_t chunk = 0;
+          std::memcpy(&chunk, p, 8);
+          if (!eight_digits(chunk)) break;
+          mantissa = mantissa * 100'000'000u + eight_digit_value(chunk);
+          digits += 8;
+          exponent10 -= 8;
+          p += 8;
+        }
+        if (p == end || *p < '0' || *p > '9') break;
+      }
       if (mantissa == 0 && *p == '0') {
         --exponent10;
         continue;
@@ -601,37 +636,23 @@ nlohmann::json allan_json(const AllanInput& in, const std::vector<allan::Analysi
   return j;
 }
 
-int run_allan(const AllanArgs& args, std::ostream& out, std::ostream& err) {
+allan::AnalysisOptions allan_options(const AllanArgs& args) {
   allan::AnalysisOptions opt;
-  AllanInput in;
-  try {
-    opt.terms = parse_terms(args.terms);
-    opt.points_per_decade = args.points_per_decade;
-    opt.max_tau_fraction = args.max_tau_fraction;
-    opt.confidence = args.confidence;
-    opt.fit_min_tau_s = args.fit_min_tau_s;
-    opt.fit_max_tau_s = args.fit_max_tau_s;
-    (void)allan::log_spaced_factors(1000, opt.points_per_decade, opt.max_tau_fraction);  // option checks
-    if (!(opt.confidence > 0.0 && opt.confidence < 1.0)) throw std::invalid_argument("--confidence must be in (0, 1)");
-  } catch (const std::invalid_argument& e) {
-    err << "imuemu allan: " << e.what() << "\n";
-    return kUsageError;
-  }
-  try {
-    in = read_allan_input(args.path, args.axes, args.rate_hz);
-  } catch (const io::CsvFormatError& e) {
-    err << "imuemu allan: " << e.what() << "\n";
-    return kBadInput;
-  } catch (const std::invalid_argument& e) {
-    err << "imuemu allan: " << e.what() << "\n";
-    return kUsageError;
-  } catch (const std::bad_alloc&) {
-    err << "imuemu allan: " << args.path << ": not enough memory to hold the samples (try --axes gyro or accel)\n";
-    return kCannotProcess;
-  }
+  opt.terms = parse_terms(args.terms);
+  opt.points_per_decade = args.points_per_decade;
+  opt.max_tau_fraction = args.max_tau_fraction;
+  opt.confidence = args.confidence;
+  opt.fit_min_tau_s = args.fit_min_tau_s;
+  opt.fit_max_tau_s = args.fit_max_tau_s;
+  (void)allan::log_spaced_factors(1000, opt.points_per_decade, opt.max_tau_fraction);  // option checks
+  if (!(opt.confidence > 0.0 && opt.confidence < 1.0)) throw std::invalid_argument("--confidence must be in (0, 1)");
+  return opt;
+}
+
+std::vector<allan::Analysis> analyse_allan_input(AllanInput& in, const allan::AnalysisOptions& opt) {
   // The axes are independent: two workers (the machine's cores), each
   // freeing an axis' samples once analysed. Exceptions are carried out of
-  // the threads and reported here.
+  // the threads and the first one rethrown here.
   std::vector<allan::Analysis> analyses(in.series.size());
   std::vector<std::exception_ptr> failures(in.series.size());
   std::atomic<std::size_t> next{0};
@@ -655,17 +676,41 @@ int run_allan(const AllanArgs& args, std::ostream& out, std::ostream& err) {
     work();
     if (helper.joinable()) helper.join();
   }
-  for (const std::exception_ptr& f : failures) {
-    if (!f) continue;
-    try {
-      std::rethrow_exception(f);
-    } catch (const std::invalid_argument& e) {
-      err << "imuemu allan: " << args.path << ": " << e.what() << "\n";
-      return kCannotProcess;
-    } catch (const std::exception& e) {
-      err << "imuemu allan: internal error: " << e.what() << "\n";
-      return kInternalError;
-    }
+  for (const std::exception_ptr& f : failures)
+    if (f) std::rethrow_exception(f);
+  return analyses;
+}
+
+int run_allan(const AllanArgs& args, std::ostream& out, std::ostream& err) {
+  allan::AnalysisOptions opt;
+  AllanInput in;
+  try {
+    opt = allan_options(args);
+  } catch (const std::invalid_argument& e) {
+    err << "imuemu allan: " << e.what() << "\n";
+    return kUsageError;
+  }
+  try {
+    in = read_allan_input(args.path, args.axes, args.rate_hz);
+  } catch (const io::CsvFormatError& e) {
+    err << "imuemu allan: " << e.what() << "\n";
+    return kBadInput;
+  } catch (const std::invalid_argument& e) {
+    err << "imuemu allan: " << e.what() << "\n";
+    return kUsageError;
+  } catch (const std::bad_alloc&) {
+    err << "imuemu allan: " << args.path << ": not enough memory to hold the samples (try --axes gyro or accel)\n";
+    return kCannotProcess;
+  }
+  std::vector<allan::Analysis> analyses;
+  try {
+    analyses = analyse_allan_input(in, opt);
+  } catch (const std::invalid_argument& e) {
+    err << "imuemu allan: " << args.path << ": " << e.what() << "\n";
+    return kCannotProcess;
+  } catch (const std::exception& e) {
+    err << "imuemu allan: internal error: " << e.what() << "\n";
+    return kInternalError;
   }
   const nlohmann::json j = allan_json(in, analyses, args);
   if (args.json) {

@@ -74,6 +74,17 @@ AllanInput read_allan_input(const std::string& path, const std::string& axes, do
 nlohmann::json allan_json(const AllanInput& input, const std::vector<allan::Analysis>& analyses,
                           const AllanArgs& args);
 
+// The analysis options of the command line (throws std::invalid_argument
+// for a bad option).
+allan::AnalysisOptions allan_options(const AllanArgs& args);
+
+// What `imuemu allan` does between reading and printing: allan::analyse on
+// every series (two threads), each series' values freed once analysed. The
+// first axis' exception is rethrown (std::invalid_argument: too short).
+// Tests call it on series generated in memory, so they take the command's
+// path without a multi-gigabyte CSV.
+std::vector<allan::Analysis> analyse_allan_input(AllanInput& in, const allan::AnalysisOptions& options);
+
 // The command; messages to err. Exit codes (daemon/commands.hpp): kOk,
 // kBadInput for a malformed file, kCannotProcess for a valid file that cannot
 // be analysed (too short), kUsageError for bad options, kOutputError when the

@@ -38,6 +38,11 @@ struct ImuFrameInput {
   Vec3 delta_velocity_m_s = Vec3::Zero();
   TimeNs period_ns = 0;                  // the output period
   std::uint32_t status = 0;              // SampleStatus bits
+  // The sensor model's temperature at t_ns (core/sensor: constant or warm-up
+  // profile), for the protocols that carry one (MAVLink HIL_SENSOR /
+  // HIGHRES_IMU `temperature`); false for the ideal sensor.
+  bool has_temperature = false;
+  double temperature_c = 0.0;
   // Inclination of the sensor axes at t_ns: aerospace pitch (nose up
   // positive) and roll (right side down positive) of the sensor FRD axes
   // relative to the local level frame (NED), Eq. 1.2. Filled only for an

@@ -23,6 +23,7 @@
 #include <string>
 #include <vector>
 
+#include "core/sensor/sensor_model.hpp"
 #include "drivers/protocols/mavlink2.hpp"
 #include "drivers/protocols/gps_time.hpp"
 #include "drivers/protocols/mip.hpp"
@@ -643,6 +644,54 @@ TEST(Mavlink2Protocol, HighresImuAloneOrAlongsideHilSensor) {
   expect_float_close(d2.samples[0].accel_m_s2.z(), -9.0);
   expect_float_close(d2.samples[0].gyro_rad_s.x(), 0.1);
   EXPECT_EQ(d2.samples[0].t_ns, 5'000);
+}
+
+// Issue 15: the sensor model's temperature profile (a warm-up from 10 to
+// 40 degC with tau 5 s, core/sensor TemperatureSpec) reaches the MAVLink
+// `temperature` field of HIL_SENSOR and HIGHRES_IMU (float at payload offset
+// 56, fields_updated bit 12; common.xml), read back by hand from the bytes;
+// it takes the place of the constant protocol option; without a temperature
+// (ideal sensor, no option) the bit stays clear.
+TEST(Mavlink2Protocol, SensorModelTemperatureProfileIsSentInHilSensorAndHighresImu) {
+  imuemu::sensor::SensorModelSpec spec;
+  spec.gyro.white_density = Vec3::Constant(1e-4);
+  spec.temperature.start_c = 10.0;
+  spec.temperature.end_c = 40.0;
+  spec.temperature.warmup_tau_s = 5.0;
+  imuemu::sensor::SensorModel model(spec, 10.0, "imu0");
+  StreamEncoderOptions o = mavlink_no_heartbeat();
+  o.mavlink_highres_imu = true;
+  o.mavlink_temperature_degC = 99.0;  // the sensor's own temperature wins
+  auto enc = make_stream_encoder("mavlink2", o);
+  for (std::uint64_t k : {0u, 10u, 50u, 300u}) {
+    SCOPED_TRACE(k);
+    const imuemu::sensor::Measurement m = model.measure(k, Vec3::Zero(), Vec3(0, 0, -kG));
+    const double t_s = static_cast<double>(k) / 10.0;
+    const double expected_c = 40.0 - 30.0 * std::exp(-t_s / 5.0);  // T(t) = T_end - (T_end - T_start) e^(-t/tau)
+    EXPECT_NEAR(m.temperature_c, expected_c, 1e-12);
+    ImuFrameInput s = sample_of(k, static_cast<TimeNs>(k) * 100'000'000, m.gyro_rad_s, m.accel_m_s2);
+    s.has_temperature = true;
+    s.temperature_c = m.temperature_c;
+    const Bytes out = encode_one(*enc, s);
+    const std::size_t second = 10u + out[1] + 2u;
+    ASSERT_LT(second, out.size());
+    ASSERT_EQ(out[7], 107);  // HIL_SENSOR
+    EXPECT_EQ(le<float>(out, 10 + 56), static_cast<float>(expected_c));
+    EXPECT_EQ(le<std::uint16_t>(out, 10 + 60) & 0x1000u, 0x1000u);
+    ASSERT_EQ(out[second + 7], 105);  // HIGHRES_IMU
+    EXPECT_EQ(le<float>(out, second + 10 + 56), static_cast<float>(expected_c));
+    EXPECT_EQ(le<std::uint16_t>(out, second + 10 + 60) & 0x1000u, 0x1000u);
+  }
+  // No temperature and no option: not sent.
+  StreamEncoderOptions none = mavlink_no_heartbeat();
+  none.mavlink_highres_imu = true;
+  none.mavlink_hil_sensor = false;
+  auto plain = make_stream_encoder("mavlink2", none);
+  const Bytes out = encode_one(*plain, sample_of(0, 0, {0.1, 0.2, 0.3}, {1.0, 2.0, -9.0}));
+  // fields_updated 0x003F: its high byte and the id are zero, so the
+  // payload is cut after byte 60 ([G] empty-byte truncation).
+  EXPECT_EQ(out[1], 61);
+  EXPECT_EQ(out[10 + 60], 0x3F);
 }
 
 // ============================================================ MIP

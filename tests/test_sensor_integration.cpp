@@ -22,6 +22,8 @@
 #include "daemon/error_model_config.hpp"
 #include "daemon/scene_config.hpp"
 #include "daemon/scene_runner.hpp"
+#include "core/reference_motion.hpp"
+#include "drivers/protocols/can_protocols.hpp"
 #include "drivers/protocols/stream_protocols.hpp"
 
 namespace imuemu {
@@ -263,6 +265,91 @@ TEST_F(SensorIntegration, SaturatedFlagReachesTheMipOverrangeField) {
     decoder->feed(bytes, [&](const drivers::DecodedSample& s) { got.push_back(s); });
     ASSERT_EQ(got.size(), 1u);
     EXPECT_EQ(got[0].status & drivers::kStatusSaturated, status);
+  }
+}
+
+// Acceptance 4 on the wire: a body spinning beyond the gyro range (STIM300
+// with its range set to +-100 deg/s, at 150 deg/s about z; a control run at
+// 50 deg/s; both within every protocol's own field range, e.g. J1939's
+// +-250 deg/s, so only the sensor's flag can mark the sample), measured by
+// the sensor model, the saturated flag handed to each encoder as the emission
+// engine does (daemon/emission.cpp: saturated_axes != 0 -> kStatusSaturated),
+// and read back from the bytes by hand, from each protocol's document:
+//  * native: status word bit 1 (docs/native-protocol.md), through its decoder;
+//  * MIP: the over-range field's accel/gyro bits, through its decoder;
+//  * DroneCAN: uavcan.protocol.NodeStatus health = WARNING (1) in the top two
+//    bits of payload byte 4 for the second that held the sample;
+//  * J1939: figures of merit of ARI and ACCS (byte 7, three 2-bit fields) =
+//    01 "degraded" (J1939DA SPNs 4983-4985), i.e. 0xD5 with the two undefined
+//    high bits set; 0xC0 when fully functional.
+// MAVLink 2 HIGHRES_IMU / HIL_SENSOR carry no saturation field (nothing to test).
+TEST(SensorSaturation, TrajectoryBeyondTheRangeSetsTheStatusOnTheWireOfEveryProtocolThatHasOne) {
+  const double range_rad_s = 100.0 * std::numbers::pi / 180.0;
+  sensor::SensorModelSpec spec = sensor::preset_spec("stim300");
+  spec.gyro.range = range_rad_s;
+  for (const double rate_dps : {150.0, 50.0}) {
+    SCOPED_TRACE(rate_dps);
+    const bool beyond = rate_dps > 100.0;
+    const reference::ConstantRate spin(Mat3::Identity(), Vec3(0.0, 0.0, rate_dps * std::numbers::pi / 180.0), 0,
+                                       3 * kNsPerSecond);
+    const SceneModel flat{Physics::flat};
+    sensor::SensorModel model(spec, 100.0, "imu0");
+    auto native = drivers::make_stream_encoder("native");
+    auto mip = drivers::make_stream_encoder("mip");
+    auto dronecan = drivers::make_can_encoder("dronecan");
+    auto j1939 = drivers::make_can_encoder("j1939");
+    std::vector<std::uint8_t> native_bytes, mip_bytes;
+    std::vector<drivers::CanFrame> dronecan_frames, node_status, j1939_frames;
+    std::uint64_t saturated = 0;
+    for (std::uint64_t k = 0; k < 200; ++k) {
+      const TimeNs t = static_cast<TimeNs>(k) * 10'000'000 + kNsPerSecond;
+      const ImuSample ideal = reference::truth_imu(spin, flat, t - kNsPerSecond);
+      const sensor::Measurement m = model.measure(k, ideal.gyro_rad_s, ideal.accel_m_s2);
+      drivers::ImuFrameInput f;
+      f.sample_counter = k;
+      f.t_ns = t;
+      f.period_ns = 10'000'000;
+      f.gyro_rad_s = m.gyro_rad_s;
+      f.accel_m_s2 = m.accel_m_s2;
+      if (m.saturated_axes != 0) f.status |= drivers::kStatusSaturated;
+      saturated += m.saturated_axes != 0 ? 1 : 0;
+      if (beyond) {
+        EXPECT_EQ(m.saturated_axes, sensor::kGyroZ) << k;
+        EXPECT_EQ(m.gyro_rad_s.z(), range_rad_s) << k;  // exactly the range
+      }
+      native->encode(f, native_bytes);
+      mip->encode(f, mip_bytes);
+      j1939_frames.clear();
+      j1939->encode(f, j1939_frames);
+      ASSERT_EQ(j1939_frames.size(), 2u);
+      for (const drivers::CanFrame& c : j1939_frames)
+        EXPECT_EQ(c.data[6], beyond ? 0xD5 : 0xC0) << k << " id " << std::hex << c.id;
+      dronecan->encode(f, dronecan_frames);
+      dronecan->periodic(t, node_status);
+    }
+    EXPECT_EQ(saturated, beyond ? 200u : 0u);
+    std::size_t native_seen = 0, mip_seen = 0;
+    drivers::make_stream_decoder("native")->feed(native_bytes, [&](const drivers::DecodedSample& d) {
+      ++native_seen;
+      EXPECT_EQ((d.status & drivers::kStatusSaturated) != 0, beyond);
+      if (beyond) {
+        EXPECT_EQ(d.gyro_rad_s.z(), range_rad_s);
+      }
+    });
+    drivers::make_stream_decoder("mip")->feed(mip_bytes, [&](const drivers::DecodedSample& d) {
+      ++mip_seen;
+      EXPECT_EQ((d.status & drivers::kStatusSaturated) != 0, beyond);
+    });
+    EXPECT_EQ(native_seen, 200u);
+    EXPECT_EQ(mip_seen, 200u);
+    // NodeStatus at t = 1 s (after sample 0) and 2 s: each reports the
+    // samples encoded since the previous one.
+    ASSERT_EQ(node_status.size(), 2u);
+    for (std::size_t n = 0; n < node_status.size(); ++n) {
+      ASSERT_EQ(node_status[n].len, 8);
+      const unsigned health = node_status[n].data[4] >> 6;
+      EXPECT_EQ(health, beyond ? 1u : 0u) << "NodeStatus " << n;
+    }
   }
 }
 

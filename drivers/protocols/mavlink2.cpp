@@ -26,6 +26,7 @@
 #include <boost/crc.hpp>
 #include <cmath>
 #include <limits>
+#include <optional>
 
 #include "drivers/protocols/wire_bytes.hpp"
 
@@ -101,8 +102,12 @@ std::uint32_t fill_imu_payload(std::uint8_t* p, const ImuFrameInput& sample,
   // A faulted sensor sends no update: PX4's simulator interface publishes
   // accel/gyro only for the fields_updated bits that are set.
   if ((sample.status & kStatusFault) != 0) updated &= ~kUpdatedAccelGyro;
-  if (options.mavlink_temperature_degC) {
-    const wire::WireValue w = wire::to_wire_float<float>(*options.mavlink_temperature_degC);
+  // The sensor model's temperature when the sample has one, else the
+  // configured constant (protocol option temperature_degC), else none.
+  const std::optional<double> temperature_c =
+      sample.has_temperature ? std::optional<double>(sample.temperature_c) : options.mavlink_temperature_degC;
+  if (temperature_c) {
+    const wire::WireValue w = wire::to_wire_float<float>(*temperature_c);
     wire::put_le<float>(p + kOffTemperature, static_cast<float>(w.value));
     if (!w.was_nan) updated |= kUpdatedTemperature;
   }
