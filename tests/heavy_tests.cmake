@@ -14,6 +14,11 @@ set(IMUEMU_HEAVY_TESTS
   Pipeline.ClosedFormPositionSmoothingEqualsTheDenseSum
   Cli.ClosedLoopOneHourFlightDriftStaysWithinBounds
   AllanEstimate.NinetyPercentIntervalsCoverTheTruthNinetyPercentOfTheTime
+  # hours of emulated time per preset (issue 15 acceptance 1)
+  AllanPresets.Icm42688pOneHourAt1kHz
+  AllanPresets.Adis16470SixHoursAt100Hz
+  AllanPresets.Stim300TwoDaysAt20Hz
+  AllanPresets.Hg9900TwoHundredHoursAt5Hz
 )
 if(NOT IMUEMU_HEAVY_LIST_ONLY)
   set_tests_properties(${IMUEMU_HEAVY_TESTS} PROPERTIES LABELS heavy)
