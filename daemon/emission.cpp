@@ -472,6 +472,10 @@ void EmissionEngine::Impl::take_live_pose(const io::SourcedPose& p) {
 }
 
 void EmissionEngine::Impl::take_live_end() {
+  // A source whose thread failed is not an end of input: the scene fails.
+  if (options.source->finished())
+    if (const std::string why = options.source->failure(); !why.empty())
+      throw std::runtime_error("pose source " + options.source->name() + " failed: " + why);
   if (!live_input_finished && options.source->finished() && options.source->queue().size() == 0) {
     live_input_finished = true;
     for (auto& d : devices) {

@@ -9,18 +9,26 @@
 // wait with back-off when [daemon] device_missing = "wait"), builds one
 // emission engine (daemon/emission.hpp: a producer thread smoothing the poses,
 // one absolute-deadline emission thread for all devices), and only then tells
-// systemd READY=1. Everything else runs on one Boost.Asio io_context: the
-// control socket (`imuemu status`), signals, STATUS= lines, the watchdog
-// (petted only while the emission thread makes progress) and the periodic
-// log summary. SIGTERM/SIGINT stop at a packet boundary, flush and close the
-// devices and exit 0; SIGHUP re-reads the scene and restarts emission with it
-// (devices reopened, a new time base); a scene that does not load is logged
-// and the running one kept.
+// systemd READY=1. The scene is built on a worker thread (it can take
+// seconds); everything else runs on one Boost.Asio io_context, never blocked
+// by a build: the control socket (`imuemu status`), signals, STATUS= lines,
+// the watchdog (petted while the emission thread makes progress, or while a
+// scene is being built) and the periodic log summary. SIGTERM/SIGINT stop at
+// a packet boundary, flush and close the devices and exit 0, at once also
+// during a build (the build is abandoned). SIGHUP reads and checks the new
+// scene (its trajectory included) while the running one goes on; only then
+// is the running scene stopped and the new one started (devices reopened, a
+// new time base); a scene that does not load is logged and the running one
+// kept untouched, and one that loads but does not start is replaced by the
+// previous scene again. An exception on an engine thread stops the scene
+// with exit 5 (never std::terminate).
 //
 // Test hook: with IMUEMU_TEST_HOOKS=1 in the environment the control socket
 // also offers "stall-emitter" (the emission thread stops making progress
 // while staying alive), which tests/hil/systemd_run.sh uses to prove the
-// watchdog restarts a stalled daemon. Never set in the shipped unit.
+// watchdog restarts a stalled daemon, and "fault-producer" (the producer
+// thread throws: tests/test_imuemud.cpp proves it ends in exit 5, not an
+// abort). Never set in the shipped unit.
 #include <sys/mman.h>
 #include <unistd.h>
 
@@ -201,7 +209,12 @@ class Daemon {
 
   // Builds the scene on the worker; opens the devices and starts emission
   // when it is built; READY=1 once running.
-  void start() { launch_start(seconds_ns(scene_.daemon.device_retry_initial_s)); }
+  // A reload being read meanwhile ends in a start itself (of the new scene,
+  // or of this one again when nothing is running).
+  void start() {
+    if (job_) return;
+    launch_start(seconds_ns(scene_.daemon.device_retry_initial_s));
+  }
 
   void stop(int exit_code) {
     if (stopping_) return;

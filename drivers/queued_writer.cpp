@@ -319,7 +319,28 @@ void QueuedWriter::back_off_before_retry() {
   }
 }
 
-void QueuedWriter::run() {
+// No exception leaves the writer thread (std::terminate would abort the
+// daemon): the link is marked down, so every later frame is refused and
+// counted (dropped_link_down), and the reason is logged once.
+void QueuedWriter::run() noexcept {
+  try {
+    write_loop();
+  } catch (const std::exception& e) {
+    writer_failed(e.what());
+  } catch (...) {
+    writer_failed("unknown exception");
+  }
+}
+
+void QueuedWriter::writer_failed(const char* what) noexcept {
+  link_up_.store(false, std::memory_order_release);
+  try {
+    log(std::string("writer thread stopped by an error (frames are dropped from now on): ") + what);
+  } catch (...) {
+  }
+}
+
+void QueuedWriter::write_loop() {
   pthread_setname_np(pthread_self(), "imuemu-tx");
   while (!stop_.load(std::memory_order_acquire)) {
     if (!link_up_.load(std::memory_order_relaxed)) {

@@ -148,7 +148,9 @@ class QueuedWriter {
   void stop() { stop(options_.stop_drain); }
 
  private:
-  void run();
+  void run() noexcept;
+  void write_loop();
+  void writer_failed(const char* what) noexcept;
   void log(std::string_view line) const;
   void signal_wake() const noexcept;
   bool take_batch();                   // moves queued frames into batch_; false if none

@@ -10,6 +10,8 @@
 #include <signal.h>
 #include <sys/socket.h>
 #include <sys/un.h>
+#include <netinet/in.h>
+#include <arpa/inet.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -19,12 +21,14 @@
 #include <fstream>
 #include <iostream>
 #include <nlohmann/json.hpp>
+#include <limits>
 #include <optional>
 #include <sstream>
 #include <string>
 #include <thread>
 
 #include "daemon/status_command.hpp"
+#include "io/pose_wire.hpp"
 #include "tests/support/spawn.hpp"
 
 namespace {
@@ -328,6 +332,78 @@ TEST_F(Imuemud, AnInstantBeyondInt64EndsTheGridInsteadOfAbortingTheDaemon) {
   EXPECT_EQ(s["thread_faults"], 0u);
   // Tick 0 is due at once; tick 1 is 2.5e18 ns (79 years) later: one sample.
   EXPECT_EQ(s["devices"][0]["emitted"], 1u) << s.dump();
+}
+
+// Issue 13 C1 as filed: one valid datagram stamped near INT64_MAX as the
+// first pose aborted imuemud (std::overflow_error in the producer). It is
+// refused now (admission: |t| <= 2^62 ns, every later sum stays in int64),
+// and a stream near that bound is emitted: the daemon lives, counts, stops 0.
+// A UDP port free right now (the scene format wants 1..65535, not 0): bound
+// to port 0 and released; the daemon binds it a moment later.
+int free_udp_port() {
+  const int fd = ::socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  socklen_t length = sizeof a;
+  int port = -1;
+  if (::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0 &&
+      ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &length) == 0)
+    port = ntohs(a.sin_port);
+  ::close(fd);
+  return port;
+}
+
+TEST_F(Imuemud, ADatagramNearTheInt64LimitIsRefusedAndTheStreamGoesOn) {
+  const int free_port = free_udp_port();
+  ASSERT_GT(free_port, 0);
+  const fs::path scene = write("udp.toml",
+                               "[scene]\nname = \"udp\"\nphysics = \"flat\"\n[trajectory]\nsource = \"udp:127.0.0.1:" +
+                                   std::to_string(free_port) + "\"\n"
+                               "knot_interval_s = 0.02\n[smoothing]\nwindow_s = 0.05\nmax_gap_s = 1.0\n[live]\n"
+                               "margin_s = 0.05\n[[imu]]\nname = \"n\"\nrate_hz = 200\nprotocol = \"native\"\n"
+                               "[imu.transport]\ntype = \"null\"\n");
+  Child c = spawn_imuemud({"--scene", scene.string(), "--control-socket", (dir_ / "c.sock").string()}, dir_ / "log");
+  ReapOnExit reap_c{c.pid};
+  const auto up = status_when(dir_ / "c.sock", [](const nlohmann::json& s) { return !s["engine"].is_null(); });
+  ASSERT_TRUE(up) << c.output();
+  const std::string name = (*up)["engine"]["pose_source"]["name"].get<std::string>();  // "udp 127.0.0.1:PORT"
+  const int port = std::stoi(name.substr(name.rfind(':') + 1));
+  ASSERT_GT(port, 0) << name;
+  const int fd = ::socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+  ASSERT_GE(fd, 0);
+  sockaddr_in to{};
+  to.sin_family = AF_INET;
+  to.sin_port = htons(static_cast<std::uint16_t>(port));
+  to.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  auto send_pose = [&](std::uint64_t sequence, std::int64_t t_ns) {
+    imuemu::io::PoseDatagram d;
+    d.sequence = sequence;
+    d.record.t_ns = t_ns;
+    d.record.position_kind = imuemu::io::PositionKind::local_ned;
+    d.record.attitude_kind = imuemu::io::AttitudeKind::quaternion;
+    d.record.attitude = Eigen::Vector4d(1, 0, 0, 0);
+    const auto bytes = imuemu::io::encode_pose_datagram(d);
+    (void)::sendto(fd, bytes.data(), bytes.size(), 0, reinterpret_cast<const sockaddr*>(&to), sizeof to);
+  };
+  send_pose(0, std::numeric_limits<std::int64_t>::max() - 1);
+  const std::int64_t base_ns = (std::int64_t{1} << 62) - 10'000'000'000;  // 10 s inside the bound
+  for (int i = 0; i < 75; ++i) {  // 1.5 s of poses at 50 Hz, in real time
+    send_pose(static_cast<std::uint64_t>(i + 1), base_ns + std::int64_t{i} * 20'000'000);
+    std::this_thread::sleep_for(20ms);
+  }
+  ::close(fd);
+  const auto after = status_when(dir_ / "c.sock", [](const nlohmann::json& s) { return emitted_of(s) > 0; });
+  ASSERT_TRUE(after) << "nothing emitted from the stream near the bound\n" << c.output();
+  const nlohmann::json& source = (*after)["engine"]["pose_source"];
+  EXPECT_GE(source["rejected"].get<std::uint64_t>(), 1u) << source.dump();
+  EXPECT_GE(source["accepted"].get<std::uint64_t>(), 2u) << source.dump();
+  EXPECT_EQ((*after)["engine"]["thread_faults"], 0u);
+  ASSERT_EQ(::kill(c.pid, SIGTERM), 0);
+  const std::optional<int> rc = wait_exit_within(c, 20s);
+  ASSERT_TRUE(rc) << c.output();
+  EXPECT_EQ(*rc, 0) << c.output();
+  EXPECT_EQ(c.output().find("terminate called"), std::string::npos) << c.output();
 }
 
 // No exception leaves an engine thread: one thrown on the producer (test
