@@ -25,6 +25,7 @@
 #include "core/attitude.hpp"
 #include "core/earth.hpp"
 #include "core/stream.hpp"
+#include "core/time_arith.hpp"
 #include "drivers/socketcan.hpp"
 #include "io/pose_source.hpp"
 
@@ -76,18 +77,29 @@ void sleep_until_monotonic(TimeNs due_ns) noexcept {
   }
 }
 
-// Grid time k of a stream starting at t0: t0 + floor(k * 1e9 / rate), split
-// so that no product overflows (core/pipeline.hpp output_grid).
+// Grid time k of a stream starting at t0: t0 + floor(k * 1e9 / rate), in
+// 128 bits (core/pipeline.hpp output_grid), saturated at the int64 limit
+// (core/time_arith.hpp): a grid reaching beyond int64 ns (a stream stamped
+// near the limit, issue 13 C1) ends there instead of wrapping.
 TimeNs grid_ns(TimeNs t0_ns, std::uint64_t k, std::int64_t rate_hz) noexcept {
-  const auto r = static_cast<std::uint64_t>(rate_hz);
-  return t0_ns + static_cast<TimeNs>((k / r) * static_cast<std::uint64_t>(kNsPerSecond) +
-                                     (k % r) * static_cast<std::uint64_t>(kNsPerSecond) / r);
+  const Int128 offset = static_cast<Int128>(k) * kNsPerSecond / rate_hz;
+  if (offset > static_cast<Int128>(kMaxTimeNs)) return kMaxTimeNs;
+  return saturating_add_ns(t0_ns, static_cast<TimeNs>(offset));
 }
 
 // Number of grid ticks with t_k <= t0 + span_ns: the k with k * 1e9 < (span + 1) * rate.
 std::uint64_t ticks_within(TimeNs span_ns, std::int64_t rate_hz) {
-  const Int128 bound = static_cast<Int128>(span_ns + 1) * rate_hz;
-  return static_cast<std::uint64_t>((bound + kNsPerSecond - 1) / kNsPerSecond);
+  const Int128 bound = (static_cast<Int128>(span_ns) + 1) * rate_hz;
+  const Int128 ticks = (bound + kNsPerSecond - 1) / kNsPerSecond;
+  return ticks > static_cast<Int128>(std::numeric_limits<std::uint64_t>::max()) ? std::numeric_limits<std::uint64_t>::max()
+                                                                                : static_cast<std::uint64_t>(ticks);
+}
+
+// Lowers an end tick to k (never raises it): either thread may find the end.
+void lower_end_tick(std::atomic<std::uint64_t>& end_tick, std::uint64_t k) noexcept {
+  std::uint64_t current = end_tick.load(std::memory_order_relaxed);
+  while (k < current && !end_tick.compare_exchange_weak(current, k, std::memory_order_relaxed)) {
+  }
 }
 
 class CanTransportOutput final : public CanOutput {
@@ -97,6 +109,7 @@ class CanTransportOutput final : public CanOutput {
   std::string describe() const override { return transport_->describe(); }
   drivers::TransportCounters counters() const override { return transport_->counters(); }
   bool flush(std::chrono::milliseconds timeout) override { return transport_->flush(timeout); }
+  void stop(std::chrono::milliseconds drain_timeout) override { transport_->stop(drain_timeout); }
 
  private:
   std::unique_ptr<drivers::CanTransport> transport_;
@@ -216,6 +229,10 @@ struct EmissionEngine::Impl {
   bool realtime_priority = false, memory_locked = false;
   std::string realtime_note;
   bool live_input_finished = false;  // producer only
+  std::atomic<std::uint64_t> faults{0}, time_limit_ends{0}, pose_faults{0};
+  mutable std::mutex fault_mutex;
+  std::string fault;  // under fault_mutex
+  std::atomic<bool> producer_fault_for_test{false};
   bool started = false, stopped = false;
 
   std::thread producer, emitter;
@@ -223,15 +240,40 @@ struct EmissionEngine::Impl {
   std::condition_variable done_cv;
   bool emitter_exited = false;
 
-  TimeNs deadline_ns(const Device& d, std::uint64_t k) const {
-    return mapping_value->monotonic_at(grid_ns(t0_ns, k, d.options.rate_hz) + options.emit_delay_ns);
+  // When tick k is due on CLOCK_MONOTONIC; kNeverDueNs when that instant
+  // (or the tick's time plus the emit delay) is beyond int64 ns: a slow
+  // replay speed or a stream stamped near the limit (issue 13 C1: this threw
+  // std::overflow_error on the producer thread and aborted imuemud). The
+  // callers end the device's grid at the first such tick.
+  static constexpr TimeNs kNeverDueNs = kMaxTimeNs;
+  TimeNs deadline_ns(const Device& d, std::uint64_t k) const noexcept {
+    const TimeNs tick_ns = grid_ns(t0_ns, k, d.options.rate_hz);
+    const std::optional<TimeNs> shifted = checked_add_ns(tick_ns, options.emit_delay_ns);
+    if (tick_ns == kMaxTimeNs || !shifted) return kNeverDueNs;
+    try {
+      return mapping_value->monotonic_at(*shifted);
+    } catch (const std::exception&) {  // std::overflow_error: not representable
+      return kNeverDueNs;
+    }
   }
+  // A device whose next tick can never be due ends there (counted once).
+  void end_at_time_limit(Device& d, std::uint64_t k) noexcept {
+    lower_end_tick(d.end_tick, k);
+    time_limit_ends.fetch_add(1, std::memory_order_relaxed);
+  }
+  // A thread failed with an exception: recorded (the first one's message),
+  // counted, and both threads stop; the daemon reports it (EngineStats::fault).
+  void record_fault(const char* thread, const char* what) noexcept;
   bool live_input() const { return options.source != nullptr; }
 
   void produce(Device& d, bool time_gated);
   void take_live_input();
-  void run_producer();
-  void run_emission(std::promise<std::string>* setup);
+  void take_live_pose(const io::SourcedPose& p);
+  void take_live_end();
+  void run_producer() noexcept;
+  void producer_loop();
+  void run_emission(std::promise<std::string>* setup) noexcept;
+  void emission_loop(std::promise<std::string>* setup, bool& setup_done);
   void emit_tick(Device& d, std::uint64_t k, bool drop);
   void finish_emission();
 };
@@ -287,7 +329,7 @@ EmissionEngine::EmissionEngine(EngineOptions options, std::vector<DeviceOptions>
       auto s = std::make_unique<OnDemandSource>(*d->engine, d->mounted ? d->sensor_knots : o.trajectory);
       d->on_demand = s.get();
       d->samples = std::move(s);
-      const std::uint64_t n = ticks_within(o.trajectory.back().t_ns - o.trajectory.front().t_ns, d->options.rate_hz);
+      const std::uint64_t n = ticks_within(saturating_sub_ns(o.trajectory.back().t_ns, o.trajectory.front().t_ns), d->options.rate_hz);
       d->end_tick = o.max_ticks_per_device ? std::min(n, *o.max_ticks_per_device) : n;
     } else {
       d->samples = std::make_unique<live::StreamSampleSource>(*d->engine);
@@ -321,7 +363,11 @@ void EmissionEngine::Impl::produce(Device& d, bool time_gated) {
     const TimeNs tick_ns = grid_ns(t0_ns, k, d.options.rate_hz);
     if (have_mapping) {
       const TimeNs due = deadline_ns(d, k);
-      if (time_gated && now < due - options.producer_lead_ns) break;
+      if (due == kNeverDueNs) {  // the end of representable time: the grid ends here
+        end_at_time_limit(d, k);
+        break;
+      }
+      if (time_gated && now < saturating_sub_ns(due, options.producer_lead_ns)) break;
       if (now > due) {  // already too late to send: the emission thread counts it; skip the work
         ++d.next_produce_tick;
         d.previous_imu.reset();
@@ -387,6 +433,20 @@ void EmissionEngine::Impl::take_live_input() {
   batch.clear();
   options.source->queue().drain(batch);
   for (const io::SourcedPose& p : batch) {
+    // Whatever one pose does, the next is taken: a failure is that pose's
+    // refusal (counted), never the end of the producer thread.
+    try {
+      take_live_pose(p);
+    } catch (const std::exception&) {
+      pose_faults.fetch_add(1, std::memory_order_relaxed);
+      poses_refused.fetch_add(1, std::memory_order_relaxed);
+    }
+  }
+  take_live_end();
+}
+
+void EmissionEngine::Impl::take_live_pose(const io::SourcedPose& p) {
+  {
     bool refused = false;
     for (auto& d : devices) {
       try {
@@ -409,6 +469,13 @@ void EmissionEngine::Impl::take_live_input() {
       mapping_ready.store(true, std::memory_order_release);
     }
   }
+}
+
+void EmissionEngine::Impl::take_live_end() {
+  // A source whose thread failed is not an end of input: the scene fails.
+  if (options.source->finished())
+    if (const std::string why = options.source->failure(); !why.empty())
+      throw std::runtime_error("pose source " + options.source->name() + " failed: " + why);
   if (!live_input_finished && options.source->finished() && options.source->queue().size() == 0) {
     live_input_finished = true;
     for (auto& d : devices) {
@@ -423,14 +490,38 @@ void EmissionEngine::Impl::take_live_input() {
       }
       // The grid ends at the last pose: known now, so the emission thread
       // stops there even if the producer runs late.
-      const std::uint64_t n = ticks_within(d->engine->last_knot_ns() - t0_ns, d->options.rate_hz);
+      const std::uint64_t n = ticks_within(saturating_sub_ns(d->engine->last_knot_ns(), t0_ns), d->options.rate_hz);
       if (n < d->end_tick.load(std::memory_order_relaxed)) d->end_tick.store(n, std::memory_order_relaxed);
     }
   }
 }
 
-void EmissionEngine::Impl::run_producer() {
+void EmissionEngine::Impl::record_fault(const char* thread, const char* what) noexcept {
+  faults.fetch_add(1, std::memory_order_relaxed);
+  try {
+    std::lock_guard lock(fault_mutex);
+    if (fault.empty()) fault = std::string(thread) + " thread: " + what;
+  } catch (...) {  // no memory for the message: the count says it
+  }
+  stop_requested.store(true, std::memory_order_release);
+}
+
+// No exception leaves a thread (std::terminate would abort the daemon without
+// closing its devices): it is recorded, both threads stop, and the daemon
+// stops the scene with the message and a failure exit code.
+void EmissionEngine::Impl::run_producer() noexcept {
+  try {
+    producer_loop();
+  } catch (const std::exception& e) {
+    record_fault("producer", e.what());
+  } catch (...) {
+    record_fault("producer", "unknown exception");
+  }
+}
+
+void EmissionEngine::Impl::producer_loop() {
   while (!stop_requested.load(std::memory_order_acquire)) {
+    if (producer_fault_for_test.exchange(false)) throw std::runtime_error("test hook: a fault on the producer thread");
     if (producer_stall.load(std::memory_order_relaxed)) {
       sleep_until_monotonic(monotonic_now_ns() + kProducerPollNs);
       continue;
@@ -529,7 +620,26 @@ void EmissionEngine::Impl::emit_tick(Device& d, std::uint64_t k, bool drop) {
 // ~100 bytes and a queue write (microseconds), far below any period, so one
 // core-bound thread serves many devices, and with SCHED_FIFO there is one
 // real-time thread to configure and watch instead of one per device.
-void EmissionEngine::Impl::run_emission(std::promise<std::string>* setup) {
+void EmissionEngine::Impl::run_emission(std::promise<std::string>* setup) noexcept {
+  bool setup_done = false;
+  try {
+    emission_loop(setup, setup_done);
+    return;  // emission_loop ends in finish_emission()
+  } catch (const std::exception& e) {
+    record_fault("emission", e.what());
+  } catch (...) {
+    record_fault("emission", "unknown exception");
+  }
+  if (!setup_done) {  // start() is waiting for the setup: it rethrows this
+    try {
+      setup->set_exception(std::current_exception());
+    } catch (...) {
+    }
+  }
+  finish_emission();
+}
+
+void EmissionEngine::Impl::emission_loop(std::promise<std::string>* setup, bool& setup_done) {
   std::string note;
   if (options.realtime.priority > 0) {
     sched_param sp{};
@@ -548,6 +658,7 @@ void EmissionEngine::Impl::run_emission(std::promise<std::string>* setup) {
   }
   const bool give_up = !note.empty() && options.realtime.require_realtime;
   setup->set_value(note);
+  setup_done = true;
   if (give_up) return;
 
   heartbeat_ns.store(monotonic_now_ns(), std::memory_order_relaxed);
@@ -566,6 +677,7 @@ void EmissionEngine::Impl::run_emission(std::promise<std::string>* setup) {
   for (auto& d : devices) {
     d->next_emit_tick = 0;
     d->next_deadline_ns = deadline_ns(*d, 0);
+    if (d->next_deadline_ns == kNeverDueNs) end_at_time_limit(*d, 0);
     first_deadline_ns = std::min(first_deadline_ns, d->next_deadline_ns);
   }
   const TimeNs cpu_at_start_ns = thread_cpu_ns();
@@ -609,6 +721,7 @@ void EmissionEngine::Impl::run_emission(std::promise<std::string>* setup) {
     emit_tick(*next, next->next_emit_tick, missed && options.drop_late_ticks);
     ++next->next_emit_tick;
     next->next_deadline_ns = deadline_ns(*next, next->next_emit_tick);
+    if (next->next_deadline_ns == kNeverDueNs) end_at_time_limit(*next, next->next_emit_tick);
     heartbeat_ns.store(woke, std::memory_order_relaxed);
     if (++iterations % 256 == 0) {  // CPU time is a system call: not on every tick
       emission_cpu_ns.store(thread_cpu_ns() - cpu_at_start_ns, std::memory_order_relaxed);
@@ -656,7 +769,15 @@ void EmissionEngine::start() {
   auto setup_result = setup.get_future();
   m.running = true;
   m.emitter = std::thread([&m, &setup] { m.run_emission(&setup); });
-  std::string note = setup_result.get();
+  std::string note;
+  try {
+    note = setup_result.get();
+  } catch (...) {  // the emission thread failed before its loop: nothing runs
+    m.emitter.join();
+    m.running = false;
+    if (m.live_input()) m.options.source->stop();
+    throw;
+  }
   if (!note.empty()) {
     m.realtime_note += (m.realtime_note.empty() ? "" : "; ") + note;
     if (m.options.realtime.require_realtime) {
@@ -688,8 +809,10 @@ void EmissionEngine::stop(std::chrono::milliseconds flush_timeout) {
   if (m.producer.joinable()) m.producer.join();
   if (m.live_input()) m.options.source->stop();
   for (auto& d : m.devices) {
-    if (d->options.transport) d->options.transport->flush(flush_timeout);
-    if (d->options.can_output) d->options.can_output->flush(flush_timeout);
+    // A bounded drain; what the device did not take by then is counted
+    // (transport dropped_at_stop) before the final statistics are read.
+    if (d->options.transport) d->options.transport->stop(flush_timeout);
+    if (d->options.can_output) d->options.can_output->stop(flush_timeout);
     if (d->options.gpio) {
       d->gpio_final = d->options.gpio->counters();
       d->options.gpio.reset();  // releases the lines (inactive)
@@ -759,6 +882,13 @@ EngineStats EmissionEngine::stats() const {
   s.emission_cpu_ns = m.emission_cpu_ns.load(std::memory_order_relaxed);
   s.producer_cpu_ns = m.producer_cpu_ns.load(std::memory_order_relaxed);
   s.emission_wall_ns = m.emission_wall_ns.load(std::memory_order_relaxed);
+  s.thread_faults = m.faults.load(std::memory_order_relaxed);
+  s.pose_faults = m.pose_faults.load(std::memory_order_relaxed);
+  s.time_limit_ends = m.time_limit_ends.load(std::memory_order_relaxed);
+  {
+    std::lock_guard lock(m.fault_mutex);
+    s.fault = m.fault;
+  }
   return s;
 }
 
@@ -771,6 +901,7 @@ bool EmissionEngine::healthy(TimeNs now_monotonic_ns, TimeNs max_silence_ns) con
 
 void EmissionEngine::set_emission_stall_for_test(bool stalled) noexcept { impl_->emission_stall.store(stalled); }
 void EmissionEngine::set_producer_stall_for_test(bool stalled) noexcept { impl_->producer_stall.store(stalled); }
+void EmissionEngine::inject_producer_fault_for_test() noexcept { impl_->producer_fault_for_test.store(true); }
 
 std::optional<live::TimeMapping> EmissionEngine::mapping() const {
   if (!impl_->mapping_ready.load(std::memory_order_acquire)) return std::nullopt;
@@ -809,6 +940,7 @@ nlohmann::json to_json(const EngineStats& s) {
                        {"dropped_link_down", d.transport.dropped_link_down},
                        {"write_errors", d.transport.write_errors},
                        {"queued", d.transport.queued},
+                       {"dropped_at_stop", d.transport.dropped_at_stop},
                        {"link_down_events", d.transport.link_down_events}}},
                      {"live",
                       {{"ticks", d.live.ticks},
@@ -846,6 +978,10 @@ nlohmann::json to_json(const EngineStats& s) {
                    {"emission_cpu_ns", s.emission_cpu_ns},
                    {"producer_cpu_ns", s.producer_cpu_ns},
                    {"emission_wall_ns", s.emission_wall_ns},
+                   {"thread_faults", s.thread_faults},
+                   {"pose_faults", s.pose_faults},
+                   {"time_limit_ends", s.time_limit_ends},
+                   {"fault", s.fault},
                    {"finished", s.finished}};
   if (s.pose_source)
     j["pose_source"] = {{"name", s.pose_source->name},

@@ -60,6 +60,8 @@ class CanOutput {
   virtual std::string describe() const = 0;
   virtual drivers::TransportCounters counters() const = 0;
   virtual bool flush(std::chrono::milliseconds timeout) { (void)timeout; return true; }
+  // Bounded drain, then discard counted (drivers::Transport::stop).
+  virtual void stop(std::chrono::milliseconds drain_timeout) { flush(drain_timeout); }
 };
 std::unique_ptr<CanOutput> can_transport_output(std::unique_ptr<drivers::CanTransport> transport);
 
@@ -174,6 +176,15 @@ struct EngineStats {
   // CPU time the threads used (CLOCK_THREAD_CPUTIME_ID), updated as they run;
   // emission_wall_ns: the emission thread's time from its first deadline on.
   TimeNs emission_cpu_ns = 0, producer_cpu_ns = 0, emission_wall_ns = 0;
+  // No exception leaves the engine's threads: one that reaches a thread's
+  // top is recorded here (fault: the first one's "producer thread: what"),
+  // both threads stop, and the caller decides (imuemud stops the scene with
+  // a failure exit code). pose_faults: live poses whose handling failed,
+  // counted as refused and skipped. time_limit_ends: devices whose grid ended
+  // because the next tick's instant does not fit int64 ns (a stream stamped
+  // near the limit, a very slow replay speed).
+  std::uint64_t thread_faults = 0, pose_faults = 0, time_limit_ends = 0;
+  std::string fault;
 };
 
 nlohmann::json to_json(const EngineStats& stats);
@@ -197,7 +208,8 @@ class EmissionEngine {
   // Waits until every device has reached its end or a stop was requested;
   // true if finished. timeout < 0: no limit.
   bool wait(std::chrono::milliseconds timeout = std::chrono::milliseconds(-1));
-  // request_stop + join + flush transports (up to flush_timeout) + release GPIO.
+  // request_stop + join + stop the transports (each a bounded drain of up to
+  // flush_timeout, then what is left counted as dropped_at_stop) + release GPIO.
   void stop(std::chrono::milliseconds flush_timeout = std::chrono::milliseconds(500));
 
   EngineStats stats() const;
@@ -210,6 +222,9 @@ class EmissionEngine {
   // heartbeat) while stalled; the producer computes nothing while starved.
   void set_emission_stall_for_test(bool stalled) noexcept;
   void set_producer_stall_for_test(bool stalled) noexcept;
+  // Test hook: the producer thread's next iteration throws (the catch-all
+  // that keeps an exception from aborting the process is what is tested).
+  void inject_producer_fault_for_test() noexcept;
 
   // The mapping once known (trajectory: at start(); live: at the first pose).
   std::optional<live::TimeMapping> mapping() const;

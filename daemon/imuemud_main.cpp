@@ -9,21 +9,30 @@
 // wait with back-off when [daemon] device_missing = "wait"), builds one
 // emission engine (daemon/emission.hpp: a producer thread smoothing the poses,
 // one absolute-deadline emission thread for all devices), and only then tells
-// systemd READY=1. Everything else runs on one Boost.Asio io_context: the
-// control socket (`imuemu status`), signals, STATUS= lines, the watchdog
-// (petted only while the emission thread makes progress) and the periodic
-// log summary. SIGTERM/SIGINT stop at a packet boundary, flush and close the
-// devices and exit 0; SIGHUP re-reads the scene and restarts emission with it
-// (devices reopened, a new time base); a scene that does not load is logged
-// and the running one kept.
+// systemd READY=1. The scene is built on a worker thread (it can take
+// seconds); everything else runs on one Boost.Asio io_context, never blocked
+// by a build: the control socket (`imuemu status`), signals, STATUS= lines,
+// the watchdog (petted while the emission thread makes progress, or while a
+// scene is being built) and the periodic log summary. SIGTERM/SIGINT stop at
+// a packet boundary, flush and close the devices and exit 0, at once also
+// during a build (the build is abandoned). SIGHUP reads and checks the new
+// scene (its trajectory included) while the running one goes on; only then
+// is the running scene stopped and the new one started (devices reopened, a
+// new time base); a scene that does not load is logged and the running one
+// kept untouched, and one that loads but does not start is replaced by the
+// previous scene again. An exception on an engine thread stops the scene
+// with exit 5 (never std::terminate).
 //
 // Test hook: with IMUEMU_TEST_HOOKS=1 in the environment the control socket
 // also offers "stall-emitter" (the emission thread stops making progress
 // while staying alive), which tests/hil/systemd_run.sh uses to prove the
-// watchdog restarts a stalled daemon. Never set in the shipped unit.
+// watchdog restarts a stalled daemon, and "fault-producer" (the producer
+// thread throws: tests/test_imuemud.cpp proves it ends in exit 5, not an
+// abort). Never set in the shipped unit.
 #include <sys/mman.h>
 #include <unistd.h>
 
+#include <atomic>
 #include <chrono>
 #include <cmath>
 #include <cstdlib>
@@ -37,9 +46,11 @@
 #include <optional>
 #include <sstream>
 #include <string>
+#include <thread>
 
 #include <CLI/CLI.hpp>
 #include <boost/asio/io_context.hpp>
+#include <boost/asio/post.hpp>
 #include <boost/asio/steady_timer.hpp>
 #include <nlohmann/json.hpp>
 
@@ -70,6 +81,10 @@ constexpr int kExitStartFailed = 1;
 constexpr int kExitUsage = 2;
 constexpr int kExitBadScene = 3;
 constexpr int kExitLinkRefused = 4;
+constexpr int kExitEmissionFailed = 5;  // an engine thread failed while running (issue 13 C1)
+// SIGTERM during a scene build: how long the worker may take to finish (it
+// may be opening devices, which is quick) before the process exits without it.
+constexpr auto kBuildJoinLimit = std::chrono::milliseconds(500);
 
 // The emission thread must have looped within this long to count as alive
 // when no watchdog interval is known (status only).
@@ -105,6 +120,48 @@ std::string summary_line(const sc::SceneConfig& scene, const imuemu::emission::E
   return out.str();
 }
 
+// One scene build on the worker thread (issue 13 H3/H4). Building can take
+// seconds (a long sample trajectory, a 200 MB file) or never end (a scene
+// whose derived sizes are absurd): on the service io thread it blocked
+// SIGTERM, the control socket and the watchdog. The io thread only launches
+// a job and takes its result (posted back to it); nothing else is shared.
+//   start:    sc::build_engine (opens the devices; not started)
+//   validate: re-read the scene file, check it and compute its trajectory,
+//             for a reload: the running scene is stopped only if this works.
+struct BuildJob {
+  enum class Kind { start, validate };
+  Kind kind = Kind::start;
+  sc::SceneConfig scene;        // start: the scene to build; validate: the re-read one
+  std::string scene_path;       // validate: empty for the built-in scene
+  sc::RunnerOptions runner;     // start (a copy: the worker shares nothing)
+  TimeNs next_retry_ns = 0;     // start: back-off after this attempt (device_missing = "wait")
+  sc::BuiltEngine built;        // start: the result
+  std::exception_ptr error;     // what the build threw
+  TimeNs started_ns = 0;
+  std::atomic<bool> done{false};  // the worker has posted its result and ends
+};
+
+void run_build_job(BuildJob& job) {
+  if (job.kind == BuildJob::Kind::start) {
+    job.built = sc::build_engine(job.scene, job.runner);
+    return;
+  }
+  sc::SceneConfig next = job.scene_path.empty() ? sc::default_scene() : sc::parse_scene_file(job.scene_path);
+  const sc::SceneCheck check = sc::check_scene(next);
+  if (check.refused) throw std::runtime_error("link budget over 100 %:\n" + sc::to_text(check));
+  const bool live = next.trajectory.kind == sc::SourceKind::udp || next.trajectory.kind == sc::SourceKind::tcp ||
+                    next.trajectory.kind == sc::SourceKind::stdin_lines;
+  if (!live) {
+    // The trajectory's content (a file that became malformed) is what most
+    // often fails a reload: found here, while the old scene still runs.
+    const std::size_t poses = sc::scene_trajectory(next).size();
+    if (poses < 2)
+      throw std::runtime_error(next.file + ": the trajectory has " + std::to_string(poses) +
+                               " poses; at least two are needed");
+  }
+  job.scene = std::move(next);
+}
+
 class Daemon {
  public:
   Daemon(boost::asio::io_context& io, std::string scene_path, sc::SceneConfig scene, sc::RunnerOptions runner,
@@ -133,18 +190,31 @@ class Daemon {
         if (built_.engine) built_.engine->set_emission_stall_for_test(true);
         return nlohmann::json{{"stalled", true}};
       });
+      control.add_command("fault-producer", "TEST HOOK: the producer thread throws (no exception may abort imuemud)", [this] {
+        svc::log_warning("test hook: producer fault on request");
+        if (built_.engine) built_.engine->inject_producer_fault_for_test();
+        return nlohmann::json{{"fault", built_.engine != nullptr}};
+      });
     }
   }
 
-  // Healthy: the emission thread looped within max_age_ns (or it is still
-  // waiting for a device, which is reported in STATUS= instead).
+  // Healthy: the emission thread looped within max_age_ns, or it is still
+  // waiting for a device, or a scene is being built on the worker (the io
+  // thread that asks is alive; systemd's TimeoutStartSec bounds a first
+  // build, and during a reload the running scene's own health counts).
   bool healthy(TimeNs max_age_ns) const {
-    if (!built_.engine) return waiting_for_device_;
+    if (!built_.engine) return waiting_for_device_ || job_ != nullptr;
     return built_.engine->healthy(monotonic_now_ns(), max_age_ns);
   }
 
-  // Opens the devices and starts emission; READY=1 once running.
-  void start() { try_start(seconds_ns(scene_.daemon.device_retry_initial_s)); }
+  // Builds the scene on the worker; opens the devices and starts emission
+  // when it is built; READY=1 once running.
+  // A reload being read meanwhile ends in a start itself (of the new scene,
+  // or of this one again when nothing is running).
+  void start() {
+    if (job_) return;
+    launch_start(seconds_ns(scene_.daemon.device_retry_initial_s));
+  }
 
   void stop(int exit_code) {
     if (stopping_) return;
@@ -155,67 +225,186 @@ class Daemon {
     status_timer_.cancel();
     stop_timer_.cancel();
     if (petter_) petter_->stop();
+    if (job_)
+      svc::log_notice(std::string("stopping while a scene is being ") +
+                      (job_->kind == BuildJob::Kind::start ? "built" : "re-read") + " (" +
+                      seconds_text(monotonic_now_ns() - job_->started_ns) + " so far): the build is abandoned");
     stop_engine();
     if (on_stopped_) on_stopped_();
   }
   void on_stopped(std::function<void()> f) { on_stopped_ = std::move(f); }
 
+  // SIGHUP. The new scene is read, checked and its trajectory computed on
+  // the worker while the running one goes on; only if that succeeds is the
+  // running scene stopped and the new one started. If the new one then fails
+  // to start, the previous scene is started again.
   void reload() {
-    svc::notify_reloading();
-    try {
-      sc::SceneConfig next = scene_path_.empty() ? sc::default_scene() : sc::parse_scene_file(scene_path_);
-      const sc::SceneCheck check = sc::check_scene(next);
-      if (check.refused) throw std::runtime_error("link budget over 100 %:\n" + sc::to_text(check));
-      svc::log_notice("reload: restarting emission with the re-read scene " + next.name);
-      stop_engine();
-      scene_ = std::move(next);
-    } catch (const std::exception& e) {
-      svc::log_err(std::string("reload failed, keeping the running scene: ") + e.what());
-      if (built_.engine) {
-        svc::notify_ready(ready_text());
-        return;
-      }
+    if (stopping_) return;
+    if (job_) {
+      pending_reload_ = true;
+      svc::log_notice("SIGHUP during a scene build: the reload follows when the build ends");
+      return;
     }
-    retry_timer_.cancel();
-    start();
+    svc::notify_reloading();
+    auto job = std::make_shared<BuildJob>();
+    job->kind = BuildJob::Kind::validate;
+    job->scene_path = scene_path_;
+    launch(std::move(job));
+  }
+
+  // After io.run() returned: waits (bounded) for a worker still building.
+  // False if it did not end in time: the caller must not destroy what the
+  // worker may still post to (it exits the process instead).
+  bool join_builder(std::chrono::milliseconds limit) {
+    if (!builder_.joinable()) return true;
+    const auto until = std::chrono::steady_clock::now() + limit;
+    while (!(builder_job_ && builder_job_->done.load(std::memory_order_acquire))) {
+      if (std::chrono::steady_clock::now() >= until) return false;
+      std::this_thread::sleep_for(std::chrono::milliseconds(5));
+    }
+    builder_.join();
+    builder_job_.reset();
+    job_.reset();  // an unused result closes its devices here (removes pty links)
+    return true;
   }
 
  private:
+  static std::string seconds_text(TimeNs ns) {
+    std::ostringstream out;
+    out.precision(3);
+    out << std::fixed << static_cast<double>(ns) / 1e9 << " s";
+    return out.str();
+  }
+
   std::string ready_text() const {
     std::string text = "scene " + scene_.name + ": ";
     for (std::size_t i = 0; i < built_.outputs.size(); ++i) text += (i ? "; " : "") + built_.outputs[i];
     return text;
   }
 
-  void try_start(TimeNs next_retry_ns) {
+  void launch_start(TimeNs next_retry_ns) {
     if (stopping_) return;
-    try {
-      built_ = sc::build_engine(scene_, runner_);
-      built_.engine->start();
-    } catch (const sc::DeviceOpenError& e) {
-      built_ = {};
-      if (scene_.daemon.device_missing == sc::DeviceMissingPolicy::wait) {
-        waiting_for_device_ = true;
-        const std::string what = std::string(e.what()) + "; retrying in " +
-                                 std::to_string(static_cast<double>(next_retry_ns) / 1e9).substr(0, 5) + " s";
-        svc::notify_status("waiting for a device: " + what);
-        svc::log_warning(what);
-        retry_timer_.expires_after(std::chrono::nanoseconds(next_retry_ns));
-        retry_timer_.async_wait([this, next_retry_ns](const boost::system::error_code& ec) {
-          if (ec) return;
-          try_start(std::min(2 * next_retry_ns, seconds_ns(scene_.daemon.device_retry_max_s)));
-        });
-        return;
+    auto job = std::make_shared<BuildJob>();
+    job->kind = BuildJob::Kind::start;
+    job->scene = scene_;
+    job->runner = runner_;
+    job->next_retry_ns = next_retry_ns;
+    launch(std::move(job));
+  }
+
+  void launch(std::shared_ptr<BuildJob> job) {
+    // The previous worker posted its result before ending: the join is brief.
+    if (builder_.joinable()) builder_.join();
+    job->started_ns = monotonic_now_ns();
+    job_ = job;
+    builder_job_ = job;
+    builder_ = std::thread([this, job] {
+      try {
+        run_build_job(*job);
+      } catch (...) {  // nothing leaves the worker: the io thread reports it
+        job->error = std::current_exception();
       }
-      svc::log_err(std::string(e.what()) + " ([daemon] device_missing = \"fail\")");
-      stop(kExitStartFailed);
-      return;
-    } catch (const std::exception& e) {
-      built_ = {};
-      svc::log_err(e.what());
-      stop(kExitStartFailed);
+      try {
+        boost::asio::post(io_, [this, job] { on_job_done(job); });
+      } catch (...) {  // no memory for the handler: the build is lost, the daemon stops
+        job->error = std::current_exception();
+      }
+      job->done.store(true, std::memory_order_release);
+    });
+  }
+
+  void on_job_done(const std::shared_ptr<BuildJob>& job) {
+    if (job != job_) return;
+    job_.reset();
+    if (stopping_) return;  // the result (if any) is destroyed with the job: devices closed
+    if (job->kind == BuildJob::Kind::validate) on_validated(*job);
+    else on_built(*job);
+    if (pending_reload_ && !job_ && !stopping_) {
+      pending_reload_ = false;
+      reload();
+    }
+  }
+
+  void on_validated(BuildJob& job) {
+    if (job.error) {
+      try {
+        std::rethrow_exception(job.error);
+      } catch (const std::exception& e) {
+        svc::log_err(std::string("reload failed, keeping the running scene: ") + e.what());
+      } catch (...) {
+        svc::log_err("reload failed (unknown error), keeping the running scene");
+      }
+      if (built_.engine) svc::notify_ready(ready_text());
+      else if (!waiting_for_device_) start();  // nothing was running (the trajectory had ended): start it again
       return;
     }
+    svc::log_notice("reload: " + job.scene.name + " read and checked (" +
+                    seconds_text(monotonic_now_ns() - job.started_ns) +
+                    "): restarting emission with it (devices reopened, new time base)");
+    previous_scene_ = scene_;
+    stop_engine();
+    retry_timer_.cancel();
+    waiting_for_device_ = false;
+    scene_ = std::move(job.scene);
+    start();
+  }
+
+  void on_built(BuildJob& job) {
+    if (job.error) {
+      try {
+        std::rethrow_exception(job.error);
+      } catch (const sc::DeviceOpenError& e) {
+        on_device_missing(e, job.next_retry_ns);
+      } catch (const std::exception& e) {
+        start_failed(e.what());
+      } catch (...) {
+        start_failed("unknown error while building the scene");
+      }
+      return;
+    }
+    built_ = std::move(job.built);
+    try {
+      built_.engine->start();
+    } catch (const std::exception& e) {
+      built_ = {};
+      start_failed(e.what());
+      return;
+    }
+    previous_scene_.reset();
+    running();
+  }
+
+  void on_device_missing(const sc::DeviceOpenError& e, TimeNs next_retry_ns) {
+    if (scene_.daemon.device_missing == sc::DeviceMissingPolicy::wait) {
+      waiting_for_device_ = true;
+      const std::string what = std::string(e.what()) + "; retrying in " +
+                               std::to_string(static_cast<double>(next_retry_ns) / 1e9).substr(0, 5) + " s";
+      svc::notify_status("waiting for a device: " + what);
+      svc::log_warning(what);
+      retry_timer_.expires_after(std::chrono::nanoseconds(next_retry_ns));
+      retry_timer_.async_wait([this, next_retry_ns](const boost::system::error_code& ec) {
+        if (ec) return;
+        launch_start(std::min(2 * next_retry_ns, seconds_ns(scene_.daemon.device_retry_max_s)));
+      });
+      return;
+    }
+    start_failed(std::string(e.what()) + " ([daemon] device_missing = \"fail\")");
+  }
+
+  void start_failed(const std::string& what) {
+    if (previous_scene_) {
+      svc::log_err("reload: the new scene " + scene_.name + " did not start: " + what +
+                   "; starting the previous scene " + previous_scene_->name + " again");
+      scene_ = std::move(*previous_scene_);
+      previous_scene_.reset();
+      start();
+      return;
+    }
+    svc::log_err(what);
+    stop(kExitStartFailed);
+  }
+
+  void running() {
     waiting_for_device_ = false;
     const imuemu::emission::EngineStats s = built_.engine->stats();
     if (!s.realtime_note.empty()) svc::log_warning(s.realtime_note + " (running without it; require_realtime = false)");
@@ -227,7 +416,6 @@ class Daemon {
                   (test_hooks_ ? "; TEST HOOKS ENABLED" : ""));
     if (!started_once_) {
       started_once_ = true;
-      if (petter_) petter_->start();
       if (run_seconds_) {
         stop_timer_.expires_after(std::chrono::nanoseconds(seconds_ns(*run_seconds_)));
         stop_timer_.async_wait([this](const boost::system::error_code& ec) {
@@ -237,8 +425,6 @@ class Daemon {
           }
         });
       }
-      last_summary_ = std::chrono::steady_clock::now();
-      schedule_status();
     }
   }
 
@@ -250,6 +436,16 @@ class Daemon {
     built_ = {};
   }
 
+ public:
+  // The status timer and the watchdog run from the start, through the
+  // builds (they are what must not go quiet while a scene is built).
+  void start_service_timers() {
+    if (petter_) petter_->start();
+    last_summary_ = std::chrono::steady_clock::now();
+    schedule_status();
+  }
+
+ private:
   void schedule_status() {
     const auto period = std::chrono::nanoseconds(seconds_ns(std::max(scene_.daemon.status_interval_s, 0.1)));
     status_timer_.expires_after(std::min<std::chrono::nanoseconds>(period, std::chrono::milliseconds(500)));
@@ -263,13 +459,24 @@ class Daemon {
   void on_status_tick(std::chrono::nanoseconds status_period) {
     if (!built_.engine) return;
     const imuemu::emission::EngineStats s = built_.engine->stats();
+    if (!s.fault.empty() || s.thread_faults > 0) {
+      // An exception reached the top of an engine thread (caught there, both
+      // threads stopped): the scene cannot go on; a failure exit lets
+      // Restart=on-failure bring it back.
+      svc::log_err("emission failed: " + (s.fault.empty() ? std::string("a thread failed") : s.fault) +
+                   "; stopping the scene");
+      stop(kExitEmissionFailed);
+      return;
+    }
     if (s.finished) {
       if (scene_.trajectory.loop) {
         svc::log_notice("the looped trajectory ended: restarting the run (devices reopened, new time base)");
         stop_engine();
         start();
       } else {
-        svc::log_notice("the trajectory ended: stopping");
+        svc::log_notice(s.time_limit_ends > 0
+                            ? "the stream reached the end of int64 nanosecond time (no later tick is representable): stopping"
+                            : "the trajectory ended: stopping");
         stop(kExitOk);
       }
       return;
@@ -298,6 +505,12 @@ class Daemon {
         {"imus", scene_.imus.size()},
         {"waiting_for_device", waiting_for_device_},
     };
+    if (job_) {
+      status["building"] = {{"what", job_->kind == BuildJob::Kind::start ? "start" : "reload"},
+                            {"elapsed_s", static_cast<double>(monotonic_now_ns() - job_->started_ns) / 1e9}};
+    } else {
+      status["building"] = nullptr;
+    }
     if (built_.engine) {
       const imuemu::emission::EngineStats s = built_.engine->stats();
       status["samples_emitted"] = s.emitted;
@@ -326,6 +539,11 @@ class Daemon {
   bool test_hooks_;
   boost::asio::steady_timer retry_timer_, status_timer_, stop_timer_;
   sc::BuiltEngine built_;
+  std::thread builder_;
+  std::shared_ptr<BuildJob> job_;          // the build under way (io thread's view); null: none
+  std::shared_ptr<BuildJob> builder_job_;  // the job of builder_ (for join_builder)
+  bool pending_reload_ = false;
+  std::optional<sc::SceneConfig> previous_scene_;  // during a reload: started again if the new scene fails
   svc::WatchdogPetter* petter_ = nullptr;
   std::optional<std::chrono::microseconds> watchdog_;
   bool waiting_for_device_ = false;
@@ -337,6 +555,12 @@ class Daemon {
   std::chrono::steady_clock::time_point last_status_{}, last_summary_{};
   TimeNs started_ns_ = monotonic_now_ns();
 };
+
+void write_stats(const std::string& path, const Daemon& daemon) {
+  if (path.empty()) return;
+  std::ofstream out(path);
+  out << (daemon.final_stats() ? imuemu::emission::to_json(*daemon.final_stats()).dump(2) : std::string("null")) << "\n";
+}
 
 // --check-config: parse, compute the figures, print them. Nothing is opened.
 int check_config(const std::string& path, bool json) {
@@ -442,15 +666,42 @@ int main(int argc, char** argv) {
       io.stop();
     });
     daemon.start();
-    io.run();
+    daemon.start_service_timers();
+    // A handler that throws ends io.run() with the exception; the service
+    // goes on (io_context can be run again), the failure is counted and
+    // logged, at most one line a second. No exception leaves the io thread.
+    std::uint64_t handler_failures = 0;
+    auto last_failure_log = std::chrono::steady_clock::time_point{};
+    for (;;) {
+      try {
+        io.run();
+        break;
+      } catch (const std::exception& e) {
+        ++handler_failures;
+        const auto now = std::chrono::steady_clock::now();
+        if (now - last_failure_log >= std::chrono::seconds(1)) {
+          last_failure_log = now;
+          svc::log_err(std::string("service handler failed (") + std::to_string(handler_failures) +
+                       " so far), going on: " + e.what());
+        }
+      }
+    }
+    if (!daemon.join_builder(kBuildJoinLimit)) {
+      // The worker is still inside a scene build (nothing there can be
+      // interrupted): exit without it, promptly, as SIGTERM asks. It has
+      // opened no device yet (that is the quick last step), the control
+      // socket is closed; std::_Exit skips the destructors that would wait
+      // for or race with it.
+      write_stats(stats_json, daemon);
+      svc::log_notice("stopped during a scene build (the build did not end within 0.5 s; abandoned)");
+      std::_Exit(daemon.exit_code());
+    }
   } catch (const std::exception& e) {
     svc::log_err(e.what());
+    if (!daemon.join_builder(kBuildJoinLimit)) std::_Exit(kExitStartFailed);
     return kExitStartFailed;
   }
-  if (!stats_json.empty()) {
-    std::ofstream out(stats_json);
-    out << (daemon.final_stats() ? imuemu::emission::to_json(*daemon.final_stats()).dump(2) : std::string("null")) << "\n";
-  }
+  write_stats(stats_json, daemon);
   svc::log_info(daemon.exit_code() == kExitOk ? "stopped" : "stopped after a failure");
   return daemon.exit_code();
 }

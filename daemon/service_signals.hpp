@@ -5,9 +5,12 @@
 //     control socket and exits 0 (a clean stop is not a failure, so
 //     Restart=on-failure leaves it stopped).
 //   SIGHUP: reload (systemctl reload = ExecReload=kill -HUP $MAINPID). The
-//     daemon sends RELOADING=1, re-reads the scene file and restarts the scene
+//     daemon sends RELOADING=1, re-reads and checks the scene file on a worker
+//     thread while the running scene goes on, then restarts the scene
 //     in-process (devices re-opened), then READY=1. A scene file that no longer
-//     parses is logged and the running scene is kept.
+//     parses (or whose trajectory does not load) is logged and the running
+//     scene is kept. The io thread is never blocked by a build, so these
+//     signals are handled at once whatever is being built.
 // A second SIGTERM while stopping is ignored: systemd escalates to SIGKILL
 // after TimeoutStopSec.
 #pragma once

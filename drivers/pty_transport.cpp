@@ -261,5 +261,6 @@ std::string PtyTransport::describe() const {
 TransportCounters PtyTransport::counters() const { return writer_->counters(); }
 bool PtyTransport::link_up() const { return writer_->link_up(); }
 bool PtyTransport::flush(std::chrono::milliseconds timeout) { return writer_->flush(timeout); }
+void PtyTransport::stop(std::chrono::milliseconds drain_timeout) { writer_->stop(drain_timeout); }
 
 }  // namespace imuemu::drivers

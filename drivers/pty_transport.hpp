@@ -61,6 +61,7 @@ class PtyTransport final : public Transport {
   TransportCounters counters() const override;
   bool link_up() const override;  // a process has the slave open
   bool flush(std::chrono::milliseconds timeout) override;
+  void stop(std::chrono::milliseconds drain_timeout) override;
 
   const std::string& slave_path() const noexcept { return slave_path_; }
   const std::string& link_path() const noexcept { return link_path_; }

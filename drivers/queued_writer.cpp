@@ -76,11 +76,28 @@ QueuedWriter::~QueuedWriter() {
   ::close(wake_fd_);
 }
 
-void QueuedWriter::stop() {
+void QueuedWriter::stop(std::chrono::milliseconds drain_timeout) {
   if (!thread_.joinable()) return;
+  // Drain: the writer runs on; a link that is down drops its queue itself.
+  const auto until = std::chrono::steady_clock::now() + drain_timeout;
+  while (finished_.load(std::memory_order_acquire) < accepted_.load(std::memory_order_acquire) &&
+         link_up_.load(std::memory_order_acquire) && std::chrono::steady_clock::now() < until) {
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
   stop_.store(true, std::memory_order_release);
   signal_wake();
   thread_.join();
+  // The writer is gone: what it did not finish (queued, or in its batch) is
+  // discarded here, and counted, instead of vanishing from the counters.
+  const std::uint64_t accepted = accepted_.load(std::memory_order_acquire);
+  const std::uint64_t finished = finished_.load(std::memory_order_acquire);
+  if (accepted > finished) {
+    const std::uint64_t left = accepted - finished;
+    dropped_at_stop_.fetch_add(left, std::memory_order_relaxed);
+    finished_.store(accepted, std::memory_order_release);
+    log(std::to_string(left) + " queued frame(s) not written: the device did not take them within the " +
+        std::to_string(drain_timeout.count()) + " ms stop drain (dropped_at_stop)");
+  }
 }
 
 void QueuedWriter::signal_wake() const noexcept {
@@ -144,6 +161,7 @@ TransportCounters QueuedWriter::counters() const {
   c.link_restored = link_restored_.load(std::memory_order_relaxed);
   c.retries = retries_.load(std::memory_order_relaxed);
   c.input_bytes_discarded = input_discarded_.load(std::memory_order_relaxed);
+  c.dropped_at_stop = dropped_at_stop_.load(std::memory_order_relaxed);
   const std::uint64_t accepted = accepted_.load(std::memory_order_relaxed);
   c.queued = accepted > finished ? accepted - finished : 0;
   c.frames = frames_.load(std::memory_order_relaxed);
@@ -301,7 +319,28 @@ void QueuedWriter::back_off_before_retry() {
   }
 }
 
-void QueuedWriter::run() {
+// No exception leaves the writer thread (std::terminate would abort the
+// daemon): the link is marked down, so every later frame is refused and
+// counted (dropped_link_down), and the reason is logged once.
+void QueuedWriter::run() noexcept {
+  try {
+    write_loop();
+  } catch (const std::exception& e) {
+    writer_failed(e.what());
+  } catch (...) {
+    writer_failed("unknown exception");
+  }
+}
+
+void QueuedWriter::writer_failed(const char* what) noexcept {
+  link_up_.store(false, std::memory_order_release);
+  try {
+    log(std::string("writer thread stopped by an error (frames are dropped from now on): ") + what);
+  } catch (...) {
+  }
+}
+
+void QueuedWriter::write_loop() {
   pthread_setname_np(pthread_self(), "imuemu-tx");
   while (!stop_.load(std::memory_order_acquire)) {
     if (!link_up_.load(std::memory_order_relaxed)) {

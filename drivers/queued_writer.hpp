@@ -103,6 +103,9 @@ struct QueuedWriterOptions {
   std::string link_restored_verb = "link restored";
   // Receives each log line (without '\n'); empty: written to stderr.
   std::function<void(std::string_view)> log;
+  // stop() without an argument (and the destructor) first lets the writer
+  // hand what is queued to the device for at most this long.
+  std::chrono::milliseconds stop_drain{200};
 };
 
 // Exponential back-off: current() starts at `initial`, grow() doubles it up
@@ -122,7 +125,7 @@ class QueuedWriter {
  public:
   // Starts the writer thread. Throws TransportError on bad options.
   QueuedWriter(std::unique_ptr<WriterDevice> device, QueuedWriterOptions options);
-  ~QueuedWriter();  // stops the thread; frames still queued are left uncounted as sent
+  ~QueuedWriter();  // stop()
   QueuedWriter(const QueuedWriter&) = delete;
   QueuedWriter& operator=(const QueuedWriter&) = delete;
 
@@ -135,10 +138,19 @@ class QueuedWriter {
   bool link_up() const noexcept { return link_up_.load(std::memory_order_acquire); }
   bool flush(std::chrono::milliseconds timeout) const;
   std::size_t max_frame_bytes() const noexcept { return max_frame_bytes_; }
-  void stop();  // idempotent
+  // Bounded drain, then the thread stops: the writer goes on handing queued
+  // frames to the device until none is left, the link is down or
+  // drain_timeout has passed; what is still queued then is discarded and
+  // counted (TransportCounters::dropped_at_stop, logged once), so every
+  // accepted frame ends in exactly one counter. offer() must no longer be
+  // called. Idempotent (a second call does nothing).
+  void stop(std::chrono::milliseconds drain_timeout);
+  void stop() { stop(options_.stop_drain); }
 
  private:
-  void run();
+  void run() noexcept;
+  void write_loop();
+  void writer_failed(const char* what) noexcept;
   void log(std::string_view line) const;
   void signal_wake() const noexcept;
   bool take_batch();                   // moves queued frames into batch_; false if none
@@ -187,6 +199,7 @@ class QueuedWriter {
   std::atomic<std::uint64_t> frames_sent_{0}, bytes_sent_{0};
   std::atomic<std::uint64_t> dropped_queue_full_{0}, dropped_link_down_{0}, write_errors_{0};
   std::atomic<std::uint64_t> link_down_events_{0}, link_restored_{0}, retries_{0}, input_discarded_{0};
+  std::atomic<std::uint64_t> dropped_at_stop_{0};
 };
 
 // strerror for messages (thread-safe).

@@ -268,6 +268,7 @@ std::string SerialTransport::describe() const { return description_; }
 TransportCounters SerialTransport::counters() const { return writer_->counters(); }
 bool SerialTransport::link_up() const { return writer_->link_up(); }
 bool SerialTransport::flush(std::chrono::milliseconds timeout) { return writer_->flush(timeout); }
+void SerialTransport::stop(std::chrono::milliseconds drain_timeout) { writer_->stop(drain_timeout); }
 
 std::vector<SerialPortInfo> list_serial_ports() {
   sp_port** ports = nullptr;

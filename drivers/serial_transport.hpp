@@ -74,6 +74,7 @@ class SerialTransport final : public Transport {
   TransportCounters counters() const override;
   bool link_up() const override;
   bool flush(std::chrono::milliseconds timeout) override;
+  void stop(std::chrono::milliseconds drain_timeout) override;
 
  private:
   std::string description_;

@@ -164,6 +164,7 @@ std::string CanTransport::describe() const { return description_; }
 TransportCounters CanTransport::counters() const { return writer_->counters(); }
 bool CanTransport::link_up() const { return writer_->link_up(); }
 bool CanTransport::flush(std::chrono::milliseconds timeout) { return writer_->flush(timeout); }
+void CanTransport::stop(std::chrono::milliseconds drain_timeout) { writer_->stop(drain_timeout); }
 
 CanReader::CanReader(const std::string& interface, bool fd_frames) : interface_(interface) {
   const CanInterfaceState state = inspect_can_interface(interface_, false);

@@ -64,6 +64,7 @@ class CanTransport {
   TransportCounters counters() const;
   bool link_up() const;
   bool flush(std::chrono::milliseconds timeout);
+  void stop(std::chrono::milliseconds drain_timeout);  // Transport::stop
 
  private:
   CanTransportOptions options_;

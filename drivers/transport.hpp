@@ -36,6 +36,7 @@ struct TransportCounters {
                                          // interface down or bus-off, no process reading the pty)
   std::uint64_t write_errors = 0;        // invalid frame (empty, too large, bad CAN id/length) or refused by the kernel
   std::uint64_t queued = 0;              // accepted, not yet handed to the kernel
+  std::uint64_t dropped_at_stop = 0;     // still queued when the transport stopped and its bounded drain ended
   std::uint64_t link_down_events = 0;    // up -> down transitions
   std::uint64_t link_restored = 0;       // down -> up transitions
   std::uint64_t retries = 0;             // back-off retries of a frame the kernel had no room for (CAN ENOBUFS)
@@ -60,6 +61,10 @@ class Transport {
     (void)timeout;
     return true;
   }
+  // End of use: a bounded drain (at most drain_timeout), then what is still
+  // queued is discarded and counted (TransportCounters::dropped_at_stop);
+  // counters() stays readable. No write_frame afterwards.
+  virtual void stop(std::chrono::milliseconds drain_timeout) { flush(drain_timeout); }
 };
 
 // Discards frames, counting them as sent: for timing benchmarks and dry runs.

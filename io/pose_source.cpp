@@ -5,6 +5,7 @@
 #include <time.h>
 
 #include <cmath>
+#include <cstdio>
 #include <limits>
 #include <numeric>
 #include <stdexcept>
@@ -99,7 +100,8 @@ std::uint64_t PoseSourceCounters::rejected() const noexcept {
 PoseSource::PoseSource(PoseSourceOptions options)
     : name_(options.name),
       queue_(options.queue_capacity),
-      admission_(std::make_unique<PoseAdmission>(options)) {}
+      admission_(std::make_unique<PoseAdmission>(options)),
+      log_(options.log) {}
 
 PoseSource::~PoseSource() {
   // Derived destructors stop first (run() uses their members); this only
@@ -109,7 +111,37 @@ PoseSource::~PoseSource() {
 
 void PoseSource::start() {
   if (thread_.joinable()) throw std::logic_error(name_ + ": pose source started twice");
-  thread_ = std::thread([this] { run(); });
+  thread_ = std::thread([this] {
+    // No exception leaves the thread (std::terminate would abort the
+    // process): the source ends, says why, and its consumer sees failure().
+    std::string what;
+    try {
+      run();
+      return;
+    } catch (const std::exception& e) {
+      what = e.what();
+    } catch (...) {
+      what = "unknown exception";
+    }
+    try {
+      {
+        std::lock_guard lock(failure_mutex_);
+        failure_ = what;
+      }
+      const std::string line = name_ + ": stopped by an error: " + what;
+      if (log_) log_(line);
+      else std::fprintf(stderr, "%s\n", line.c_str());
+    } catch (...) {
+    }
+    failed_.store(true, std::memory_order_release);
+    mark_finished();
+  });
+}
+
+std::string PoseSource::failure() const {
+  if (!failed_.load(std::memory_order_acquire)) return {};
+  std::lock_guard lock(failure_mutex_);
+  return failure_.empty() ? std::string("unknown error") : failure_;
 }
 
 void PoseSource::stop() {

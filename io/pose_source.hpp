@@ -167,6 +167,9 @@ class PoseSource {
   // The input ended (file, stdin: end of input or a read error) and every
   // accepted pose is in the queue; nothing more will come.
   bool finished() const noexcept { return finished_.load(std::memory_order_acquire); }
+  // The source's thread ended with an exception (caught there: it never
+  // leaves the thread): what it said; empty otherwise. finished() is then true.
+  std::string failure() const;
   // The bound port (UDP, TCP; useful with port 0), 0 for the others.
   virtual std::uint16_t local_port() const noexcept { return 0; }
 
@@ -194,6 +197,10 @@ class PoseSource {
   std::thread thread_;
   std::atomic<bool> stop_requested_{false};
   std::atomic<bool> finished_{false};
+  std::atomic<bool> failed_{false};
+  mutable std::mutex failure_mutex_;
+  std::string failure_;
+  std::function<void(std::string_view)> log_;
   std::mutex sleep_mutex_;
   std::condition_variable sleep_cv_;
 };

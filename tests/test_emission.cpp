@@ -31,6 +31,7 @@
 #include "drivers/byte_stream_reader.hpp"
 #include "drivers/protocols/can_protocols.hpp"
 #include "drivers/protocols/stream_protocols.hpp"
+#include "drivers/queued_writer.hpp"
 #include "io/pose_source.hpp"
 #include "io/scene_poses.hpp"
 #include "io/trajectory_csv.hpp"
@@ -728,3 +729,88 @@ TEST_F(EmitCommand, RefusesAMismatchedProtocolAndDevice) {
 
 }  // namespace
 }  // namespace imuemu::emission
+
+// QueuedWriter::stop (issue 13): it discarded whatever was still queued,
+// uncounted (frames neither sent nor dropped: `queued` stayed > 0 forever in
+// the final statistics). Now stop() drains for a bounded time and counts
+// what is left as dropped_at_stop.
+namespace imuemu::drivers {
+namespace {
+
+// A datagram device taking one frame per write, `write_delay` each (a slow
+// link), or none at all when `stalled` (would_block with nothing to poll:
+// the writer waits until it is woken).
+class SlowDevice final : public WriterDevice {
+ public:
+  SlowDevice(std::chrono::milliseconds write_delay, bool stalled, std::atomic<std::uint64_t>& written)
+      : write_delay_(write_delay), stalled_(stalled), written_(written) {}
+  bool datagrams() const override { return true; }
+  int poll_fd() const override { return -1; }
+  DeviceWrite write(std::span<const std::byte> bytes) override {
+    if (stalled_) return {DeviceWrite::Outcome::would_block, 0, {}};
+    std::this_thread::sleep_for(write_delay_);
+    written_.fetch_add(1);
+    return {DeviceWrite::Outcome::written, bytes.size(), {}};
+  }
+  std::optional<std::string> service(short, std::uint64_t*) override { return std::nullopt; }
+  void on_link_lost() override {}
+  bool try_restore(std::string&) override { return true; }
+  bool initially_up() const override { return true; }
+
+ private:
+  std::chrono::milliseconds write_delay_;
+  bool stalled_;
+  std::atomic<std::uint64_t>& written_;
+};
+
+// Every frame offered ends in exactly one counter once the writer stopped.
+void expect_every_frame_accounted(const TransportCounters& c) {
+  EXPECT_EQ(c.queued, 0u);
+  EXPECT_EQ(c.frames, c.frames_sent + c.dropped_queue_full + c.dropped_link_down + c.write_errors + c.dropped_at_stop);
+}
+
+QueuedWriterOptions quiet_options() {
+  QueuedWriterOptions o;
+  o.name = "test";
+  o.log = [](std::string_view) {};
+  return o;
+}
+
+TEST(QueuedWriterStop, DrainsWhatTheDeviceTakesWithinTheBound) {
+  std::atomic<std::uint64_t> written{0};
+  QueuedWriter writer(std::make_unique<SlowDevice>(std::chrono::milliseconds(5), false, written), quiet_options());
+  const std::vector<std::byte> frame(32, std::byte{0x5a});
+  for (int i = 0; i < 20; ++i) ASSERT_TRUE(writer.offer(frame));
+  // 20 frames at 5 ms: about 100 ms; the bound is far beyond on any host.
+  writer.stop(std::chrono::seconds(20));
+  const TransportCounters c = writer.counters();
+  EXPECT_EQ(c.frames_sent, 20u);
+  EXPECT_EQ(written.load(), 20u);
+  EXPECT_EQ(c.dropped_at_stop, 0u);
+  expect_every_frame_accounted(c);
+}
+
+TEST(QueuedWriterStop, CountsWhatTheDeviceDidNotTakeAndReturnsWithinTheBound) {
+  std::atomic<std::uint64_t> written{0};
+  std::vector<std::string> log;
+  QueuedWriterOptions o = quiet_options();
+  o.log = [&log](std::string_view line) { log.emplace_back(line); };
+  QueuedWriter writer(std::make_unique<SlowDevice>(std::chrono::milliseconds(0), true, written), o);
+  const std::vector<std::byte> frame(32, std::byte{0x5a});
+  for (int i = 0; i < 10; ++i) ASSERT_TRUE(writer.offer(frame));
+  const auto t0 = std::chrono::steady_clock::now();
+  writer.stop(std::chrono::milliseconds(100));
+  // The drain is bounded (100 ms asked; generous for a loaded host).
+  EXPECT_LT(std::chrono::steady_clock::now() - t0, std::chrono::seconds(10));
+  const TransportCounters c = writer.counters();
+  EXPECT_EQ(c.frames_sent, 0u);
+  EXPECT_EQ(c.dropped_at_stop, 10u);
+  expect_every_frame_accounted(c);
+  ASSERT_FALSE(log.empty());
+  EXPECT_NE(log.back().find("10 queued frame(s) not written"), std::string::npos) << log.back();
+  writer.stop(std::chrono::milliseconds(100));  // idempotent: nothing counted twice
+  EXPECT_EQ(writer.counters().dropped_at_stop, 10u);
+}
+
+}  // namespace
+}  // namespace imuemu::drivers

@@ -6,7 +6,12 @@
 // loopback_imuemud_scenes (tests/loopback/daemon_scenes.py).
 #include <gtest/gtest.h>
 
+#include <poll.h>
 #include <signal.h>
+#include <sys/socket.h>
+#include <sys/un.h>
+#include <netinet/in.h>
+#include <arpa/inet.h>
 #include <sys/wait.h>
 #include <unistd.h>
 
@@ -16,9 +21,15 @@
 #include <fstream>
 #include <iostream>
 #include <nlohmann/json.hpp>
+#include <limits>
+#include <optional>
 #include <sstream>
 #include <string>
 #include <thread>
+
+#include "daemon/status_command.hpp"
+#include "io/pose_wire.hpp"
+#include "tests/support/spawn.hpp"
 
 namespace {
 
@@ -63,20 +74,61 @@ struct Child {
 Child spawn_imuemud(const std::vector<std::string>& args, const fs::path& log) {
   Child c;
   c.log = log;
-  c.pid = ::fork();
-  if (c.pid == 0) {
-    std::FILE* f = std::fopen(log.c_str(), "w");
-    ::dup2(::fileno(f), 1);
-    ::dup2(::fileno(f), 2);
-    std::vector<char*> argv;
-    argv.push_back(const_cast<char*>(IMUEMUD_PATH));
-    for (const std::string& a : args) argv.push_back(const_cast<char*>(a.c_str()));
-    argv.push_back(nullptr);
-    ::execv(IMUEMUD_PATH, argv.data());
-    ::_exit(127);
-  }
+  c.pid = imuemu::test::spawn_logged(IMUEMUD_PATH, args, log.string());
   return c;
 }
+
+// A failed assertion must not leave a daemon running: kills (SIGKILL) and
+// reaps the child at scope exit unless it was reaped already (waitpid then
+// fails with ECHILD, and a reaped pid is never signalled).
+struct ReapOnExit {
+  pid_t pid;
+  ~ReapOnExit() {
+    int status = 0;
+    if (pid > 0 && ::waitpid(pid, &status, WNOHANG) == 0) {
+      ::kill(pid, SIGKILL);
+      ::waitpid(pid, &status, 0);
+    }
+  }
+};
+
+// Exit status within `limit`, or nullopt (the child is then still running).
+std::optional<int> wait_exit_within(const Child& c, std::chrono::milliseconds limit) {
+  const auto until = std::chrono::steady_clock::now() + limit;
+  while (std::chrono::steady_clock::now() < until) {
+    int status = 0;
+    if (::waitpid(c.pid, &status, WNOHANG) == c.pid)
+      return WIFEXITED(status) ? WEXITSTATUS(status) : 128 + WTERMSIG(status);
+    std::this_thread::sleep_for(10ms);
+  }
+  return std::nullopt;
+}
+
+// The daemon's status reply, or nullopt while it does not answer (yet).
+std::optional<nlohmann::json> status_of(const fs::path& socket, std::chrono::milliseconds timeout = 2000ms) {
+  try {
+    return imuemu::cli::query_control_socket(socket.string(), "status", timeout);
+  } catch (const std::exception&) {
+    return std::nullopt;
+  }
+}
+
+// Polls `status` (bounded) until `ready(reply)`; the last reply or nullopt.
+template <typename Predicate>
+std::optional<nlohmann::json> status_when(const fs::path& socket, Predicate ready, std::chrono::seconds limit = 30s) {
+  const auto until = std::chrono::steady_clock::now() + limit;
+  std::optional<nlohmann::json> last;
+  while (std::chrono::steady_clock::now() < until) {
+    if (auto s = status_of(socket)) {
+      last = s;
+      if (ready(*s)) return s;
+    }
+    std::this_thread::sleep_for(50ms);
+  }
+  return std::nullopt;
+}
+
+std::uint64_t emitted_of(const nlohmann::json& status) { return status["samples_emitted"].get<std::uint64_t>(); }
 
 class Imuemud : public ::testing::Test {
  protected:
@@ -258,6 +310,311 @@ TEST_F(Imuemud, LoopSeamsAreSilentGapsWithoutExtrapolation) {
   EXPECT_EQ(d["samples"]["exact"], d["emitted"]);  // everything sent is the smoother's own
   EXPECT_EQ(d["ticks"].get<std::uint64_t>(), d["emitted"].get<std::uint64_t>() + d["not_sent"].get<std::uint64_t>() +
                                                  d["underruns"].get<std::uint64_t>() + d["dropped_late"].get<std::uint64_t>());
+}
+
+// Issue 13 C1: an instant beyond int64 ns on the emission timeline (here a
+// replay speed of 1e-12: tick 4 at 400 Hz would be due ~1e19 ns from now)
+// threw std::overflow_error on the producer thread and aborted imuemud
+// ("terminate called", exit 134). Now the grid ends at the last
+// representable tick, the daemon runs on and stops cleanly.
+TEST_F(Imuemud, AnInstantBeyondInt64EndsTheGridInsteadOfAbortingTheDaemon) {
+  const fs::path scene = write("slow.toml",
+                               "[scene]\nname = \"slow\"\nphysics = \"flat\"\n[trajectory]\nsource = \"sample:static\"\n"
+                               "duration_s = 10\nspeed = \"1/1000000000000\"\n[[imu]]\nname = \"n\"\nrate_hz = 400\n"
+                               "protocol = \"native\"\n[imu.transport]\ntype = \"null\"\n");
+  const ProcessResult r = run_imuemud("--scene " + scene.string() + " --control-socket " + (dir_ / "c.sock").string() +
+                                      " --seconds 1 --stats-json " + (dir_ / "stats.json").string());
+  ASSERT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_EQ(r.output.find("terminate called"), std::string::npos) << r.output;
+  std::ifstream in(dir_ / "stats.json");
+  const nlohmann::json s = nlohmann::json::parse(in);
+  EXPECT_EQ(s["time_limit_ends"], 1u) << s.dump();
+  EXPECT_EQ(s["thread_faults"], 0u);
+  // Tick 0 is due at once; tick 1 is 2.5e18 ns (79 years) later: one sample.
+  EXPECT_EQ(s["devices"][0]["emitted"], 1u) << s.dump();
+}
+
+// Issue 13 C1 as filed: one valid datagram stamped near INT64_MAX as the
+// first pose aborted imuemud (std::overflow_error in the producer). It is
+// refused now (admission: |t| <= 2^62 ns, every later sum stays in int64),
+// and a stream near that bound is emitted: the daemon lives, counts, stops 0.
+// A UDP port free right now (the scene format wants 1..65535, not 0): bound
+// to port 0 and released; the daemon binds it a moment later.
+int free_udp_port() {
+  const int fd = ::socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  socklen_t length = sizeof a;
+  int port = -1;
+  if (::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0 &&
+      ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &length) == 0)
+    port = ntohs(a.sin_port);
+  ::close(fd);
+  return port;
+}
+
+TEST_F(Imuemud, ADatagramNearTheInt64LimitIsRefusedAndTheStreamGoesOn) {
+  const int free_port = free_udp_port();
+  ASSERT_GT(free_port, 0);
+  const fs::path scene = write("udp.toml",
+                               "[scene]\nname = \"udp\"\nphysics = \"flat\"\n[trajectory]\nsource = \"udp:127.0.0.1:" +
+                                   std::to_string(free_port) + "\"\n"
+                               "knot_interval_s = 0.02\n[smoothing]\nwindow_s = 0.05\nmax_gap_s = 1.0\n[live]\n"
+                               "margin_s = 0.05\n[[imu]]\nname = \"n\"\nrate_hz = 200\nprotocol = \"native\"\n"
+                               "[imu.transport]\ntype = \"null\"\n");
+  Child c = spawn_imuemud({"--scene", scene.string(), "--control-socket", (dir_ / "c.sock").string()}, dir_ / "log");
+  ReapOnExit reap_c{c.pid};
+  const auto up = status_when(dir_ / "c.sock", [](const nlohmann::json& s) { return !s["engine"].is_null(); });
+  ASSERT_TRUE(up) << c.output();
+  const std::string name = (*up)["engine"]["pose_source"]["name"].get<std::string>();  // "udp 127.0.0.1:PORT"
+  const int port = std::stoi(name.substr(name.rfind(':') + 1));
+  ASSERT_GT(port, 0) << name;
+  const int fd = ::socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+  ASSERT_GE(fd, 0);
+  sockaddr_in to{};
+  to.sin_family = AF_INET;
+  to.sin_port = htons(static_cast<std::uint16_t>(port));
+  to.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  auto send_pose = [&](std::uint64_t sequence, std::int64_t t_ns) {
+    imuemu::io::PoseDatagram d;
+    d.sequence = sequence;
+    d.record.t_ns = t_ns;
+    d.record.position_kind = imuemu::io::PositionKind::local_ned;
+    d.record.attitude_kind = imuemu::io::AttitudeKind::quaternion;
+    d.record.attitude = Eigen::Vector4d(1, 0, 0, 0);
+    const auto bytes = imuemu::io::encode_pose_datagram(d);
+    (void)::sendto(fd, bytes.data(), bytes.size(), 0, reinterpret_cast<const sockaddr*>(&to), sizeof to);
+  };
+  send_pose(0, std::numeric_limits<std::int64_t>::max() - 1);
+  const std::int64_t base_ns = (std::int64_t{1} << 62) - 10'000'000'000;  // 10 s inside the bound
+  for (int i = 0; i < 75; ++i) {  // 1.5 s of poses at 50 Hz, in real time
+    send_pose(static_cast<std::uint64_t>(i + 1), base_ns + std::int64_t{i} * 20'000'000);
+    std::this_thread::sleep_for(20ms);
+  }
+  ::close(fd);
+  const auto after = status_when(dir_ / "c.sock", [](const nlohmann::json& s) { return emitted_of(s) > 0; });
+  ASSERT_TRUE(after) << "nothing emitted from the stream near the bound\n" << c.output();
+  const nlohmann::json& source = (*after)["engine"]["pose_source"];
+  EXPECT_GE(source["rejected"].get<std::uint64_t>(), 1u) << source.dump();
+  EXPECT_GE(source["accepted"].get<std::uint64_t>(), 2u) << source.dump();
+  EXPECT_EQ((*after)["engine"]["thread_faults"], 0u);
+  ASSERT_EQ(::kill(c.pid, SIGTERM), 0);
+  const std::optional<int> rc = wait_exit_within(c, 20s);
+  ASSERT_TRUE(rc) << c.output();
+  EXPECT_EQ(*rc, 0) << c.output();
+  EXPECT_EQ(c.output().find("terminate called"), std::string::npos) << c.output();
+}
+
+// No exception leaves an engine thread: one thrown on the producer (test
+// hook) stops the scene with a clear message and exit 5, devices closed and
+// the statistics written, instead of std::terminate.
+TEST_F(Imuemud, AnExceptionOnAnEngineThreadStopsTheSceneWithAFailureExit) {
+  ::setenv("IMUEMU_TEST_HOOKS", "1", 1);
+  Child c = spawn_imuemud({"--pty-link-dir", dir_.string(), "--control-socket", (dir_ / "c.sock").string(),
+                           "--stats-json", (dir_ / "stats.json").string()},
+                          dir_ / "log");
+  ReapOnExit reap_c{c.pid};
+  ::unsetenv("IMUEMU_TEST_HOOKS");
+  ASSERT_TRUE(status_when(dir_ / "c.sock", [](const nlohmann::json& s) { return emitted_of(s) > 0; })) << c.output();
+  const nlohmann::json reply = imuemu::cli::query_control_socket((dir_ / "c.sock").string(), "fault-producer", 2000ms);
+  EXPECT_EQ(reply["fault"], true);
+  const std::optional<int> rc = wait_exit_within(c, 20s);
+  ASSERT_TRUE(rc) << c.output();
+  EXPECT_EQ(*rc, 5) << c.output();
+  const std::string out = c.output();
+  EXPECT_NE(out.find("emission failed: producer thread: test hook: a fault on the producer thread"), std::string::npos)
+      << out;
+  EXPECT_FALSE(fs::exists(dir_ / "ttyIMU0")) << "the device was closed";
+  std::ifstream in(dir_ / "stats.json");
+  const nlohmann::json s = nlohmann::json::parse(in);
+  EXPECT_EQ(s["thread_faults"], 1u);
+}
+
+// A fake service manager: NOTIFY_SOCKET for the child, counting WATCHDOG=1.
+class NotifySocket {
+ public:
+  explicit NotifySocket(const fs::path& path) : path_(path) {
+    fd_ = ::socket(AF_UNIX, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+    sockaddr_un address{};
+    address.sun_family = AF_UNIX;
+    std::strncpy(address.sun_path, path_.c_str(), sizeof address.sun_path - 1);
+    bound_ = ::bind(fd_, reinterpret_cast<sockaddr*>(&address), sizeof address) == 0;
+  }
+  ~NotifySocket() { ::close(fd_); }
+  bool bound() const { return bound_; }
+  // Messages arriving within `window`.
+  std::vector<std::string> collect(std::chrono::milliseconds window) {
+    std::vector<std::string> got;
+    const auto end = std::chrono::steady_clock::now() + window;
+    for (;;) {
+      const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(end - std::chrono::steady_clock::now());
+      if (left.count() <= 0) break;
+      pollfd p{fd_, POLLIN, 0};
+      if (::poll(&p, 1, static_cast<int>(left.count())) != 1) continue;
+      char buffer[4096];
+      const ssize_t n = ::recv(fd_, buffer, sizeof buffer, 0);
+      if (n > 0) got.emplace_back(buffer, static_cast<std::size_t>(n));
+    }
+    return got;
+  }
+
+ private:
+  fs::path path_;
+  int fd_ = -1;
+  bool bound_ = false;
+};
+
+// A 30-day built-in sample at 1 s knots: a build of tens of seconds (about
+// 40 s on the 2-core CI host; far longer than the test waits on any host
+// this suite runs on), not finished when the test signals.
+std::string long_build_scene() {
+  return "[scene]\nname = \"long\"\nphysics = \"ecef\"\n[trajectory]\nsource = \"sample:flight\"\n"
+         "duration_s = 2592000\nknot_interval_s = 1.0\nloop = false\n[daemon]\nwatchdog = true\n"
+         "[[imu]]\nname = \"n\"\nrate_hz = 100\nprotocol = \"native\"\n[imu.transport]\ntype = \"null\"\n";
+}
+
+// Issue 13 H3: signals, the control socket and the watchdog ran on the io
+// thread, which was blocked in the scene build: status got no answer, no
+// WATCHDOG=1 was sent (WatchdogSec = 5 s kills it) and SIGTERM waited for
+// the end of the build (26 s for a 30-day scene). Now the build runs on a
+// worker: status answers "building", the watchdog is pinged, and SIGTERM
+// exits at once with 0.
+TEST_F(Imuemud, DuringALongSceneBuildStatusAnswersTheWatchdogIsPingedAndSigtermExitsPromptly) {
+  const fs::path scene = write("long.toml", long_build_scene());
+  NotifySocket manager(dir_ / "notify");
+  ASSERT_TRUE(manager.bound());
+  ::setenv("NOTIFY_SOCKET", (dir_ / "notify").c_str(), 1);
+  ::setenv("WATCHDOG_USEC", "400000", 1);  // pets every 200 ms
+  Child c = spawn_imuemud({"--scene", scene.string(), "--control-socket", (dir_ / "c.sock").string()}, dir_ / "log");
+  ReapOnExit reap_c{c.pid};
+  ::unsetenv("NOTIFY_SOCKET");
+  ::unsetenv("WATCHDOG_USEC");
+  const std::optional<nlohmann::json> building =
+      status_when(dir_ / "c.sock", [](const nlohmann::json& s) { return !s["building"].is_null(); });
+  ASSERT_TRUE(building) << "no status reply saying the scene is being built\n" << c.output();
+  EXPECT_EQ((*building)["building"]["what"], "start");
+  // 1.5 s of the build: several WATCHDOG=1 (every 200 ms; at least 3 on a loaded host).
+  std::size_t pets = 0;
+  for (const std::string& m : manager.collect(1500ms))
+    if (m.find("WATCHDOG=1") != std::string::npos) ++pets;
+  EXPECT_GE(pets, 3u) << c.output();
+  const std::optional<nlohmann::json> still = status_of(dir_ / "c.sock");
+  ASSERT_TRUE(still) << c.output();
+  ASSERT_FALSE((*still)["building"].is_null()) << "the build ended early; the scene is meant to take tens of seconds";
+  const auto signalled = std::chrono::steady_clock::now();
+  ASSERT_EQ(::kill(c.pid, SIGTERM), 0);
+  const std::optional<int> rc = wait_exit_within(c, 10s);
+  ASSERT_TRUE(rc) << "SIGTERM not honoured within 10 s during the build\n" << c.output();
+  EXPECT_EQ(*rc, 0) << c.output();
+  // Bounded by the daemon's own 0.5 s wait for the worker, plus start-up noise.
+  EXPECT_LT(std::chrono::steady_clock::now() - signalled, 5s) << c.output();
+  EXPECT_NE(c.output().find("the build is abandoned"), std::string::npos) << c.output();
+  EXPECT_FALSE(fs::exists(dir_ / "c.sock")) << "the control socket is removed";
+}
+
+std::string file_scene(const fs::path& trajectory, const std::string& name) {
+  return "[scene]\nname = \"" + name + "\"\nphysics = \"flat\"\n[trajectory]\nsource = \"file:" + trajectory.string() +
+         "\"\n[[imu]]\nname = \"n\"\nrate_hz = 100\nprotocol = \"native\"\n[imu.transport]\ntype = \"null\"\n";
+}
+
+bool write_sample_trajectory(const fs::path& out, double duration_s) {
+  const std::string cmd = std::string(IMUEMU_CLI_PATH) + " sample-trajectory --kind static --duration-s " +
+                          std::to_string(duration_s) + " --out " + out.string() + " > /dev/null 2>&1";
+  return std::system(cmd.c_str()) == 0;
+}
+
+// Issue 13 H4: SIGHUP after the trajectory file became malformed stopped the
+// running scene and exited 1 (the old scene was dropped before the new one
+// was known to build). Now the new scene is read and checked first; the
+// running scene goes on with its counters, and the exit code stays 0.
+TEST_F(Imuemud, AReloadOfAMalformedSceneKeepsTheRunningSceneAndItsCounters) {
+  const fs::path trajectory = dir_ / "t.csv";
+  ASSERT_TRUE(write_sample_trajectory(trajectory, 600));
+  const fs::path scene = write("file.toml", file_scene(trajectory, "file"));
+  Child c = spawn_imuemud({"--scene", scene.string(), "--control-socket", (dir_ / "c.sock").string()}, dir_ / "log");
+  ReapOnExit reap_c{c.pid};
+  const auto before = status_when(dir_ / "c.sock", [](const nlohmann::json& s) { return emitted_of(s) > 20; });
+  ASSERT_TRUE(before) << c.output();
+  std::ofstream(trajectory, std::ios::trunc) << "t_s,x_m\nthis is not a trajectory\n";
+  ASSERT_EQ(::kill(c.pid, SIGHUP), 0);
+  // The refusal is logged; the scene is the same run (counters only grew).
+  const auto until = std::chrono::steady_clock::now() + 30s;
+  while (c.output().find("reload failed") == std::string::npos && std::chrono::steady_clock::now() < until)
+    std::this_thread::sleep_for(50ms);
+  ASSERT_NE(c.output().find("reload failed, keeping the running scene"), std::string::npos) << c.output();
+  EXPECT_NE(c.output().find(trajectory.string()), std::string::npos) << "the message names the file\n" << c.output();
+  const std::uint64_t at_refusal = emitted_of(*before);
+  const auto after = status_when(dir_ / "c.sock", [&](const nlohmann::json& s) { return emitted_of(s) > at_refusal + 20; });
+  ASSERT_TRUE(after) << "the running scene did not go on\n" << c.output();
+  EXPECT_TRUE((*after)["building"].is_null());
+  EXPECT_EQ(c.output().find("emission stopped"), std::string::npos) << "the running scene was stopped\n" << c.output();
+  ASSERT_EQ(::kill(c.pid, SIGTERM), 0);
+  const std::optional<int> rc = wait_exit_within(c, 20s);
+  ASSERT_TRUE(rc) << c.output();
+  EXPECT_EQ(*rc, 0) << c.output();
+}
+
+// A reload of a good scene restarts emission with it (name and file change).
+TEST_F(Imuemud, AReloadOfAGoodSceneSwitchesToIt) {
+  const fs::path trajectory = dir_ / "t.csv";
+  ASSERT_TRUE(write_sample_trajectory(trajectory, 600));
+  const fs::path scene = write("file.toml", file_scene(trajectory, "first"));
+  Child c = spawn_imuemud({"--scene", scene.string(), "--control-socket", (dir_ / "c.sock").string()}, dir_ / "log");
+  ReapOnExit reap_c{c.pid};
+  ASSERT_TRUE(status_when(dir_ / "c.sock", [](const nlohmann::json& s) { return emitted_of(s) > 0; })) << c.output();
+  write("file.toml", file_scene(trajectory, "second"));
+  ASSERT_EQ(::kill(c.pid, SIGHUP), 0);
+  const auto second = status_when(dir_ / "c.sock", [](const nlohmann::json& s) {
+    return s["scene"] == "second" && emitted_of(s) > 0;
+  });
+  EXPECT_TRUE(second) << c.output();
+  ASSERT_EQ(::kill(c.pid, SIGTERM), 0);
+  const std::optional<int> rc = wait_exit_within(c, 20s);
+  ASSERT_TRUE(rc) << c.output();
+  EXPECT_EQ(*rc, 0) << c.output();
+}
+
+// A pty link left by a daemon killed with SIGKILL (its lock released by the
+// kernel) is replaced by the next start; a regular file or a directory at
+// the link path is never removed: the start is refused naming the path.
+TEST_F(Imuemud, AStalePtyLinkAfterSigkillIsReplacedButAFileOrDirectoryIsRefused) {
+  const std::vector<std::string> args{"--pty-link-dir", dir_.string(), "--control-socket", (dir_ / "c.sock").string()};
+  Child first = spawn_imuemud(args, dir_ / "log1");
+  ReapOnExit reap_first{first.pid};
+  ASSERT_TRUE(status_when(dir_ / "c.sock", [](const nlohmann::json& s) { return emitted_of(s) > 0; })) << first.output();
+  ASSERT_TRUE(fs::is_symlink(dir_ / "ttyIMU0"));
+  const fs::path stale_target = fs::read_symlink(dir_ / "ttyIMU0");
+  ASSERT_EQ(::kill(first.pid, SIGKILL), 0);
+  first.wait_exit();
+  ASSERT_TRUE(fs::is_symlink(dir_ / "ttyIMU0")) << "SIGKILL leaves the link behind";
+  // Something else holds the old /dev/pts number now (or nothing does): the
+  // link is stale either way, because no live imuemu holds its lock.
+  Child second = spawn_imuemud(args, dir_ / "log2");
+  ReapOnExit reap_second{second.pid};
+  ASSERT_TRUE(status_when(dir_ / "c.sock", [](const nlohmann::json& s) { return emitted_of(s) > 0; })) << second.output();
+  ASSERT_TRUE(fs::is_symlink(dir_ / "ttyIMU0"));
+  const fs::path target = fs::read_symlink(dir_ / "ttyIMU0");
+  EXPECT_TRUE(fs::exists(target)) << target;  // a live pty of the second daemon
+  ::kill(second.pid, SIGTERM);
+  EXPECT_EQ(second.wait_exit(), 0) << second.output();
+  (void)stale_target;
+
+  std::ofstream(dir_ / "ttyIMU0") << "precious";
+  const ProcessResult file = run_imuemud("--pty-link-dir " + dir_.string() + " --control-socket " + (dir_ / "c.sock").string());
+  EXPECT_EQ(file.exit_code, 1) << file.output;
+  EXPECT_NE(file.output.find((dir_ / "ttyIMU0").string()), std::string::npos) << file.output;
+  EXPECT_NE(file.output.find("not a symbolic link"), std::string::npos) << file.output;
+  std::ifstream kept(dir_ / "ttyIMU0");
+  std::string content;
+  kept >> content;
+  EXPECT_EQ(content, "precious");
+  fs::remove(dir_ / "ttyIMU0");
+  fs::create_directory(dir_ / "ttyIMU0");
+  const ProcessResult dir = run_imuemud("--pty-link-dir " + dir_.string() + " --control-socket " + (dir_ / "c.sock").string());
+  EXPECT_EQ(dir.exit_code, 1) << dir.output;
+  EXPECT_NE(dir.output.find((dir_ / "ttyIMU0").string()), std::string::npos) << dir.output;
+  EXPECT_TRUE(fs::is_directory(dir_ / "ttyIMU0"));
 }
 
 }  // namespace
