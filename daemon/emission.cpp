@@ -395,6 +395,10 @@ void EmissionEngine::Impl::produce(Device& d, bool time_gated) {
         measured.gyro_rad_s = m.gyro_rad_s;
         measured.accel_m_s2 = m.accel_m_s2;
         if (m.saturated_axes != 0) f.status |= drivers::kStatusSaturated;  // counted when sent
+        // The model's temperature profile, for the protocols that carry one
+        // (MAVLink HIL_SENSOR/HIGHRES_IMU); ideal sensors keep the option's value.
+        f.has_temperature = true;
+        f.temperature_c = m.temperature_c;
       }
       f.gyro_rad_s = measured.gyro_rad_s;
       f.accel_m_s2 = measured.accel_m_s2;
