@@ -111,7 +111,7 @@ TEST_F(GenerateMemory, FourHoursAtOneKilohertzUnder100MiB) {
   const ChildRun g = run_imuemu({"generate", "--in", path("t.csv"), "--out", path("imu.csv"), "--rate", "1000", "--quiet"},
                                 dir_ / "generate.log");
   ASSERT_EQ(g.exit_code, 0) << g.log;
-  std::cout << "generate 4 h at 1 kHz: peak RSS " << g.max_rss_kib / 1024.0 << " MiB, " << g.wall_s << " s\n";
+  std::cout << "generate 4 h at 1 kHz: peak RSS " << static_cast<double>(g.max_rss_kib) / 1024.0 << " MiB, " << g.wall_s << " s\n";
   EXPECT_LT(g.max_rss_kib, kLimitKiB);
   // And it wrote the whole run: header + 4 h * 1000 + 1 samples, 0 to 14400 s.
   const FileShape s = shape_of(path("imu.csv"));
@@ -130,7 +130,7 @@ TEST_F(GenerateMemory, SensorAndTrajectoryOutStayBounded) {
                                  path("k.csv"), "--rate", "1000", "--sensor", "adis16470", "--seed", "7", "--quiet"},
                                 dir_ / "generate.log");
   ASSERT_EQ(g.exit_code, 0) << g.log;
-  std::cout << "generate 20 min at 1 kHz, adis16470, --trajectory-out: peak RSS " << g.max_rss_kib / 1024.0
+  std::cout << "generate 20 min at 1 kHz, adis16470, --trajectory-out: peak RSS " << static_cast<double>(g.max_rss_kib) / 1024.0
             << " MiB, " << g.wall_s << " s\n";
   EXPECT_LT(g.max_rss_kib, kLimitKiB);
   EXPECT_EQ(shape_of(path("imu.csv")).lines, 1u + 1'200'001u);
