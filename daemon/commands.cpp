@@ -175,6 +175,7 @@ int generate(const GenerateArgs& args) {
   if (!args.scene_file.empty()) return run_guarded([&] { return generate_for_scene(args); });
   return run_guarded([&] {
     const auto wall_start = std::chrono::steady_clock::now();
+    io::Trajectory trajectory = io::read_trajectory_csv(args.in_path);
     PipelineOptions opt;
     opt.scene = scene_model(args.scene, args.gravity_m_s2);
     opt.rate_hz = args.rate_hz;
@@ -190,8 +191,8 @@ int generate(const GenerateArgs& args) {
     opt.kernel.width = smoothing::kernel_width_from_string(args.kernel);
     opt.kernel.half_width_s = args.kernel_half_width_s;
     opt.kernel.order = args.kernel_order;
-    // The parsed file is dropped once it is poses (the input is all that is held).
-    const std::vector<Pose> knots = io::poses_in_scene(io::read_trajectory_csv(args.in_path), opt.scene.physics);
+    const std::vector<Pose> knots = io::poses_in_scene(trajectory, opt.scene.physics);
+    trajectory = io::Trajectory{};  // the parsed file is dropped once it is poses: only the knots are held
     if (args.delta < 0)
       opt.kernel.delta = auto_delta(knots, args.rate_hz, opt.interpolation.method == interp::Method::hermite ? 1.0 : 2.0);
     const scene::ErrorModelConfig model = scene::error_model_from_option(args.sensor.empty() ? "ideal" : args.sensor, args.seed);
