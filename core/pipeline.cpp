@@ -63,36 +63,21 @@ double output_grid_fraction_ns(std::size_t k, std::int64_t rate_hz) {
 
 BatchResult run_batch(const std::vector<Pose>& knots, const PipelineOptions& options,
                       const ProgressFn& progress) {
-  // Whole-list checks first, so a bad file is refused before any work.
-  interp::check_knots(knots);
-  // Park-Ravani's recursion diverges on long trajectories; the whole list is
-  // at hand, so say so (naming the knots) before its wild attitudes reach the
-  // smoother, which would only report a window spanning too much rotation.
-  if (options.interpolation.method == interp::Method::park_ravani)
-    (void)interp::park_ravani_coefficients(knots, options.interpolation);
   // The batch path is a loop over the streaming engine: one implementation.
-  StreamPipeline stream(options);
   BatchResult result;
-  const std::size_t expected = static_cast<std::size_t>(
-      seconds_between(knots.front().t_ns, knots.back().t_ns) * static_cast<double>(options.rate_hz) + 2.0);
-  result.trajectory.reserve(expected);
-  result.imu.reserve(expected);
-  auto drain = [&] {
-    StreamSample sample;
-    while (stream.pop(sample)) {
-      result.trajectory.push_back(sample.kinematics);
-      result.imu.push_back(sample.imu);
-    }
-  };
-  const std::size_t report_every = std::max<std::size_t>(1, knots.size() / 50);
-  for (std::size_t k = 0; k < knots.size(); ++k) {
-    stream.push(knots[k]);
-    drain();
-    if (progress && k % report_every == 0) progress(static_cast<double>(k) / static_cast<double>(knots.size()));
+  if (knots.size() >= 2 && knots.back().t_ns > knots.front().t_ns) {  // run_streaming refuses the rest
+    const std::size_t expected = static_cast<std::size_t>(
+        seconds_between(knots.front().t_ns, knots.back().t_ns) * static_cast<double>(options.rate_hz) + 2.0);
+    result.trajectory.reserve(expected);
+    result.imu.reserve(expected);
   }
-  stream.finish();
-  drain();
-  if (progress) progress(1.0);
+  run_streaming(
+      knots, options,
+      [&](const StreamSample& sample) {
+        result.trajectory.push_back(sample.kinematics);
+        result.imu.push_back(sample.imu);
+      },
+      progress);
   return result;
 }
 

@@ -837,4 +837,29 @@ TimeNs StreamPipeline::lookahead_ns(const PipelineOptions& output_options, TimeN
                            saturating_mul_ns(knot_interval_ns, knots));
 }
 
+void run_streaming(const std::vector<Pose>& knots, const PipelineOptions& options, const StreamSampleSink& sink,
+                   const ProgressFn& progress) {
+  // Whole-list checks first, so a bad file is refused before any work.
+  interp::check_knots(knots);
+  // Park-Ravani's recursion diverges on long trajectories; the whole list is
+  // at hand, so say so (naming the knots) before its wild attitudes reach the
+  // smoother, which would only report a window spanning too much rotation.
+  if (options.interpolation.method == interp::Method::park_ravani)
+    (void)interp::park_ravani_coefficients(knots, options.interpolation);
+  StreamPipeline stream(options);
+  StreamSample sample;
+  auto drain = [&] {
+    while (stream.pop(sample)) sink(sample);
+  };
+  const std::size_t report_every = std::max<std::size_t>(1, knots.size() / 50);
+  for (std::size_t k = 0; k < knots.size(); ++k) {
+    stream.push(knots[k]);
+    drain();
+    if (progress && k % report_every == 0) progress(static_cast<double>(k) / static_cast<double>(knots.size()));
+  }
+  stream.finish();
+  drain();
+  if (progress) progress(1.0);
+}
+
 }  // namespace imuemu

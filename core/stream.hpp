@@ -10,7 +10,9 @@
 
 #include <cstddef>
 #include <deque>
+#include <functional>
 #include <memory>
+#include <vector>
 
 #include "core/pipeline.hpp"
 
@@ -83,5 +85,17 @@ class StreamPipeline {
   bool any_output_ = false;
   bool finished_ = false;
 };
+
+// Receives each output sample, in time order, as soon as it is final.
+using StreamSampleSink = std::function<void(const StreamSample&)>;
+
+// The batch method (run_batch) without its result vectors: the whole-list
+// checks of run_batch, then every knot pushed through one StreamPipeline and
+// every sample handed to `sink` as soon as it is ready, so memory is the
+// knots plus O(window), whatever the duration. run_batch is this with a sink
+// that appends, so both give the same bits. Throws what run_batch throws, and
+// whatever `sink` throws (after some samples may have been delivered).
+void run_streaming(const std::vector<Pose>& knots, const PipelineOptions& options, const StreamSampleSink& sink,
+                   const ProgressFn& progress = {});
 
 }  // namespace imuemu

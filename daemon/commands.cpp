@@ -15,6 +15,7 @@
 #include "core/attitude.hpp"
 #include "core/mounting.hpp"
 #include "core/stream.hpp"
+#include "daemon/batch_generation.hpp"
 #include "daemon/error_model_config.hpp"
 #include "daemon/scene_runner.hpp"
 #include "core/earth.hpp"
@@ -114,15 +115,16 @@ int run_guarded(Fn&& fn) {
   }
 }
 
-// The sensor stage of `generate` (daemon/error_model_config.cpp): the same
-// SensorModel::measure on sample k as imuemud's producer on tick k.
-void apply_sensor_stage(const scene::ErrorModelConfig& model, const std::string& device, std::int64_t rate_hz,
-                        TimeNs t0_ns, std::vector<ImuSample>& imu, bool quiet) {
-  if (model.ideal()) return;
-  if (!quiet)
-    for (const std::string& line : scene::error_model_lines(model, static_cast<double>(rate_hz)))
-      std::cerr << "imuemu: sensor " << device << ": " << line << "\n";
-  const std::uint64_t saturated = scene::apply_error_model(model, device, rate_hz, t0_ns, imu);
+// The sensor stage of `generate` (daemon/batch_generation.hpp SensorStage):
+// the same SensorModel::measure on sample k as imuemud's producer on tick k.
+void describe_sensor_stage(const scene::ErrorModelConfig& model, const std::string& device, std::int64_t rate_hz,
+                           bool quiet) {
+  if (model.ideal() || quiet) return;
+  for (const std::string& line : scene::error_model_lines(model, static_cast<double>(rate_hz)))
+    std::cerr << "imuemu: sensor " << device << ": " << line << "\n";
+}
+
+void report_saturation(const std::string& device, std::uint64_t saturated, bool quiet) {
   if (!quiet && saturated > 0)
     std::cerr << "imuemu: sensor " << device << ": " << saturated << " samples saturated (clipped to the range)\n";
 }
@@ -152,17 +154,17 @@ int generate_for_scene(const GenerateArgs& args) {
     const TimeNs keep_ns = end_ns + StreamPipeline::lookahead_ns(opt, interval_ns) + 10 * interval_ns;
     while (knots.size() > 2 && knots.back().t_ns > keep_ns) knots.pop_back();
   }
-  BatchResult result = run_batch(knots, opt);
-  std::erase_if(result.imu, [end_ns](const ImuSample& s) { return s.t_ns >= end_ns; });
   const scene::ErrorModelConfig model =
       args.sensor.empty() ? imu->error_model : scene::error_model_from_option(args.sensor, args.seed);
   scene::ErrorModelConfig seeded = model;
   if (args.seed >= 0) seeded.spec.seed = static_cast<std::uint64_t>(args.seed);
-  if (!knots.empty()) apply_sensor_stage(seeded, imu->name, imu->rate_hz, knots.front().t_ns, result.imu, args.quiet);
-  io::write_imu_csv(args.out_path, result.imu);
+  describe_sensor_stage(seeded, imu->name, imu->rate_hz, args.quiet);
+  // Streamed to the file sample by sample: O(window) memory (batch_generation.hpp).
+  const BatchCounts counts = generate_to_files(knots, opt, seeded, imu->name, {args.out_path, "", opt.scene.physics, end_ns});
+  report_saturation(imu->name, counts.saturated_samples, args.quiet);
   if (!args.quiet)
     std::cerr << "imuemu: scene " << sc.name << ", imu " << imu->name << ": " << knots.size() << " knots -> "
-              << result.imu.size() << " samples at " << imu->rate_hz << " Hz (Delta " << opt.kernel.delta << ") -> "
+              << counts.samples << " samples at " << imu->rate_hz << " Hz (Delta " << opt.kernel.delta << ") -> "
               << args.out_path << "\n";
   return static_cast<int>(kOk);
 }
@@ -173,7 +175,7 @@ int generate(const GenerateArgs& args) {
   if (!args.scene_file.empty()) return run_guarded([&] { return generate_for_scene(args); });
   return run_guarded([&] {
     const auto wall_start = std::chrono::steady_clock::now();
-    const io::Trajectory trajectory = io::read_trajectory_csv(args.in_path);
+    io::Trajectory trajectory = io::read_trajectory_csv(args.in_path);
     PipelineOptions opt;
     opt.scene = scene_model(args.scene, args.gravity_m_s2);
     opt.rate_hz = args.rate_hz;
@@ -190,21 +192,24 @@ int generate(const GenerateArgs& args) {
     opt.kernel.half_width_s = args.kernel_half_width_s;
     opt.kernel.order = args.kernel_order;
     const std::vector<Pose> knots = io::poses_in_scene(trajectory, opt.scene.physics);
+    trajectory = io::Trajectory{};  // the parsed file is dropped once it is poses: only the knots are held
     if (args.delta < 0)
       opt.kernel.delta = auto_delta(knots, args.rate_hz, opt.interpolation.method == interp::Method::hermite ? 1.0 : 2.0);
     const scene::ErrorModelConfig model = scene::error_model_from_option(args.sensor.empty() ? "ideal" : args.sensor, args.seed);
-    BatchResult result;
+    describe_sensor_stage(model, "imu0", args.rate_hz, args.quiet);
+    BatchCounts counts;
     {
+      // Streamed to both files sample by sample: O(window) memory
+      // (batch_generation.hpp); neither file is replaced unless both are written.
       ProgressBar bar(!args.quiet);
-      result = run_batch(knots, opt, [&](double f) { bar.update(f); });
+      counts = generate_to_files(knots, opt, model, "imu0",
+                                 {args.out_path, args.trajectory_out_path, opt.scene.physics},
+                                 [&](double f) { bar.update(f); });
     }
-    if (!knots.empty()) apply_sensor_stage(model, "imu0", args.rate_hz, knots.front().t_ns, result.imu, args.quiet);
-    io::write_imu_csv(args.out_path, result.imu);
-    if (!args.trajectory_out_path.empty())
-      io::write_trajectory_csv(args.trajectory_out_path, result.trajectory, opt.scene.physics);
+    report_saturation("imu0", counts.saturated_samples, args.quiet);
     if (!args.quiet) {
       const double wall_s = std::chrono::duration<double>(std::chrono::steady_clock::now() - wall_start).count();
-      std::cerr << "imuemu: " << knots.size() << " knots -> " << result.imu.size() << " samples at " << args.rate_hz
+      std::cerr << "imuemu: " << knots.size() << " knots -> " << counts.samples << " samples at " << args.rate_hz
                 << " Hz (" << args.scene << ", " << args.method << ", Delta " << opt.kernel.delta << ", " << args.kernel
                 << " order-" << args.kernel_order << " kernel, " << args.chart << " chart, " << args.derivatives << " derivatives) in " << number(std::round(wall_s * 1000) / 1000)
                 << " s -> " << args.out_path << "\n";

@@ -18,6 +18,7 @@
 #include <stdexcept>
 #include <vector>
 
+#include "daemon/arrival_jitter.hpp"
 #include "daemon/commands.hpp"
 #include "drivers/byte_stream_reader.hpp"
 #include "drivers/socketcan.hpp"
@@ -60,12 +61,6 @@ SequenceKind sequence_kind(const std::string& protocol) {
   return SequenceKind::none;
 }
 
-// Nearest-rank percentile of a sorted vector (p in (0, 1]).
-double percentile_sorted(const std::vector<double>& sorted, double p) {
-  const auto rank = static_cast<std::size_t>(std::ceil(p * static_cast<double>(sorted.size())));
-  return sorted[std::clamp<std::size_t>(rank, 1, sorted.size()) - 1];
-}
-
 nlohmann::json vec_json(const Vec3& v) { return nlohmann::json::array({v.x(), v.y(), v.z()}); }
 
 std::string format_vec(const Vec3& v) {
@@ -90,7 +85,11 @@ std::string format_seconds(TimeNs t_ns) {
 class Session {
  public:
   Session(const ListenArgs& args, std::ostream& out, const ListenSampleHook& hook)
-      : args_(args), out_(out), hook_(hook), kind_(sequence_kind(args.protocol)) {
+      : args_(args),
+        out_(out),
+        hook_(hook),
+        kind_(sequence_kind(args.protocol)),
+        jitter_(args.expect_rate_hz > 0.0 ? 1e9 / args.expect_rate_hz : 0.0) {
     if (!args_.out_path.empty()) {
       csv_.open(args_.out_path, std::ios::out | std::ios::trunc);
       if (!csv_) throw std::runtime_error("listen: cannot write --out '" + args_.out_path + "'");
@@ -113,7 +112,7 @@ class Session {
       ++timed_samples_;
     }
     if (first_arrival_ns_ < 0) first_arrival_ns_ = arrival_ns;
-    if (last_arrival_ns_ >= 0) arrival_intervals_ns_.push_back(arrival_ns - last_arrival_ns_);
+    if (last_arrival_ns_ >= 0) jitter_.record(arrival_ns - last_arrival_ns_);
     last_arrival_ns_ = arrival_ns;
 
     if (csv_.is_open()) write_csv(s);
@@ -145,18 +144,15 @@ class Session {
       summary.rate_from_arrival_hz =
           static_cast<double>(samples_ - 1) / seconds_between(first_arrival_ns_, last_arrival_ns_);
     }
-    if (!arrival_intervals_ns_.empty()) {
+    if (jitter_.count() > 0) {
       const double nominal_ns =
           args_.expect_rate_hz > 0.0
               ? 1e9 / args_.expect_rate_hz
-              : static_cast<double>(last_arrival_ns_ - first_arrival_ns_) / static_cast<double>(arrival_intervals_ns_.size());
-      std::vector<double> jitter_us;
-      jitter_us.reserve(arrival_intervals_ns_.size());
-      for (const TimeNs d : arrival_intervals_ns_) jitter_us.push_back(std::abs(static_cast<double>(d) - nominal_ns) * 1e-3);
-      std::sort(jitter_us.begin(), jitter_us.end());
-      summary.jitter_p50_us = percentile_sorted(jitter_us, 0.50);
-      summary.jitter_p99_us = percentile_sorted(jitter_us, 0.99);
-      summary.jitter_max_us = jitter_us.back();
+              : static_cast<double>(last_arrival_ns_ - first_arrival_ns_) / static_cast<double>(jitter_.count());
+      const JitterSummary j = *jitter_.summary(nominal_ns);
+      summary.jitter_p50_us = j.p50_us;
+      summary.jitter_p99_us = j.p99_us;
+      summary.jitter_max_us = j.max_us;
     }
     if (args_.expect_rate_hz > 0.0) {
       summary.expected_rate_hz = args_.expect_rate_hz;
@@ -236,7 +232,8 @@ class Session {
   std::uint64_t last_sequence_ = 0, last_messages_ = 0, own_gaps_ = 0, backward_steps_ = 0;
   std::optional<TimeNs> first_t_ns_, last_t_ns_;
   TimeNs first_arrival_ns_ = -1, last_arrival_ns_ = -1;
-  std::vector<TimeNs> arrival_intervals_ns_;
+  // Bounded: exact for short runs, a fixed histogram beyond (arrival_jitter.hpp).
+  ArrivalJitter jitter_;
 };
 
 void validate(const ListenArgs& args) {

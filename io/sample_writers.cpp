@@ -260,58 +260,83 @@ std::vector<ImuSample> read_imu_csv(const std::string& path) {
 
 std::string kinematics_csv_header(Physics physics) { return join(kinematics_schema(physics)); }
 
+namespace {
+
+constexpr const char* kKinematicsWho = "write_trajectory_csv";
+
+// Every rule a kinematics row must meet (index: the state's index, for messages).
+void check_state(std::size_t index, TimeNs previous_ns, const Kinematics& s) {
+  require_increasing(kKinematicsWho, index, previous_ns, s.t_ns);
+  require_finite(kKinematicsWho, index, s.t_ns, "position_m", s.position_m);
+  require_finite(kKinematicsWho, index, s.t_ns, "velocity_m_s", s.velocity_m_s);
+  require_finite(kKinematicsWho, index, s.t_ns, "acceleration_m_s2", s.acceleration_m_s2);
+  require_finite(kKinematicsWho, index, s.t_ns, "angular_rate_rad_s", s.angular_rate_rad_s);
+  // The quaternion only means something for a rotation matrix; the reader
+  // accepts |q| within 1e-6 of 1, so the matrix must be that close to SO(3).
+  const bool finite = s.attitude.allFinite();
+  const double orthogonality =
+      finite ? (s.attitude.transpose() * s.attitude - Mat3::Identity()).cwiseAbs().maxCoeff() : 0.0;
+  if (!finite || orthogonality > 1e-6 || s.attitude.determinant() <= 0.0) {
+    throw std::invalid_argument(std::string(kKinematicsWho) + ": sample " + std::to_string(index) + " (t = " +
+                                describe_time(s.t_ns) +
+                                "): attitude is not a rotation matrix (non-finite, |R^T R - I| = " +
+                                detail::format_double(orthogonality) + " > 1e-6, or det <= 0)");
+  }
+}
+
+// One row of a state already checked.
+void put_state_row(AtomicFileWriter& file, const Kinematics& s) {
+  char row[512];  // 1 time (<= 21) + 16 doubles (<= 24 each) + separators
+  char* p = write_decimal_seconds(row, s.t_ns);
+  const Eigen::Vector4d q = so3::quaternion_from_matrix(s.attitude);
+  const auto put3 = [&p](const Vec3& v) {
+    for (int k = 0; k < 3; ++k) {
+      *p++ = ',';
+      p = put_double(p, v[k]);
+    }
+  };
+  put3(s.position_m);
+  for (int k = 0; k < 4; ++k) {
+    *p++ = ',';
+    p = put_double(p, q[k]);
+  }
+  put3(s.velocity_m_s);
+  put3(s.acceleration_m_s2);
+  put3(s.angular_rate_rad_s);
+  *p++ = '\n';
+  file.write(std::string_view(row, static_cast<std::size_t>(p - row)));
+}
+
+}  // namespace
+
+KinematicsCsvWriter::KinematicsCsvWriter(const std::string& path, Physics physics) : file_(path) {
+  file_.write(kinematics_csv_header(physics));
+  file_.write("\n");
+}
+
+void KinematicsCsvWriter::write(const Kinematics& state) {
+  check_state(count_, previous_ns_, state);
+  put_state_row(file_, state);
+  previous_ns_ = state.t_ns;
+  ++count_;
+}
+
+void KinematicsCsvWriter::commit() {
+  if (count_ == 0)
+    throw std::invalid_argument(std::string(kKinematicsWho) + ": no states to write to '" + file_.target_path() + "'");
+  file_.commit();
+}
+
 void write_trajectory_csv(const std::string& path, const std::vector<Kinematics>& states,
                           Physics physics) {
-  static constexpr const char* kWho = "write_trajectory_csv";
-  if (states.empty()) throw std::invalid_argument(std::string(kWho) + ": no states to write to '" + path + "'");
+  if (states.empty()) throw std::invalid_argument(std::string(kKinematicsWho) + ": no states to write to '" + path + "'");
   // Validate everything first: a refused run must not even create the
   // temporary file.
-  for (std::size_t i = 0; i < states.size(); ++i) {
-    const Kinematics& s = states[i];
-    require_increasing(kWho, i, i > 0 ? states[i - 1].t_ns : 0, s.t_ns);
-    require_finite(kWho, i, s.t_ns, "position_m", s.position_m);
-    require_finite(kWho, i, s.t_ns, "velocity_m_s", s.velocity_m_s);
-    require_finite(kWho, i, s.t_ns, "acceleration_m_s2", s.acceleration_m_s2);
-    require_finite(kWho, i, s.t_ns, "angular_rate_rad_s", s.angular_rate_rad_s);
-    // The quaternion only means something for a rotation matrix; the reader
-    // accepts |q| within 1e-6 of 1, so the matrix must be that close to SO(3).
-    const bool finite = s.attitude.allFinite();
-    const double orthogonality = finite ? (s.attitude.transpose() * s.attitude - Mat3::Identity())
-                                              .cwiseAbs()
-                                              .maxCoeff()
-                                        : 0.0;
-    if (!finite || orthogonality > 1e-6 || s.attitude.determinant() <= 0.0) {
-      throw std::invalid_argument(std::string(kWho) + ": sample " + std::to_string(i) + " (t = " +
-                                  describe_time(s.t_ns) +
-                                  "): attitude is not a rotation matrix (non-finite, |R^T R - I| = " +
-                                  detail::format_double(orthogonality) + " > 1e-6, or det <= 0)");
-    }
-  }
-
+  for (std::size_t i = 0; i < states.size(); ++i) check_state(i, i > 0 ? states[i - 1].t_ns : 0, states[i]);
   AtomicFileWriter file(path);
   file.write(kinematics_csv_header(physics));
   file.write("\n");
-  char row[512];  // 1 time (<= 21) + 16 doubles (<= 24 each) + separators
-  for (const Kinematics& s : states) {
-    char* p = write_decimal_seconds(row, s.t_ns);
-    const Eigen::Vector4d q = so3::quaternion_from_matrix(s.attitude);
-    const auto put3 = [&p](const Vec3& v) {
-      for (int k = 0; k < 3; ++k) {
-        *p++ = ',';
-        p = put_double(p, v[k]);
-      }
-    };
-    put3(s.position_m);
-    for (int k = 0; k < 4; ++k) {
-      *p++ = ',';
-      p = put_double(p, q[k]);
-    }
-    put3(s.velocity_m_s);
-    put3(s.acceleration_m_s2);
-    put3(s.angular_rate_rad_s);
-    *p++ = '\n';
-    file.write(std::string_view(row, static_cast<std::size_t>(p - row)));
-  }
+  for (const Kinematics& s : states) put_state_row(file, s);
   file.commit();
 }
 

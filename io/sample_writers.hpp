@@ -71,9 +71,32 @@ std::vector<ImuSample> parse_imu_csv(std::string_view text, const std::string& s
 // read_trajectory_csv(path, {.allow_extra_columns = true}).
 std::string kinematics_csv_header(Physics physics);
 
+// Streaming writer of the kinematics file: header first, one row per
+// write(). Nothing appears at `path` until commit(); destroying an
+// uncommitted writer leaves no file.
+class KinematicsCsvWriter {
+ public:
+  KinematicsCsvWriter(const std::string& path, Physics physics);
+  // Throws std::invalid_argument (naming the state's index and field) for a
+  // non-finite value, an attitude that is not a rotation (|R^T R - I| > 1e-6
+  // or det < 0) or a time not after the previous state's; nothing is written
+  // then.
+  void write(const Kinematics& state);
+  // Throws std::invalid_argument if no state was written, std::system_error
+  // on I/O errors.
+  void commit();
+  std::size_t count() const noexcept { return count_; }
+
+ private:
+  AtomicFileWriter file_;
+  std::size_t count_ = 0;
+  TimeNs previous_ns_ = 0;
+};
+
 // Throws std::invalid_argument (naming the state's index and field) for an
 // empty vector, a non-finite value, an attitude that is not a rotation
-// (|R^T R - I| > 1e-6 or det < 0) or non-increasing times.
+// (|R^T R - I| > 1e-6 or det < 0) or non-increasing times, before creating
+// any file.
 void write_trajectory_csv(const std::string& path, const std::vector<Kinematics>& states,
                           Physics physics);
 

@@ -217,3 +217,81 @@ TEST_F(Cli, StreamReplayEqualsGenerate) {
   EXPECT_EQ(bad.exit_code, 2);
   EXPECT_NE(bad.output.find("expected file:PATH"), std::string::npos) << bad.output;
 }
+
+// ------------------------------------------- issue 13: generate streams to its writers
+// Batch generation writes each sample as it is made (daemon/batch_generation.hpp);
+// the in-memory path it replaced (run_batch, then the sensor stage over the
+// vector, then the writers) is the reference here, byte for byte.
+#include "core/pipeline.hpp"
+#include "daemon/error_model_config.hpp"
+#include "io/atomic_file.hpp"
+#include "io/sample_writers.hpp"
+#include "io/scene_poses.hpp"
+#include "io/trajectory_csv.hpp"
+
+namespace {
+std::string file_bytes(const std::string& p) {
+  std::string text;
+  EXPECT_EQ(imuemu::io::read_whole_file(p, text), 0) << p;
+  return text;
+}
+}  // namespace
+
+TEST_F(Cli, GenerateStreamedEqualsInMemoryBatchByteForByte) {
+  using namespace imuemu;
+  ASSERT_EQ(run("sample-trajectory --kind circle --duration-s 60 --period-s 0.1 --out " + path("c.csv")).exit_code, 0);
+  const CliRun g = run("generate --in " + path("c.csv") + " --out " + path("g.csv") + " --trajectory-out " +
+                       path("k.csv") + " --rate 200 --scene flat --delta 20 --sensor adis16470 --seed 3 --quiet");
+  ASSERT_EQ(g.exit_code, 0) << g.output;
+  PipelineOptions o;
+  o.scene.physics = Physics::flat;
+  o.scene.flat_gravity_m_s2 = Vec3(0.0, 0.0, 9.80665);
+  o.rate_hz = 200;
+  o.kernel.delta = 20;
+  const std::vector<Pose> knots = io::poses_in_scene(io::read_trajectory_csv(path("c.csv")), Physics::flat);
+  BatchResult b = run_batch(knots, o);
+  ASSERT_EQ(b.imu.size(), 12001u);
+  const std::uint64_t saturated = scene::apply_error_model(scene::error_model_from_option("adis16470", 3), "imu0",
+                                                           200, knots.front().t_ns, b.imu);
+  EXPECT_EQ(saturated, 0u);
+  io::write_imu_csv(path("want_imu.csv"), b.imu);
+  io::write_trajectory_csv(path("want_k.csv"), b.trajectory, Physics::flat);
+  EXPECT_EQ(file_bytes(path("g.csv")), file_bytes(path("want_imu.csv")));
+  EXPECT_EQ(file_bytes(path("k.csv")), file_bytes(path("want_k.csv")));
+}
+
+// F1: --trajectory-out that cannot be written refuses the run before --out is
+// replaced (before, --out was written first and then the run failed, exit 5).
+TEST_F(Cli, UnwritableTrajectoryOutLeavesOutUntouched) {
+  ASSERT_EQ(run("sample-trajectory --kind circle --duration-s 10 --period-s 0.1 --out " + path("c.csv")).exit_code, 0);
+  write("imu.csv", "old\n");
+  const CliRun r = run("generate --quiet --scene flat --in " + path("c.csv") + " --out " + path("imu.csv") +
+                       " --trajectory-out " + path("missing/k.csv"));
+  EXPECT_EQ(r.exit_code, 5) << r.output;
+  EXPECT_EQ(file_bytes(path("imu.csv")), "old\n");
+  for (const auto& e : fs::directory_iterator(dir_))
+    EXPECT_TRUE(e.path().filename() == "c.csv" || e.path().filename() == "imu.csv") << e.path();
+}
+
+// A run refused after samples were already streamed out (a gap beyond
+// --max-gap-s at the end) replaces neither file and leaves no temporary.
+TEST_F(Cli, RefusalAfterStreamingStartedLeavesNoOutput) {
+  std::string text = "time_s,north_m,east_m,down_m,heading_deg,pitch_deg,roll_deg\n";
+  for (int t = 0; t <= 60; ++t) text += std::to_string(t) + "," + std::to_string(10 * t) + ",0,0,0,0,0\n";
+  text += "90,900,0,0,0,0,0\n";  // 30 s after the previous knot
+  write("gap.csv", text);
+  write("imu.csv", "old\n");
+  write("k.csv", "old k\n");
+  const CliRun r = run("generate --quiet --scene flat --rate 400 --in " + path("gap.csv") + " --out " + path("imu.csv") +
+                       " --trajectory-out " + path("k.csv"));
+  EXPECT_EQ(r.exit_code, 4) << r.output;
+  EXPECT_NE(r.output.find("gap limit"), std::string::npos) << r.output;
+  EXPECT_EQ(file_bytes(path("imu.csv")), "old\n");
+  EXPECT_EQ(file_bytes(path("k.csv")), "old k\n");
+  std::size_t files = 0;
+  for (const auto& e : fs::directory_iterator(dir_)) {
+    ++files;
+    EXPECT_EQ(e.path().string().find(".tmp."), std::string::npos) << e.path();
+  }
+  EXPECT_EQ(files, 3u);
+}

@@ -29,6 +29,7 @@
 #include <vector>
 
 #include "core/reference_motion.hpp"
+#include "daemon/arrival_jitter.hpp"
 #include "daemon/listen_command.hpp"
 #include "drivers/protocols/stream_protocols.hpp"
 #include "drivers/pty_transport.hpp"
@@ -639,4 +640,119 @@ TEST(ListenCan, DroneCanAndJ1939FromAVirtualCanBus) {
     }
     std::printf("%s", imuemu::cli::summary_text(summary).c_str());
   }
+}
+
+// ---------------------------------------------------------------- R3 (issue 13)
+// listen's arrival-jitter statistics in bounded memory (daemon/arrival_jitter.hpp):
+// before, 8 bytes per sample forever (~0.7 GB a day at 1 kHz).
+
+namespace {
+
+using imuemu::cli::ArrivalJitter;
+using imuemu::cli::JitterSummary;
+
+// The independent truth: every |d - nominal| sorted, nearest rank.
+JitterSummary exact_jitter(const std::vector<imuemu::TimeNs>& intervals, double nominal_ns) {
+  std::vector<double> j;
+  for (const imuemu::TimeNs d : intervals) j.push_back(std::abs(static_cast<double>(d) - nominal_ns) * 1e-3);
+  std::sort(j.begin(), j.end());
+  const auto at = [&](double p) {
+    auto rank = static_cast<std::size_t>(std::ceil(p * static_cast<double>(j.size())));
+    rank = std::clamp<std::size_t>(rank, 1, j.size());
+    return j[rank - 1];
+  };
+  return {at(0.5), at(0.99), j.back()};
+}
+
+// A pty reader's arrival intervals at 1 kHz: 1 ms with Gaussian jitter, some
+// samples of one read (interval 0) and some late wake-ups (up to 3 ms).
+std::vector<imuemu::TimeNs> live_like_intervals(std::size_t n, unsigned seed) {
+  std::mt19937_64 rng(seed);
+  std::normal_distribution<double> jitter_ns(0.0, 5000.0);
+  std::uniform_real_distribution<double> u(0.0, 1.0);
+  std::vector<imuemu::TimeNs> out;
+  out.reserve(n);
+  for (std::size_t i = 0; i < n; ++i) {
+    const double r = u(rng);
+    if (r < 0.02) out.push_back(0);
+    else if (r < 0.03) out.push_back(static_cast<imuemu::TimeNs>(1e6 + u(rng) * 2e6));
+    else out.push_back(static_cast<imuemu::TimeNs>(std::llround(1e6 + jitter_ns(rng))));
+  }
+  return out;
+}
+
+double mean_of(const std::vector<imuemu::TimeNs>& v) {
+  long double sum = 0.0L;
+  for (const imuemu::TimeNs d : v) sum += static_cast<long double>(d);
+  return static_cast<double>(sum / static_cast<long double>(v.size()));
+}
+
+}  // namespace
+
+// Up to kExactIntervals the summary is the exact one (what listen always
+// printed before).
+TEST(ArrivalJitter, ShortRunsAreExact) {
+  const auto intervals = live_like_intervals(ArrivalJitter::kExactIntervals, 1);
+  ArrivalJitter stats;
+  for (const imuemu::TimeNs d : intervals) stats.record(d);
+  ASSERT_TRUE(stats.exact());
+  const double nominal_ns = mean_of(intervals);
+  const JitterSummary want = exact_jitter(intervals, nominal_ns);
+  const JitterSummary got = *stats.summary(nominal_ns);
+  EXPECT_EQ(got.p50_us, want.p50_us);
+  EXPECT_EQ(got.p99_us, want.p99_us);
+  EXPECT_EQ(got.max_us, want.max_us);
+  EXPECT_FALSE(ArrivalJitter().summary(1e6).has_value());
+}
+
+// Beyond, the histogram: never below the exact percentile, above it by at
+// most one bucket (1 % of |d - reference|, 2 ns at the centre); the maximum
+// exact. With and without a known nominal interval.
+TEST(ArrivalJitter, LongRunsWithinOneBucketOfExact) {
+  const auto intervals = live_like_intervals(400'000, 2);
+  for (const bool expected : {false, true}) {
+    ArrivalJitter stats(expected ? 1e6 : 0.0);
+    for (const imuemu::TimeNs d : intervals) stats.record(d);
+    ASSERT_FALSE(stats.exact());
+    const double nominal_ns = expected ? 1e6 : mean_of(intervals);
+    // The reference the histogram measures from: the nominal, or the mean
+    // of the first kExactIntervals intervals.
+    const double reference_ns =
+        expected ? 1e6
+                 : mean_of(std::vector<imuemu::TimeNs>(intervals.begin(),
+                                                       intervals.begin() + ArrivalJitter::kExactIntervals));
+    const double shift_us = std::abs(nominal_ns - reference_ns) * 1e-3;
+    const JitterSummary want = exact_jitter(intervals, nominal_ns);
+    const JitterSummary got = *stats.summary(nominal_ns);
+    std::cout << (expected ? "expected rate" : "mean interval") << ": p50 " << got.p50_us << " us (exact "
+              << want.p50_us << "), p99 " << got.p99_us << " us (exact " << want.p99_us << "), max " << got.max_us
+              << " us\n";
+    for (const auto& [g, w] : {std::pair{got.p50_us, want.p50_us}, std::pair{got.p99_us, want.p99_us}}) {
+      EXPECT_GE(g, w - 1e-9);
+      EXPECT_LE(g, w + 0.01 * (w + shift_us) + 0.002);
+    }
+    EXPECT_EQ(got.max_us, want.max_us);
+    EXPECT_GT(want.p50_us, 1.0);  // the case is not degenerate: microseconds of jitter
+  }
+}
+
+// The bound itself: the memory held is the same after 2.8 h of 1 kHz
+// samples as after 33 s, and a fraction of what 8 bytes a sample would be.
+TEST(ArrivalJitter, MemoryDoesNotGrowWithTheRun) {
+  ArrivalJitter stats;
+  const auto intervals = live_like_intervals(100'000, 3);
+  std::size_t after_switch = 0;
+  constexpr std::size_t kIntervals = 10'000'000;
+  for (std::size_t i = 0; i < kIntervals; ++i) {
+    stats.record(intervals[i % intervals.size()]);
+    if (i == 2 * ArrivalJitter::kExactIntervals) after_switch = stats.memory_bytes();
+  }
+  EXPECT_EQ(stats.count(), kIntervals);
+  EXPECT_EQ(stats.memory_bytes(), after_switch);
+  EXPECT_LE(stats.memory_bytes(), ArrivalJitter::kBuckets * sizeof(std::uint64_t));
+  EXPECT_LE(stats.memory_bytes(), std::size_t{200} * 1024);
+  EXPECT_LT(stats.memory_bytes() * 100, kIntervals * sizeof(imuemu::TimeNs));  // before: 80 MB
+  const JitterSummary j = *stats.summary(1e6);
+  EXPECT_LE(j.p50_us, j.p99_us);
+  EXPECT_LE(j.p99_us, j.max_us);
 }
