@@ -44,7 +44,7 @@ inline constexpr std::uint64_t kMaxBatchSamples = 1'000'000'000;
 // need a million per end (500 MB), 1 ns apart a billion. Beyond this count
 // the virtual knots are spread over the padding at pad / kMaxPaddingKnots
 // (still on the extrapolated curve), so their number never exceeds it.
-inline constexpr std::int64_t kMaxPaddingKnots = 65'536;
+inline constexpr std::int64_t kMaxPaddingKnots = 4096;
 
 // Position coordinates (m) of a trajectory (heights, ECEF, local NED): a
 // million km. Beyond it the physics squares them into inf (h_m = 1e300 ended

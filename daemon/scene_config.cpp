@@ -341,8 +341,8 @@ void parse_trajectory_section(const Table& t, const SceneConfig& scene, Trajecto
   if (out.kind == SourceKind::sample &&
       out.duration_s / out.knot_interval_s + 1.0 > static_cast<double>(limits::kMaxKnots))
     t.fail_at(t.has("knot_interval_s") ? "knot_interval_s" : "duration_s",
-              "duration_s / knot_interval_s gives more than " + std::to_string(limits::kMaxKnots) +
-                  " built-in knots; use a longer knot interval");
+              "duration_s / knot_interval_s gives more than " + std::to_string(limits::kMaxKnots / 1'000'000) +
+                  " million built-in knots; use a longer knot interval");
   out.loop = t.boolean("loop", false);
   out.start = t.choice("start", "now", {"now", "next-second"}) == "now" ? StartAlignment::now : StartAlignment::next_second;
 }
@@ -707,10 +707,12 @@ SceneConfig parse_document(const Context& ctx, const toml::table& root) {
     scene.imus.push_back(parse_imu(t));
     // A window beyond a million samples is a unit mistake, and would make
     // the engine allocate gigabytes for its kernel.
+    const double window_samples = std::round(scene.smoothing.window_s.value_or(scene.trajectory.knot_interval_s) *
+                                             static_cast<double>(scene.imus.back().rate_hz));
     const int delta = pipeline_options(scene, scene.imus.back()).kernel.delta;
     if (delta > limits::kMaxWindowSamples)
       ctx.fail(imus[i].source(), t.path(),
-               "the smoothing window is more than " + std::to_string(limits::kMaxWindowSamples) + " samples at " +
+               "the smoothing window is " + std::to_string(static_cast<long long>(window_samples)) + " samples at " +
                    std::to_string(scene.imus.back().rate_hz) +
                    " Hz (smoothing.window_s, or trajectory.knot_interval_s by default); at most " +
                    std::to_string(limits::kMaxWindowSamples));
