@@ -7,6 +7,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "core/limits.hpp"
 #include "core/stream.hpp"
 
 namespace imuemu {
@@ -61,16 +62,38 @@ double output_grid_fraction_ns(std::size_t k, std::int64_t rate_hz) {
   return static_cast<double>(((ks % rate_hz) * kNsPerSecond) % rate_hz) / static_cast<double>(rate_hz);
 }
 
+std::uint64_t batch_sample_count(const std::vector<Pose>& knots, std::int64_t rate_hz) {
+  if (knots.size() > limits::kMaxKnots)
+    throw limits::SizeLimitError(std::to_string(knots.size()) + " knots: more than the " +
+                                 std::to_string(limits::kMaxKnots) + " a trajectory may hold (split it)");
+  if (knots.size() < 2)
+    throw std::invalid_argument("interpolation needs at least 2 knots, got " + std::to_string(knots.size()));
+  const std::uint64_t samples = limits::grid_sample_count(knots.front().t_ns, knots.back().t_ns, rate_hz);
+  const std::string span = "the trajectory spans " +
+                           std::to_string(seconds_between(knots.front().t_ns, knots.back().t_ns)) + " s (knots 0 to " +
+                           std::to_string(knots.size() - 1) + ")";
+  if (samples < 2)
+    throw limits::SizeLimitError(span + ": shorter than two output samples at " + std::to_string(rate_hz) + " Hz");
+  if (samples > limits::kMaxBatchSamples)
+    throw limits::SizeLimitError(span + ": " + std::to_string(samples) + " output samples at " +
+                                 std::to_string(rate_hz) + " Hz, more than the " +
+                                 std::to_string(limits::kMaxBatchSamples) + " of one batch run");
+  return samples;
+}
+
 BatchResult run_batch(const std::vector<Pose>& knots, const PipelineOptions& options,
                       const ProgressFn& progress) {
   // The batch path is a loop over the streaming engine: one implementation.
+  // The knots' own rules first (their message names the knots), then the
+  // derived sizes before anything is allocated for them (core/limits.hpp).
+  interp::check_knots(knots);
+  const std::uint64_t expected = batch_sample_count(knots, options.rate_hz);
   BatchResult result;
-  if (knots.size() >= 2 && knots.back().t_ns > knots.front().t_ns) {  // run_streaming refuses the rest
-    const std::size_t expected = static_cast<std::size_t>(
-        seconds_between(knots.front().t_ns, knots.back().t_ns) * static_cast<double>(options.rate_hz) + 2.0);
-    result.trajectory.reserve(expected);
-    result.imu.reserve(expected);
-  }
+  // A bounded first reservation: the vectors grow with what the run really
+  // produces, and a large count is never reserved before any work.
+  constexpr std::uint64_t kMaxReservedSamples = std::uint64_t{1} << 22;
+  result.trajectory.reserve(static_cast<std::size_t>(std::min(expected, kMaxReservedSamples)));
+  result.imu.reserve(static_cast<std::size_t>(std::min(expected, kMaxReservedSamples)));
   run_streaming(
       knots, options,
       [&](const StreamSample& sample) {

@@ -139,6 +139,12 @@ struct GapError : interp::InterpolationError {
   using interp::InterpolationError::InterpolationError;
 };
 
+// Output samples a batch run over `knots` makes (the grid from the first to
+// the last knot), checked against core/limits.hpp before any work: throws
+// limits::SizeLimitError for more than kMaxKnots knots, fewer than two or
+// more than kMaxBatchSamples samples (README: exit 4).
+std::uint64_t batch_sample_count(const std::vector<Pose>& knots, std::int64_t rate_hz);
+
 // Runs the whole batch method. Throws interp::InterpolationError for knots the
 // method cannot interpolate (GapError for gaps) and std::invalid_argument for
 // bad options (rate not positive or above 1 MHz, fewer than two output

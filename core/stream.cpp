@@ -1,5 +1,7 @@
 #include "core/stream.hpp"
 
+#include "core/limits.hpp"
+
 #include <algorithm>
 #include <array>
 #include <cmath>
@@ -55,7 +57,11 @@ class KernelMoments {
 std::vector<Pose> extend(const Pose& from, const Pose& towards, const Pose& beyond, bool quadratic, TimeNs pad_ns) {
   std::vector<Pose> out;
   const bool before = towards.t_ns > from.t_ns;
-  const TimeNs h = static_cast<TimeNs>(ns_between(std::min(from.t_ns, towards.t_ns), std::max(from.t_ns, towards.t_ns)));
+  const TimeNs end_h = static_cast<TimeNs>(ns_between(std::min(from.t_ns, towards.t_ns), std::max(from.t_ns, towards.t_ns)));
+  // The end interval, or wider when that would take more than
+  // kMaxPaddingKnots virtual knots to cover the padding (knots 1 ns apart
+  // and a 1 s padding: a billion); the virtual knots stay on the curve.
+  const TimeNs h = std::max(end_h, pad_ns / limits::kMaxPaddingKnots + 1);
   const Vec3 xi = so3::log(towards.attitude.transpose() * from.attitude);  // one step away from `towards`
   const double t1 = seconds_between(from.t_ns, towards.t_ns), t2 = seconds_between(from.t_ns, beyond.t_ns);
   const Vec3 y1 = towards.position_m - from.position_m, y2 = beyond.position_m - from.position_m;
@@ -69,7 +75,9 @@ std::vector<Pose> extend(const Pose& from, const Pose& towards, const Pose& beyo
     // Lagrange through (0, 0), (t1, y1), (t2, y2), relative to `from`.
     const Vec3 offset = quadratic ? Vec3(t * (t - t2) / (t1 * (t1 - t2)) * y1 + t * (t - t1) / (t2 * (t2 - t1)) * y2)
                                   : Vec3(t / t1 * y1);
-    out.push_back({t_ns, from.position_m + offset, from.attitude * so3::exp(kd * xi)});
+    // Constant body rate: xi per end interval (k of them when h is the end interval).
+    const double steps = h == end_h ? kd : static_cast<double>(step_ns) / static_cast<double>(end_h);
+    out.push_back({t_ns, from.position_m + offset, from.attitude * so3::exp(steps * xi)});
   }
   return out;
 }
@@ -665,6 +673,10 @@ StreamPipeline::StreamPipeline(const PipelineOptions& options) : options_(option
   if (options.rate_hz <= 0 || options.rate_hz > 1'000'000)
     throw std::invalid_argument("output rate " + std::to_string(options.rate_hz) + " Hz: expected 1..1000000");
   if (!(options.max_gap_s > 0.0)) throw std::invalid_argument("max gap must be > 0 s");
+  // The one cap on the window (core/limits.hpp), whoever chose Delta.
+  if (options.kernel.delta > limits::kMaxWindowSamples)
+    throw limits::SizeLimitError("smoothing window Delta " + std::to_string(options.kernel.delta) +
+                                 " samples: at most " + std::to_string(limits::kMaxWindowSamples));
   // Construct one run now so bad kernel/spline options fail here, not at the first knot.
   run_ = std::make_unique<Run>(options_, out_, 0);
 }
@@ -680,30 +692,8 @@ std::string knot_name(std::size_t index, TimeNs t_ns) {
 void StreamPipeline::push(const Pose& knot) {
   if (finished_) throw std::logic_error("StreamPipeline::push after finish");
   // Every knot-level rule first; nothing changes until they all pass.
-  interp::check_knot_finite(knot, knots_pushed_);
-  bool gap = false;
-  if (knots_pushed_ > 0) {
-    interp::check_next_knot(last_knot_, knot, knots_pushed_);
-    const auto max_gap_ns = static_cast<std::uint64_t>(std::min(options_.max_gap_s, 1e9) * 1e9);
-    const std::uint64_t step_ns = ns_between(last_knot_.t_ns, knot.t_ns);  // exact for any ordered pair
-    if (step_ns > max_gap_ns) {
-      if (options_.gap_policy == GapPolicy::error)
-        throw GapError("knots " + std::to_string(knots_pushed_ - 1) + " (t=" + knot_time(last_knot_.t_ns) + ") and " +
-                       std::to_string(knots_pushed_) + " (t=" + knot_time(knot.t_ns) + ") are " +
-                       std::to_string(static_cast<double>(step_ns) * 1e-9) + " s apart, more than the " +
-                       std::to_string(options_.max_gap_s) +
-                       " s gap limit: raise the limit or split the trajectory at gaps");
-      // GapPolicy::split: the stretch before the gap ends here, with its own
-      // end windows; the next starts at this knot.
-      if (run_->real_knots() < 2)
-        throw GapError("knot " + std::to_string(run_first_knot_) + " (t=" + knot_time(last_knot_.t_ns) +
-                       ") is isolated between two gaps: a segment needs at least two knots");
-      gap = true;
-    }
-  }
+  const bool gap = check_knot(knot);
   const bool new_run = knots_pushed_ == 0 || gap;
-  check_padding(knot, new_run);
-  check_chart_span(knot, new_run);
 
   // The knot is acceptable on its own; what is left can only fail inside the
   // run (a window spanning too much rotation), which Run::push rolls back.
@@ -725,7 +715,14 @@ void StreamPipeline::push(const Pose& knot) {
     out_.resize(out_before);
     throw;
   }
-  // Commit.
+  record(knot, new_run);
+  if (!out_.empty()) {
+    newest_output_ns_ = out_.back().kinematics.t_ns;
+    any_output_ = true;
+  }
+}
+
+void StreamPipeline::record(const Pose& knot, bool new_run) {
   if (knots_pushed_ == 0) first_knot_ns_ = knot.t_ns;
   if (new_run) {
     run_first_knot_ = knots_pushed_;
@@ -736,10 +733,51 @@ void StreamPipeline::push(const Pose& knot) {
     recent_.pop_front();
   last_knot_ = knot;
   ++knots_pushed_;
-  if (!out_.empty()) {
-    newest_output_ns_ = out_.back().kinematics.t_ns;
-    any_output_ = true;
+}
+
+void StreamPipeline::check_last_run() const {
+  if (knots_in_run() >= 2) return;
+  if (knots_pushed_ < 2)
+    throw interp::InterpolationError("interpolation needs at least 2 knots, got " + std::to_string(knots_pushed_));
+  throw GapError("knot " + std::to_string(run_first_knot_) + " (t=" + knot_time(last_knot_.t_ns) +
+                 ") is isolated between two gaps: a segment needs at least two knots");
+}
+
+void StreamPipeline::check_trajectory(const std::vector<Pose>& knots, const PipelineOptions& options) {
+  StreamPipeline rules(options);
+  for (const Pose& knot : knots) {
+    const bool gap = rules.check_knot(knot);
+    rules.record(knot, rules.knots_pushed_ == 0 || gap);
   }
+  rules.check_last_run();
+}
+
+bool StreamPipeline::check_knot(const Pose& knot) const {
+  interp::check_knot_finite(knot, knots_pushed_);
+  bool gap = false;
+  if (knots_pushed_ > 0) {
+    interp::check_next_knot(last_knot_, knot, knots_pushed_);
+    const auto max_gap_ns = static_cast<std::uint64_t>(std::min(options_.max_gap_s, 1e9) * 1e9);
+    const std::uint64_t step_ns = ns_between(last_knot_.t_ns, knot.t_ns);  // exact for any ordered pair
+    if (step_ns > max_gap_ns) {
+      if (options_.gap_policy == GapPolicy::error)
+        throw GapError("knots " + std::to_string(knots_pushed_ - 1) + " (t=" + knot_time(last_knot_.t_ns) + ") and " +
+                       std::to_string(knots_pushed_) + " (t=" + knot_time(knot.t_ns) + ") are " +
+                       std::to_string(static_cast<double>(step_ns) * 1e-9) + " s apart, more than the " +
+                       std::to_string(options_.max_gap_s) +
+                       " s gap limit: raise the limit or split the trajectory at gaps");
+      // GapPolicy::split: the stretch before the gap ends here, with its own
+      // end windows; the next starts at this knot.
+      if (knots_in_run() < 2)
+        throw GapError("knot " + std::to_string(run_first_knot_) + " (t=" + knot_time(last_knot_.t_ns) +
+                       ") is isolated between two gaps: a segment needs at least two knots");
+      gap = true;
+    }
+  }
+  const bool new_run = knots_pushed_ == 0 || gap;
+  check_padding(knot, new_run);
+  check_chart_span(knot, new_run);
+  return gap;
 }
 
 // Ends::extrapolate pads pad_ns, plus one knot interval h, before a run's
@@ -760,7 +798,7 @@ void StreamPipeline::check_padding(const Pose& knot, bool new_run) const {
   const TimeNs reach_ns = saturating_add_ns(pad_ns, h_ns);
   if (!checked_add_ns(knot.t_ns, reach_ns)) refuse(knots_pushed_, knot.t_ns, reach_ns, "after");
   if (new_run && !checked_sub_ns(knot.t_ns, pad_ns)) refuse(knots_pushed_, knot.t_ns, pad_ns, "before");
-  if (!new_run && run_->real_knots() == 1 && !checked_sub_ns(last_knot_.t_ns, reach_ns))
+  if (!new_run && knots_in_run() == 1 && !checked_sub_ns(last_knot_.t_ns, reach_ns))
     refuse(run_first_knot_, last_knot_.t_ns, reach_ns, "before");
 }
 
@@ -790,12 +828,7 @@ void StreamPipeline::check_chart_span(const Pose& knot, bool new_run) const {
 
 void StreamPipeline::finish() {
   if (finished_) return;
-  if (run_->real_knots() < 2) {
-    if (knots_pushed_ < 2)
-      throw interp::InterpolationError("interpolation needs at least 2 knots, got " + std::to_string(knots_pushed_));
-    throw GapError("knot " + std::to_string(run_first_knot_) + " (t=" + knot_time(last_knot_.t_ns) +
-                   ") is isolated between two gaps: a segment needs at least two knots");
-  }
+  check_last_run();
   run_->finish();
   finished_ = true;
   if (!out_.empty()) {
@@ -839,8 +872,10 @@ TimeNs StreamPipeline::lookahead_ns(const PipelineOptions& output_options, TimeN
 
 void run_streaming(const std::vector<Pose>& knots, const PipelineOptions& options, const StreamSampleSink& sink,
                    const ProgressFn& progress) {
-  // Whole-list checks first, so a bad file is refused before any work.
+  // Whole-list checks first, so a bad file is refused before any work, and
+  // the derived sizes before anything is allocated for them (core/limits.hpp).
   interp::check_knots(knots);
+  (void)batch_sample_count(knots, options.rate_hz);
   // Park-Ravani's recursion diverges on long trajectories; the whole list is
   // at hand, so say so (naming the knots) before its wild attitudes reach the
   // smoother, which would only report a window spanning too much rotation.

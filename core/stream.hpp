@@ -69,8 +69,22 @@ class StreamPipeline {
   // (interp::Options::spline_window_knots).
   static TimeNs lookahead_ns(const PipelineOptions& options, TimeNs knot_interval_ns);
 
+  // Every knot-level rule push() and finish() apply (finite, strictly
+  // increasing, not antipodal, gaps, end padding within int64, the chart
+  // span), over a whole trajectory, without computing a sample: throws what
+  // push() or finish() would throw for the first knot they would refuse.
+  // imuemud --check-config uses it to say what a start would refuse.
+  static void check_trajectory(const std::vector<Pose>& knots, const PipelineOptions& options);
+
  private:
   class Run;  // one gap-free stretch of knots
+  // The knot-level rules of push (nothing changes); true if the knot starts
+  // a new run after a gap (GapPolicy::split).
+  bool check_knot(const Pose& knot) const;
+  // Commits an accepted knot to the bookkeeping the rules read.
+  void record(const Pose& knot, bool new_run);
+  void check_last_run() const;
+  std::size_t knots_in_run() const { return knots_pushed_ - run_first_knot_; }
   void check_padding(const Pose& knot, bool new_run) const;
   void check_chart_span(const Pose& knot, bool new_run) const;
   PipelineOptions options_;

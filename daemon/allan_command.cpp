@@ -25,6 +25,7 @@
 #include <CLI/CLI.hpp>
 #include <nlohmann/json.hpp>
 
+#include "daemon/cli_options.hpp"
 #include "daemon/commands.hpp"
 #include "io/decimal_time.hpp"
 #include "io/sample_writers.hpp"
@@ -745,14 +746,14 @@ void add_allan_command(CLI::App& app, int& exit_code) {
   c->add_option("--axes", a->axes, "Which axes: all, gyro or accel")->capture_default_str()
       ->check(CLI::IsMember({"all", "gyro", "accel"}));
   c->add_option("--rate", a->rate_hz, "Nominal sample rate in Hz (needed when the capture has no sample times)")
-      ->check(CLI::PositiveNumber);
+      ->check(finite_in(0.0, 1e9, true));
   c->add_option("--points-per-decade", a->points_per_decade, "tau grid density")->capture_default_str()
       ->check(CLI::Range(1, 1000));
   c->add_option("--max-tau-fraction", a->max_tau_fraction, "Largest tau as a fraction of the record (<= 0.5)")
-      ->capture_default_str();
+      ->capture_default_str()->check(finite_in(0.0, 0.5, true));
   c->add_option("--confidence", a->confidence, "Confidence of the intervals")->capture_default_str();
-  c->add_option("--fit-min-tau-s", a->fit_min_tau_s, "Fit only tau >= this (s)");
-  c->add_option("--fit-max-tau-s", a->fit_max_tau_s, "Fit only tau <= this (s)");
+  c->add_option("--fit-min-tau-s", a->fit_min_tau_s, "Fit only tau >= this (s)")->check(seconds_in(0.0, kMaxDurationS));
+  c->add_option("--fit-max-tau-s", a->fit_max_tau_s, "Fit only tau <= this (s)")->check(seconds_in(0.0, kMaxDurationS));
   c->add_option("--terms", a->terms,
                 "Fit terms: comma list of q (quantization), n (ARW/VRW), b (bias instability), k (rate random walk), "
                 "r (rate ramp)")

@@ -27,6 +27,7 @@
 #include <vector>
 
 #include "core/reference_motion.hpp"
+#include "daemon/cli_options.hpp"
 #include "daemon/commands.hpp"
 #include "daemon/emission.hpp"
 #include "drivers/protocols/stream_protocols.hpp"
@@ -167,7 +168,7 @@ void add_bench_timing_command(CLI::App& app, int& exit_code) {
   auto args = std::make_shared<BenchTimingArgs>();
   auto* c = bench->add_subcommand("timing", "Emission lateness and CPU against a bare clock_nanosleep loop at the same rate");
   c->add_option("--rate", args->rate_hz, "Output rate (Hz)")->capture_default_str()->check(CLI::Range(1, 1000000));
-  c->add_option("--seconds", args->seconds, "Duration of each run")->capture_default_str()->check(CLI::PositiveNumber);
+  c->add_option("--seconds", args->seconds, "Duration of each run")->capture_default_str()->check(seconds_in(0.0, kMaxDurationS, true));
   c->add_option("--devices", args->devices, "Devices on the emission thread")->capture_default_str()->check(CLI::Range(1, 64));
   c->add_option("--priority", args->priority, "SCHED_FIFO priority (1..99; 0: normal)")->capture_default_str()->check(CLI::Range(0, 99));
   c->add_option("--protocol", args->protocol, "Stream encoder")->capture_default_str()

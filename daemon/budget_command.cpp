@@ -10,6 +10,7 @@
 #include <string>
 #include <vector>
 
+#include "daemon/cli_options.hpp"
 #include "daemon/commands.hpp"
 #include "drivers/link_budget.hpp"
 #include "drivers/protocols/can_protocols.hpp"
@@ -34,15 +35,15 @@ void add_budget_command(CLI::App& app, int& exit_code) {
 
   auto* c = app.add_subcommand("budget", "Link budget of a device: the real encoder's traffic against the UART or CAN bus (worst-case stuffing); warns above 70 %, refuses above 100 %");
   c->add_option("--protocol", o->protocol, "Wire protocol")->required()->check(CLI::IsMember(protocols));
-  c->add_option("--rate", o->rate_hz, "Sample rate (Hz)")->capture_default_str()->check(CLI::PositiveNumber);
+  c->add_option("--rate", o->rate_hz, "Sample rate (Hz)")->capture_default_str()->check(finite_in(0.0, 1e6, true));
   c->add_option("--baud", o->serial.baud, "UART: baud rate")->capture_default_str()->check(CLI::PositiveNumber);
   c->add_option("--data-bits", o->serial.data_bits, "UART: data bits")->capture_default_str()->check(CLI::Range(5, 8));
   c->add_option("--parity", o->parity, "UART: none|odd|even|mark|space")->capture_default_str()
       ->check(CLI::IsMember({"none", "odd", "even", "mark", "space"}));
   c->add_option("--stop-bits", o->serial.stop_bits, "UART: 1 or 2")->capture_default_str()->check(CLI::IsMember({1, 2}));
-  c->add_option("--bitrate", o->can_rates.nominal_bit_rate, "CAN: nominal bit rate")->capture_default_str()->check(CLI::PositiveNumber);
+  c->add_option("--bitrate", o->can_rates.nominal_bit_rate, "CAN: nominal bit rate")->capture_default_str()->check(finite_in(0.0, 1e9, true));
   c->add_option("--data-bitrate", o->can_rates.data_bit_rate, "CAN FD: data phase bit rate (frames with BRS)")->capture_default_str()
-      ->check(CLI::PositiveNumber);
+      ->check(finite_in(0.0, 1e9, true));
   c->add_flag("--brs", o->brs, "CAN FD frames use the bit rate switch");
   c->add_flag("--json", o->json, "Print the budget as one JSON object");
 

@@ -13,6 +13,9 @@
 #include <unordered_map>
 
 #include "core/attitude.hpp"
+#include "core/limits.hpp"
+#include "core/time_arith.hpp"
+#include "daemon/cli_options.hpp"
 #include "core/mounting.hpp"
 #include "core/stream.hpp"
 #include "daemon/batch_generation.hpp"
@@ -60,17 +63,31 @@ class ProgressBar {
   std::chrono::steady_clock::time_point start_ = std::chrono::steady_clock::now();
 };
 
+std::string number(double v) {
+  char buf[64];
+  const auto res = std::to_chars(buf, buf + sizeof buf, v);
+  return std::string(buf, res.ptr);
+}
+
 // Default window in median knot intervals: the C2 Hermite base curve needs
 // only +-1; the two-point methods' chord polygon has impulsive acceleration at
 // the knots, and a bump one interval wide leaves an 18% ripple at the knot
 // rate, two intervals 0.7% (tests/test_pipeline.cpp, circle).
+// The window is capped where every window is (limits::kMaxWindowSamples):
+// two knots an hour apart at 4 kHz asked for 14.4 million samples.
 int auto_delta(const std::vector<Pose>& knots, std::int64_t rate_hz, double intervals) {
   if (knots.size() < 2) return 0;
   std::vector<TimeNs> steps;
   for (std::size_t i = 1; i < knots.size(); ++i) steps.push_back(knots[i].t_ns - knots[i - 1].t_ns);
   std::nth_element(steps.begin(), steps.begin() + static_cast<std::ptrdiff_t>(steps.size() / 2), steps.end());
   const double median_s = static_cast<double>(steps[steps.size() / 2]) * 1e-9;
-  return std::max(1, static_cast<int>(std::lround(intervals * median_s * static_cast<double>(rate_hz))));
+  const std::optional<int> delta = window_samples(intervals * median_s, rate_hz);
+  if (!delta)
+    throw limits::SizeLimitError("the automatic window (" + number(intervals) + " median knot interval(s) of " +
+                                 number(median_s) + " s at " + std::to_string(rate_hz) + " Hz) is more than " +
+                                 std::to_string(limits::kMaxWindowSamples) +
+                                 " samples; give --delta or a lower --rate, or add knots");
+  return *delta;
 }
 
 Physics physics_from(const std::string& scene) { return scene == "flat" ? Physics::flat : Physics::ecef; }
@@ -82,18 +99,15 @@ SceneModel scene_model(const std::string& scene, double gravity_m_s2) {
   return m;
 }
 
-std::string number(double v) {
-  char buf[64];
-  const auto res = std::to_chars(buf, buf + sizeof buf, v);
-  return std::string(buf, res.ptr);
-}
-
 // Errors from files become messages with the file:line:column the reader put
 // in them, and a meaningful exit code.
 template <typename Fn>
 int run_guarded(Fn&& fn) {
   try {
     return fn();
+  } catch (const UsageError& e) {
+    std::cerr << "imuemu: " << e.what() << "\n";
+    return kUsageError;
   } catch (const io::CsvFormatError& e) {
     std::cerr << "imuemu: " << e.what() << "\n";
     return kBadInput;
@@ -147,11 +161,12 @@ int generate_for_scene(const GenerateArgs& args) {
   for (const Pose& p : scene::scene_trajectory(sc)) knots.push_back(sensor_pose(p, imu->mounting));
   TimeNs end_ns = std::numeric_limits<TimeNs>::max();
   if (args.max_seconds > 0 && knots.size() >= 2) {
-    end_ns = knots.front().t_ns + static_cast<TimeNs>(std::llround(args.max_seconds * 1e9));
+    end_ns = saturating_add_ns(knots.front().t_ns, option_ns("--max-seconds", args.max_seconds));
     // A sample sees knots up to its look-ahead: beyond it (plus a margin of
     // knots) nothing changes the samples kept.
-    const TimeNs interval_ns = static_cast<TimeNs>(std::llround(sc.trajectory.knot_interval_s * 1e9));
-    const TimeNs keep_ns = end_ns + StreamPipeline::lookahead_ns(opt, interval_ns) + 10 * interval_ns;
+    const TimeNs interval_ns = option_ns("knot_interval_s", sc.trajectory.knot_interval_s);
+    const TimeNs keep_ns = saturating_add_ns(
+        saturating_add_ns(end_ns, StreamPipeline::lookahead_ns(opt, interval_ns)), saturating_mul_ns(interval_ns, 10));
     while (knots.size() > 2 && knots.back().t_ns > keep_ns) knots.pop_back();
   }
   const scene::ErrorModelConfig model =
@@ -222,7 +237,7 @@ int verify(const VerifyArgs& args) {
   return run_guarded([&] {
     std::vector<ImuSample> imu = io::read_imu_csv(args.imu_path);
     if (args.start_s > 0.0 && !imu.empty()) {
-      const TimeNs start_ns = imu.front().t_ns + static_cast<TimeNs>(std::llround(args.start_s * 1e9));
+      const TimeNs start_ns = saturating_add_ns(imu.front().t_ns, option_ns("--start-s", args.start_s));
       imu.erase(imu.begin(), std::lower_bound(imu.begin(), imu.end(), start_ns,
                                               [](const ImuSample& s, TimeNs t) { return s.t_ns < t; }));
     }
@@ -261,7 +276,7 @@ int verify(const VerifyArgs& args) {
     std::printf("%12s %14s %14s %14s %14s\n", "time_s", "pos_err_m", "horiz_err_m", "vert_err_m", "att_err_rad");
     double max_pos = 0.0, max_h = 0.0, max_v = 0.0, max_att = 0.0;
     TimeNs next_report = imu.front().t_ns;
-    const auto report_step = static_cast<TimeNs>(std::max(args.report_every_s, 1e-3) * 1e9);
+    const TimeNs report_step = option_ns("--report-every-s", std::max(args.report_every_s, 1e-3));
     for (std::size_t i = 0; i < states.size(); ++i) {
       const auto it = index_of.find(states[i].t_ns);
       if (it == index_of.end()) continue;
@@ -282,7 +297,7 @@ int verify(const VerifyArgs& args) {
       if (states[i].t_ns >= next_report || i + 1 == states.size()) {
         std::printf("%12s %14.6e %14.6e %14.6e %14.6e\n",
                     io::format_decimal_seconds(states[i].t_ns - imu.front().t_ns).c_str(), dp.norm(), horiz, vert, att);
-        while (next_report <= states[i].t_ns) next_report += report_step;
+        while (next_report <= states[i].t_ns && next_report < kMaxTimeNs) next_report = saturating_add_ns(next_report, report_step);
       }
     }
     std::printf("# max: position %.6e m (horizontal %.6e, vertical %.6e), attitude %.6e rad\n", max_pos, max_h,
@@ -298,8 +313,14 @@ int verify(const VerifyArgs& args) {
 }
 
 std::string sample_trajectory_csv(const std::string& kind, double duration_s, double period_s) {
-  const auto duration_ns = static_cast<TimeNs>(std::llround(duration_s * 1e9));
-  const auto period_ns = static_cast<TimeNs>(std::llround(period_s * 1e9));
+  const TimeNs duration_ns = option_ns("duration", duration_s);
+  const TimeNs period_ns = option_ns("period", period_s);
+  // The knot count, before the knots are sampled and formatted.
+  if (!(period_ns > 0) || duration_ns < 0 ||
+      static_cast<std::uint64_t>(duration_ns / period_ns) + 1 > limits::kMaxKnots)
+    throw limits::SizeLimitError("a sample trajectory of " + number(duration_s) + " s with knots every " +
+                                 number(period_s) + " s: more than " + std::to_string(limits::kMaxKnots) +
+                                 " knots; use a longer period");
   std::string text;
   auto line = [&](TimeNs t, const Vec3& p, const attitude::HeadingPitchRoll& hpr) {
     text += io::format_decimal_seconds(t);

@@ -30,6 +30,8 @@
 #include <vector>
 
 #include "core/stream.hpp"
+#include "core/time_arith.hpp"
+#include "daemon/cli_options.hpp"
 #include "daemon/commands.hpp"
 #include "daemon/emission.hpp"
 #include "drivers/protocols/can_protocols.hpp"
@@ -60,7 +62,11 @@ int median_interval_delta(const std::vector<Pose>& knots, std::int64_t rate_hz) 
   if (steps.empty()) return 1;
   std::nth_element(steps.begin(), steps.begin() + static_cast<std::ptrdiff_t>(steps.size() / 2), steps.end());
   const double median_s = static_cast<double>(steps[steps.size() / 2]) * 1e-9;
-  return std::max(1, static_cast<int>(std::lround(median_s * static_cast<double>(rate_hz))));
+  // The one window cap (core/limits.hpp), as generate's automatic window.
+  if (const std::optional<int> delta = window_samples(median_s, rate_hz)) return *delta;
+  throw limits::SizeLimitError("the automatic window (one median knot interval of " + std::to_string(median_s) +
+                               " s at " + std::to_string(rate_hz) + " Hz) is more than " +
+                               std::to_string(limits::kMaxWindowSamples) + " samples; give --delta or a lower --rate");
 }
 
 
@@ -184,11 +190,15 @@ int emit(const EmitArgs& a) {
       else if (a.source == "stdin") source = io::make_fd_pose_source(0, so);
       else throw std::invalid_argument("--source '" + a.source + "': expected udp:ADDR:PORT, tcp:ADDR:PORT or stdin");
       dev.pipeline.gap_policy = GapPolicy::split;
-      dev.pipeline.kernel.delta = a.delta > 0 ? a.delta
-                                              : std::max(1, static_cast<int>(std::lround(a.knot_interval_s * static_cast<double>(a.rate_hz))));
+      const std::optional<int> window = window_samples(a.knot_interval_s, a.rate_hz);
+      if (a.delta <= 0 && !window)
+        throw UsageError("--knot-interval-s " + bound_text(a.knot_interval_s) + " at --rate " + std::to_string(a.rate_hz) +
+                         " Hz makes a window of more than " + std::to_string(limits::kMaxWindowSamples) +
+                         " samples; give --delta, a shorter interval or a lower rate");
+      dev.pipeline.kernel.delta = a.delta > 0 ? a.delta : *window;
       eo.source = source.get();
-      eo.emit_delay_ns = StreamPipeline::lookahead_ns(dev.pipeline, static_cast<TimeNs>(std::llround(a.knot_interval_s * 1e9))) +
-                         static_cast<TimeNs>(std::llround(a.margin_s * 1e9));
+      eo.emit_delay_ns = saturating_add_ns(StreamPipeline::lookahead_ns(dev.pipeline, option_ns("--knot-interval-s", a.knot_interval_s)),
+                                           option_ns("--margin-s", a.margin_s));
     } else {
       eo.trajectory = a.trajectory_path.empty() ? sample_trajectory_poses(a.sample_kind, a.sample_duration_s, a.sample_period_s, scene.physics)
                                                 : io::poses_in_scene(io::read_trajectory_csv(a.trajectory_path), scene.physics);
@@ -327,24 +337,24 @@ void add_emit_command(CLI::App& app, int& exit_code) {
   c->add_option("--trajectory", a.trajectory_path, "Trajectory CSV (docs/trajectory-format.md), all poses up front");
   c->add_option("--sample", a.sample_kind, "Built-in trajectory instead: flight, circle or static")
       ->check(CLI::IsMember({"flight", "circle", "static"}));
-  c->add_option("--duration-s", a.sample_duration_s, "--sample: trajectory duration")->capture_default_str()->check(CLI::PositiveNumber);
-  c->add_option("--sample-period-s", a.sample_period_s, "--sample: knot period")->capture_default_str()->check(CLI::PositiveNumber);
+  c->add_option("--duration-s", a.sample_duration_s, "--sample: trajectory duration")->capture_default_str()->check(seconds_in(0.0, kMaxDurationS, true));
+  c->add_option("--sample-period-s", a.sample_period_s, "--sample: knot period")->capture_default_str()->check(seconds_in(0.0, kMaxIntervalS, true));
   c->add_option("--source", a.source, "Live poses instead: udp:ADDR:PORT | tcp:ADDR:PORT | stdin (as imuemu stream)");
   c->add_option("--tcp-idle-timeout-s", a.tcp_idle_timeout_s, "--source tcp: close a client that sent nothing for this long (0: never)")
-      ->capture_default_str()->check(CLI::Range(0.0, 86400.0));
-  c->add_option("--knot-interval-s", a.knot_interval_s, "--source: expected pose spacing (window, look-ahead)")->capture_default_str()->check(CLI::PositiveNumber);
-  c->add_option("--margin-s", a.margin_s, "--source: extra delay beyond the engine's look-ahead")->capture_default_str()->check(CLI::NonNegativeNumber);
+      ->capture_default_str()->check(seconds_in(0.0, 86400.0));
+  c->add_option("--knot-interval-s", a.knot_interval_s, "--source: expected pose spacing (window, look-ahead)")->capture_default_str()->check(seconds_in(0.0, kMaxIntervalS, true));
+  c->add_option("--margin-s", a.margin_s, "--source: extra delay beyond the engine's look-ahead")->capture_default_str()->check(seconds_in(0.0, kMaxIntervalS));
   c->add_option("--scene", a.scene, "ecef or flat")->capture_default_str()->check(CLI::IsMember({"ecef", "flat"}));
-  c->add_option("--gravity", a.gravity_m_s2, "flat scene gravity (m/s^2)")->capture_default_str();
+  c->add_option("--gravity", a.gravity_m_s2, "flat scene gravity (m/s^2)")->capture_default_str()->check(finite_in(0.0, kMaxGravityM_s2));
   c->add_option("--rate", a.rate_hz, "Output rate in Hz (integer)")->capture_default_str()->check(CLI::Range(1, 1000000));
-  c->add_option("--delta", a.delta, "Window half-length Delta (samples); default one median knot interval")->check(CLI::Range(1, 1000000));
+  c->add_option("--delta", a.delta, "Window half-length Delta (samples); default one median knot interval")->check(CLI::Range(std::int64_t{1}, limits::kMaxWindowSamples));
   c->add_option("--protocol", a.protocol, "Wire protocol")->capture_default_str()->check(CLI::IsMember(protocols));
   c->add_option("--device", a.device, "pty:LINKPATH | serial:PATH[,baud=N] | can:IFACE")->required();
   c->add_flag("--can-fd", a.can_fd, "can: send CAN FD frames (the interface needs MTU 72)");
-  c->add_option("--seconds", a.seconds, "Stop after this many seconds of emission (default: end of the trajectory)")->check(CLI::NonNegativeNumber);
+  c->add_option("--seconds", a.seconds, "Stop after this many seconds of emission (default: end of the trajectory)")->check(seconds_in(0.0, kMaxDurationS));
   c->add_option("--gpio", a.gpio, "Sync pulse output CHIP:LINE (libgpiod), edge at the sample instant");
   c->add_option("--sync-every", a.sync_every, "Pulse on every Nth sample")->capture_default_str()->check(CLI::PositiveNumber);
-  c->add_option("--sync-width-us", a.sync_width_us, "Pulse width (us)")->capture_default_str()->check(CLI::PositiveNumber);
+  c->add_option("--sync-width-us", a.sync_width_us, "Pulse width (us)")->capture_default_str()->check(finite_in(0.0, 1e6, true));
   c->add_flag("--sync-active-low", a.sync_active_low, "The pulse drives the line low");
   c->add_option("--priority", a.priority, "SCHED_FIFO priority of the emission thread (1..99; 0: normal)")->capture_default_str()->check(CLI::Range(0, 99));
   c->add_flag("--lock-memory", a.lock_memory, "mlockall(MCL_CURRENT|MCL_FUTURE)");

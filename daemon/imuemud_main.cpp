@@ -563,10 +563,11 @@ void write_stats(const std::string& path, const Daemon& daemon) {
 }
 
 // --check-config: parse, compute the figures, print them. Nothing is opened.
-int check_config(const std::string& path, bool json) {
+int check_config(const std::string& path, bool json, const sc::RunnerOptions& runner) {
   sc::SceneConfig scene;
   try {
     scene = path == "-" ? sc::default_scene() : sc::parse_scene_file(path);
+    sc::check_startable(scene, runner);  // what a start would refuse (scene_check.hpp)
   } catch (const std::exception& e) {
     std::cerr << e.what() << "\n";
     return kExitBadScene;
@@ -607,7 +608,11 @@ int main(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     return app.exit(e) == 0 ? kExitOk : kExitUsage;
   }
-  if (!check_path.empty()) return check_config(check_path, json);
+  if (!check_path.empty()) {
+    sc::RunnerOptions check_runner;
+    check_runner.pty_link_dir = pty_link_dir;
+    return check_config(check_path, json, check_runner);
+  }
 
   const std::map<std::string, svc::LogLevel> levels{{"err", svc::LogLevel::err}, {"warning", svc::LogLevel::warning},
       {"notice", svc::LogLevel::notice}, {"info", svc::LogLevel::info}, {"debug", svc::LogLevel::debug}};
@@ -643,6 +648,7 @@ int main(int argc, char** argv) {
                                     : !scene.daemon.control_socket.empty()
                                         ? scene.daemon.control_socket
                                         : svc::default_control_socket_path(scene.name);
+    sc::check_start_paths(scene, runner, socket_path);  // aliases, directories, lengths (scene_check.hpp)
     {
       // /run/imuemu comes from the unit's RuntimeDirectory=; the built-in
       // scene's /tmp/imuemu and test directories are made here.

@@ -28,8 +28,13 @@ const char* prefix_of(LogLevel level) {
 
 std::string format_log_line(LogLevel level, std::string_view text) {
   std::string line = prefix_of(level);
-  line.reserve(line.size() + text.size() + 1);
-  for (const char c : text) line.push_back(c == '\n' || c == '\r' ? ' ' : c);
+  // Messages echo user input (a scene's names, a source's lines): a 100 KB
+  // name must not become a 100 KB journal line.
+  const bool cut = text.size() > kMaxLogTextBytes;
+  const std::string_view shown = cut ? text.substr(0, kMaxLogTextBytes) : text;
+  line.reserve(line.size() + shown.size() + 48);
+  for (const char c : shown) line.push_back(c == '\n' || c == '\r' ? ' ' : c);
+  if (cut) line += "... (" + std::to_string(text.size() - kMaxLogTextBytes) + " more bytes not shown)";
   line.push_back('\n');
   return line;
 }

@@ -9,6 +9,7 @@
 // daemon logs a periodic summary (and uses RateLimiter for repeated events).
 #pragma once
 
+#include <cstddef>
 #include <cstdint>
 #include <mutex>
 #include <string>
@@ -21,8 +22,13 @@ namespace imuemu::service {
 // Values are the syslog priorities (RFC 5424 §6.2.1), as journald reads them.
 enum class LogLevel : int { err = 3, warning = 4, notice = 5, info = 6, debug = 7 };
 
+// Longest text of one log line; the rest is cut and counted ("... (N more
+// bytes not shown)").
+inline constexpr std::size_t kMaxLogTextBytes = 4096;
+
 // "<P>text\n" with the SD_* prefix of `level`; newlines inside `text` become
-// spaces (journald would otherwise make the rest a line without a priority).
+// spaces (journald would otherwise make the rest a line without a priority);
+// text beyond kMaxLogTextBytes is cut.
 std::string format_log_line(LogLevel level, std::string_view text);
 
 // Lines less severe than this are dropped (default info: debug is dropped).

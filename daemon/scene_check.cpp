@@ -8,7 +8,14 @@
 #include <nlohmann/json.hpp>
 #include <sstream>
 
+#include "core/limits.hpp"
+#include "core/mounting.hpp"
 #include "core/stream.hpp"
+#include "daemon/scene_runner.hpp"
+
+#include <climits>
+#include <filesystem>
+#include <unistd.h>
 
 namespace imuemu::scene {
 namespace {
@@ -42,7 +49,83 @@ std::string fixed(double v, int digits) {
 
 std::string seconds_text(TimeNs ns) { return fixed(static_cast<double>(ns) * 1e-9, 3) + " s"; }
 
+// A path as the kernel resolves it, as far as can be told without following
+// links that do not exist yet: absolute, ".", ".." and repeated slashes
+// removed, the existing part of the directory canonical.
+std::string normalised(const std::string& path) {
+  namespace fs = std::filesystem;
+  fs::path p = fs::path(path).lexically_normal();
+  std::error_code ec;
+  const fs::path parent = fs::weakly_canonical(p.parent_path(), ec);
+  if (!ec && !parent.empty()) p = parent / p.filename();
+  std::string text = p.string();
+  while (text.size() > 1 && text.rfind("//", 0) == 0) text.erase(0, 1);  // POSIX: "//x" is "/x" on Linux
+  return text;
+}
+
 }  // namespace
+
+void check_start_paths(const SceneConfig& scene, const RunnerOptions& options, const std::string& control_socket) {
+  namespace fs = std::filesystem;
+  std::map<std::string, std::string> owner;  // normalised path -> what uses it
+  auto claim = [&](const std::string& path, const std::string& what) {
+    const std::string key = normalised(path);
+    const auto [it, fresh] = owner.emplace(key, what);
+    if (!fresh)
+      throw std::invalid_argument(scene.file + ": " + what + " and " + it->second + " are the same path (" + key + ")");
+  };
+  if (!control_socket.empty()) {
+    claim(control_socket, "the control socket " + control_socket);
+    // The start creates the socket's directory if it can: the nearest
+    // existing ancestor must be a writable directory.
+    fs::path dir = fs::path(control_socket).parent_path();
+    std::error_code ec;
+    while (!dir.empty() && !fs::exists(dir, ec) && dir != dir.parent_path()) dir = dir.parent_path();
+    if (!fs::is_directory(dir, ec))
+      throw std::invalid_argument(scene.file + ": control socket " + control_socket + ": " + dir.string() +
+                                  " is not a directory");
+    if (dir != fs::path(control_socket).parent_path() && ::access(dir.c_str(), W_OK) != 0)
+      throw std::invalid_argument(scene.file + ": control socket " + control_socket + ": its directory does not exist and " +
+                                  dir.string() + " is not writable");
+  }
+  for (const ImuConfig& imu : scene.imus) {
+    if (imu.transport.type != TransportType::pty) continue;
+    const std::string link = pty_link_path(imu, options);
+    const std::string what = "imu '" + imu.name + "': pty link " + link;
+    const fs::path p = fs::path(link).lexically_normal();
+    if (!p.has_filename() || p == p.root_path())
+      throw std::invalid_argument(scene.file + ": " + what + ": names a directory, not a file");
+    if (link.size() >= PATH_MAX || p.filename().string().size() > NAME_MAX)
+      throw std::invalid_argument(scene.file + ": " + what.substr(0, 200) + "...: longer than PATH_MAX (" +
+                                  std::to_string(PATH_MAX - 1) + ") or a name longer than NAME_MAX (" +
+                                  std::to_string(NAME_MAX) + ")");
+    std::error_code ec;
+    if (fs::is_directory(fs::symlink_status(p, ec)))
+      throw std::invalid_argument(scene.file + ": " + what + ": is an existing directory");
+    claim(link, what);
+  }
+}
+
+void check_startable(const SceneConfig& scene, const RunnerOptions& options) {
+  const bool replay = scene.trajectory.kind == SourceKind::file || scene.trajectory.kind == SourceKind::sample;
+  if (replay) {
+    const std::vector<Pose> once = scene_trajectory(scene);
+    for (const ImuConfig& imu : scene.imus) {
+      std::vector<Pose> knots;
+      knots.reserve(once.size());
+      for (const Pose& p : once) knots.push_back(sensor_pose(p, imu.mounting));
+      const PipelineOptions po = pipeline_options(scene, imu);
+      try {
+        (void)batch_sample_count(knots, po.rate_hz);
+        StreamPipeline::check_trajectory(knots, po);
+      } catch (const std::exception& e) {
+        throw std::invalid_argument(scene.file + ": imu '" + imu.name + "': trajectory " + scene.trajectory.source +
+                                    ": " + e.what());
+      }
+    }
+  }
+  check_start_paths(scene, options, scene.daemon.control_socket);
+}
 
 SceneCheck check_scene(const SceneConfig& scene) {
   SceneCheck check;

@@ -55,6 +55,27 @@ struct SceneCheck {
   std::vector<std::string> warnings;
 };
 
+struct RunnerOptions;  // daemon/scene_runner.hpp
+
+// What a start would refuse that the parser cannot see, checked without
+// opening a device, by the functions the start path itself runs:
+//  - the trajectory (file or built-in sample): loaded by scene_trajectory()
+//    (a malformed file: io::CsvFormatError naming file:line), its knot count
+//    and output size against core/limits.hpp, and every device's knots
+//    through StreamPipeline::check_trajectory (the engine's own knot rules:
+//    antipodal steps, gaps, end padding, the chart span);
+//  - the published paths (check_start_paths).
+// Throws std::invalid_argument (or CsvFormatError) naming the scene file, the
+// device and what is wrong.
+void check_startable(const SceneConfig& scene, const RunnerOptions& options);
+
+// The paths a start creates: every pty link as published (pty_link_path, so
+// --pty-link-dir included) must name a file (not "/", not a directory), fit
+// PATH_MAX/NAME_MAX, and be distinct from the others and from the control
+// socket after normalisation ("./x", "//x", "a/../x"); the control socket's
+// directory must exist or be creatable. imuemud runs this before it starts.
+void check_start_paths(const SceneConfig& scene, const RunnerOptions& options, const std::string& control_socket);
+
 // Computes the figures; throws std::invalid_argument only for a scene that
 // parse_scene_* would not have produced.
 SceneCheck check_scene(const SceneConfig& scene);

@@ -19,6 +19,7 @@
 #include "daemon/error_model_config.hpp"
 
 #include "core/attitude.hpp"
+#include "core/limits.hpp"
 #include "core/stream.hpp"
 #include "drivers/protocols/protocol_options.hpp"
 #include "drivers/transport.hpp"
@@ -337,10 +338,11 @@ void parse_trajectory_section(const Table& t, const SceneConfig& scene, Trajecto
   }
   out.knot_interval_s = t.number("knot_interval_s", 1.0, 0.0, 3600.0, true);
   // The built-in motions are sampled into knots up front.
-  constexpr double kMaxSampleKnots = 1e7;
-  if (out.kind == SourceKind::sample && out.duration_s / out.knot_interval_s > kMaxSampleKnots)
+  if (out.kind == SourceKind::sample &&
+      out.duration_s / out.knot_interval_s + 1.0 > static_cast<double>(limits::kMaxKnots))
     t.fail_at(t.has("knot_interval_s") ? "knot_interval_s" : "duration_s",
-              "duration_s / knot_interval_s gives more than 10 million built-in knots; use a longer knot interval");
+              "duration_s / knot_interval_s gives more than " + std::to_string(limits::kMaxKnots / 1'000'000) +
+                  " million built-in knots; use a longer knot interval");
   out.loop = t.boolean("loop", false);
   if (out.kind == SourceKind::tcp) out.tcp_idle_timeout_s = t.number("tcp_idle_timeout_s", 5.0, 0.0, 86400.0);
   else t.forbid("tcp_idle_timeout_s", "applies to tcp: sources only");
@@ -356,8 +358,8 @@ void parse_smoothing_section(const Table& t, SmoothingConfig& out) {
     t.forbid("sigma", "applies to method = \"min-accel\" only");
     t.forbid("mu", "applies to method = \"min-accel\" only");
   }
-  out.sigma = t.number("sigma", 1.0, 0.0, 3.0);
-  out.mu = t.number("mu", 1.0, 0.0, 3.0);
+  out.sigma = t.number("sigma", 1.0, limits::kMinSpeedFactor, limits::kMaxSpeedFactor);
+  out.mu = t.number("mu", 1.0, limits::kMinSpeedFactor, limits::kMaxSpeedFactor);
   out.spline_window_knots = static_cast<int>(t.integer("spline_window_knots", 4, 1, 64));
   if (t.has("delta") && t.has("window_s"))
     t.fail_at("window_s", "give the window either as delta (samples) or as window_s (seconds), not both");
@@ -707,12 +709,15 @@ SceneConfig parse_document(const Context& ctx, const toml::table& root) {
     scene.imus.push_back(parse_imu(t));
     // A window beyond a million samples is a unit mistake, and would make
     // the engine allocate gigabytes for its kernel.
+    const double window_samples = std::round(scene.smoothing.window_s.value_or(scene.trajectory.knot_interval_s) *
+                                             static_cast<double>(scene.imus.back().rate_hz));
     const int delta = pipeline_options(scene, scene.imus.back()).kernel.delta;
-    if (delta > 1'000'000)
+    if (delta > limits::kMaxWindowSamples)
       ctx.fail(imus[i].source(), t.path(),
-               "the smoothing window is " + std::to_string(delta) + " samples at " +
+               "the smoothing window is " + std::to_string(static_cast<long long>(window_samples)) + " samples at " +
                    std::to_string(scene.imus.back().rate_hz) +
-                   " Hz (smoothing.window_s, or trajectory.knot_interval_s by default); at most 1000000");
+                   " Hz (smoothing.window_s, or trajectory.knot_interval_s by default); at most " +
+                   std::to_string(limits::kMaxWindowSamples));
     // The engine's own checks on the combination (window, rate, spline).
     try {
       const StreamPipeline probe(pipeline_options(scene, scene.imus.back()));
@@ -726,9 +731,21 @@ SceneConfig parse_document(const Context& ctx, const toml::table& root) {
 
 }  // namespace
 
+namespace {
+// Messages quote the offending value or name: a 100 KB name is shown as its
+// first kMaxEchoBytes and an ellipsis, not echoed whole.
+constexpr std::size_t kMaxEchoBytes = 200;
+std::string bounded(const std::string& text) {
+  if (text.size() <= kMaxEchoBytes) return text;
+  return text.substr(0, kMaxEchoBytes) + "... (" + std::to_string(text.size()) + " bytes)";
+}
+}  // namespace
+
 SceneError::SceneError(std::string file, std::uint32_t line, std::uint32_t column, std::string key, const std::string& what)
-    : std::runtime_error(file + (line > 0 ? ":" + std::to_string(line) + ":" + std::to_string(column) : std::string()) +
-                         ": " + (key.empty() ? std::string() : key + ": ") + what),
+    : std::runtime_error(bounded(file) + (line > 0 ? ":" + std::to_string(line) + ":" + std::to_string(column) : std::string()) +
+                         ": " + (key.empty() ? std::string() : bounded(key) + ": ") +
+                         (what.size() <= 8 * kMaxEchoBytes ? what : what.substr(0, 8 * kMaxEchoBytes) + "... (" +
+                                                                        std::to_string(what.size()) + " bytes)")),
       file_(std::move(file)),
       line_(line),
       column_(column),
@@ -786,9 +803,13 @@ PipelineOptions pipeline_options(const SceneConfig& scene, const ImuConfig& imu)
   po.interpolation.spline_window_knots = s.spline_window_knots;
   // Window: as `imuemu stream` (one knot interval) unless given.
   const double window_s = s.window_s.value_or(scene.trajectory.knot_interval_s);
-  po.kernel.delta = s.delta_samples
-                        ? *s.delta_samples
-                        : static_cast<int>(std::max(1.0, std::round(window_s * static_cast<double>(imu.rate_hz))));
+  // Beyond the cap (limits::kMaxWindowSamples) the window reads as one more
+  // than the cap, which the parser and the engine refuse: the int never overflows.
+  const double window_samples = std::round(window_s * static_cast<double>(imu.rate_hz));
+  po.kernel.delta = s.delta_samples ? *s.delta_samples
+                    : window_samples > static_cast<double>(limits::kMaxWindowSamples)
+                        ? static_cast<int>(limits::kMaxWindowSamples + 1)
+                        : static_cast<int>(std::max(1.0, window_samples));
   po.kernel.order = s.kernel_order;
   po.kernel.width = s.kernel;
   po.kernel.half_width_s = s.kernel_half_width_s;

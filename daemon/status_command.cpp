@@ -19,6 +19,7 @@
 #include <boost/asio/streambuf.hpp>
 #include <boost/asio/write.hpp>
 
+#include "daemon/cli_options.hpp"
 #include "daemon/commands.hpp"
 #include "daemon/control_socket.hpp"
 
@@ -221,7 +222,7 @@ void add_status_command(CLI::App& app, int& exit_code) {
   cmd->add_option("--scene", args->scene, "Scene name, for the default socket path")->capture_default_str()->excludes(socket_option);
   cmd->add_option("--command", args->command,
                   "Command to send: status, help (lists what the daemon offers)")->capture_default_str();
-  cmd->add_option("--timeout-s", args->timeout_s, "Give up when no reply comes within this")->capture_default_str();
+  cmd->add_option("--timeout-s", args->timeout_s, "Give up when no reply comes within this")->capture_default_str()->check(seconds_in(0.0, kMaxIntervalS, true));
   auto* compact = cmd->add_flag("--compact", args->compact, "One-line JSON");
   cmd->add_flag("--summary", args->summary, "A few lines for a person (each counter explained) instead of the JSON")
       ->excludes(compact);

@@ -21,6 +21,8 @@
 #include "core/live_emitter.hpp"
 #include "core/stream.hpp"
 #include "core/time_mapping.hpp"
+#include "core/time_arith.hpp"
+#include "daemon/cli_options.hpp"
 #include "daemon/commands.hpp"
 #include "daemon/error_model_config.hpp"
 #include "io/pose_source.hpp"
@@ -77,8 +79,30 @@ int stream(const StreamArgs& args) {
   po.scene.physics = args.scene == "flat" ? Physics::flat : Physics::ecef;
   po.scene.flat_gravity_m_s2 = Vec3(0.0, 0.0, args.gravity_m_s2);
   po.rate_hz = args.rate_hz;
-  po.kernel.delta = args.delta > 0 ? args.delta
-                                   : static_cast<int>(std::max<double>(1.0, args.knot_interval_s * static_cast<double>(args.rate_hz)));
+  // Every seconds/Hz option through the one checked conversion
+  // (cli_options.hpp), before any object is built from them.
+  TimeNs knot_interval_ns = 0, blend_ns = 0, margin_ns = 0, duration_ns = kMaxTimeNs;
+  try {
+    knot_interval_ns = option_ns("--knot-interval-s", args.knot_interval_s);
+    blend_ns = option_ns("--blend-s", args.blend_s);
+    margin_ns = option_ns("--margin-s", args.margin_s);
+    if (args.duration_s > 0) duration_ns = option_ns("--duration-s", args.duration_s);
+    if (args.delta > 0) {
+      po.kernel.delta = args.delta;
+    } else {
+      const std::optional<int> delta = window_samples(args.knot_interval_s, args.rate_hz);
+      if (!delta)
+        throw UsageError("--knot-interval-s " + bound_text(args.knot_interval_s) + " at --rate " +
+                         std::to_string(args.rate_hz) + " Hz makes a window of more than " +
+                         std::to_string(limits::kMaxWindowSamples) +
+                         " samples (the cap); give --delta 1.." + std::to_string(limits::kMaxWindowSamples) +
+                         ", a shorter interval or a lower rate");
+      po.kernel.delta = *delta;
+    }
+  } catch (const UsageError& e) {
+    std::cerr << "imuemu stream: " << e.what() << "\n";
+    return kUsageError;
+  }
   po.gap_policy = GapPolicy::split;
   po.max_gap_s = args.max_gap_s;
   const bool as_fast_as_possible = args.speed == "max";
@@ -105,6 +129,24 @@ int stream(const StreamArgs& args) {
     }
     return e;
   };
+  // The engine and the emitter check their options in their constructors:
+  // a refusal there is a message and exit 4, never an escaped exception.
+  std::unique_ptr<StreamPipeline> engine_owner;
+  std::unique_ptr<live::LiveEmitter> emitter_owner;
+  try {
+    engine_owner = std::make_unique<StreamPipeline>(po);
+    live::LiveEmitterOptions lo;
+    lo.scene = po.scene;
+    lo.underrun = args.underrun == "pause" ? live::UnderrunPolicy::pause : live::UnderrunPolicy::extrapolate;
+    lo.blend_ns = blend_ns;
+    emitter_owner = std::make_unique<live::LiveEmitter>(lo);
+  } catch (const std::exception& e) {
+    std::cerr << "imuemu stream: " << e.what() << "\n";
+    return kCannotProcess;
+  }
+  StreamPipeline& engine = *engine_owner;
+  live::StreamSampleSource samples(engine);
+  live::LiveEmitter& emitter = *emitter_owner;
   live::SpeedFactor speed;
   std::unique_ptr<io::PoseSource> source;
   io::PoseSourceOptions so;
@@ -154,15 +196,7 @@ int stream(const StreamArgs& args) {
   sigaction(SIGINT, &sa, nullptr);
   sigaction(SIGTERM, &sa, nullptr);
 
-  StreamPipeline engine(po);
-  live::StreamSampleSource samples(engine);
-  live::LiveEmitterOptions lo;
-  lo.scene = po.scene;
-  lo.underrun = args.underrun == "pause" ? live::UnderrunPolicy::pause : live::UnderrunPolicy::extrapolate;
-  lo.blend_ns = static_cast<TimeNs>(args.blend_s * 1e9);
-  live::LiveEmitter emitter(lo);
-  const TimeNs delay_ns = StreamPipeline::lookahead_ns(po, static_cast<TimeNs>(args.knot_interval_s * 1e9)) +
-                          static_cast<TimeNs>(args.margin_s * 1e9);
+  const TimeNs delay_ns = saturating_add_ns(StreamPipeline::lookahead_ns(po, knot_interval_ns), margin_ns);
   std::cerr << "imuemu stream: " << source->name() << " -> " << args.rate_hz << " Hz, Delta " << po.kernel.delta
             << ", emitting " << static_cast<double>(delay_ns) * 1e-9 << " s behind the poses\n";
   source->start();
@@ -215,11 +249,11 @@ int stream(const StreamArgs& args) {
         // The first pose's time is "now" on the sender's clock; each tick goes
         // out the engine's look-ahead (plus margin) after its own time.
         const live::TimeMapping clock = live::TimeMapping::start_now(t0, io::monotonic_now_ns(), speed);
-        const TimeNs end_ns = args.duration_s > 0 ? t0 + static_cast<TimeNs>(args.duration_s * 1e9) : INT64_MAX;
+        const TimeNs end_ns = saturating_add_ns(t0, duration_ns);
         for (std::int64_t k = 0; !g_stop; ++k) {
           const TimeNs tick = t0 + (k / po.rate_hz) * kNsPerSecond + (k % po.rate_hz) * kNsPerSecond / po.rate_hz;
           if (tick > end_ns) break;
-          sleep_until_monotonic(clock.monotonic_at(tick + delay_ns));
+          sleep_until_monotonic(clock.monotonic_at(saturating_add_ns(tick, delay_ns)));
           take_input();
           if (input_done && !finished) {
             if (engine.knots_pushed() >= 2) engine.finish();

@@ -1,10 +1,13 @@
 #include "io/atomic_file.hpp"
 
+#include <dirent.h>
 #include <fcntl.h>
+#include <signal.h>
 #include <sys/stat.h>
 #include <unistd.h>
 
 #include <cerrno>
+#include <charconv>
 #include <cstdio>
 #include <cstdlib>
 #include <cstring>
@@ -45,14 +48,133 @@ std::string directory_of(const std::string& path) {
   return path.substr(0, slash);
 }
 
+std::string file_name_of(const std::string& path) {
+  const std::size_t slash = path.rfind('/');
+  return slash == std::string::npos ? path : path.substr(slash + 1);
+}
+
+void fsync_directory(const std::string& path) {
+  // Make a rename durable. Best effort: some file systems refuse fsync on a
+  // directory, and the data is already in place.
+  const int dir_fd = ::open(directory_of(path).c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
+  if (dir_fd >= 0) {
+    ::fsync(dir_fd);
+    ::close(dir_fd);
+  }
+}
+
+// This thread's open OutputTransaction (AtomicFileWriter::commit defers to it).
+thread_local OutputTransaction* t_transaction = nullptr;
+
 }  // namespace
+
+pid_t temp_file_owner(std::string_view name, std::string_view target_name) {
+  constexpr std::string_view kMark = ".tmp.";
+  if (name.size() <= target_name.size() + kMark.size() || name.substr(0, target_name.size()) != target_name ||
+      name.substr(target_name.size(), kMark.size()) != kMark)
+    return -1;
+  const std::string_view rest = name.substr(target_name.size() + kMark.size());
+  const std::size_t dot = rest.find('.');
+  if (dot == std::string_view::npos || dot == 0 || dot + 1 == rest.size()) return -1;
+  pid_t pid = 0;
+  const auto [end, ec] = std::from_chars(rest.data(), rest.data() + dot, pid);
+  if (ec != std::errc() || end != rest.data() + dot || pid <= 0) return -1;
+  return pid;
+}
+
+std::size_t remove_stale_temp_files(const std::string& target_path) noexcept {
+  std::size_t removed = 0;
+  try {
+    const std::string dir = directory_of(target_path), target_name = file_name_of(target_path);
+    DIR* d = ::opendir(dir.c_str());
+    if (d == nullptr) return 0;
+    std::vector<std::string> stale;
+    while (const dirent* e = ::readdir(d)) {
+      const pid_t pid = temp_file_owner(e->d_name, target_name);
+      if (pid <= 0 || pid == ::getpid()) continue;
+      if (::kill(pid, 0) == 0 || errno != ESRCH) continue;  // running (or not ours to signal: EPERM)
+      stale.emplace_back(dir + "/" + e->d_name);
+    }
+    ::closedir(d);
+    for (const std::string& path : stale) {
+      struct stat info {};
+      // Regular files of this user only (never follow a symlink planted there).
+      if (::lstat(path.c_str(), &info) != 0 || !S_ISREG(info.st_mode) || info.st_uid != ::geteuid()) continue;
+      if (::unlink(path.c_str()) == 0) ++removed;
+    }
+  } catch (...) {
+  }
+  return removed;
+}
+
+OutputTransaction::OutputTransaction() {
+  if (t_transaction != nullptr) throw std::logic_error("OutputTransaction: one is already open on this thread");
+  t_transaction = this;
+}
+
+OutputTransaction::~OutputTransaction() {
+  end();
+  for (const Prepared& p : prepared_) ::unlink(p.temp_path.c_str());
+}
+
+void OutputTransaction::end() noexcept {
+  if (t_transaction == this) t_transaction = nullptr;
+  open_ = false;
+}
+
+void OutputTransaction::adopt(std::string temp_path, std::string target_path) {
+  prepared_.push_back({std::move(temp_path), std::move(target_path)});
+}
+
+void OutputTransaction::commit() {
+  if (!open_) throw std::logic_error("OutputTransaction::commit: already ended");
+  end();
+  // The old targets as hard links, so a failed rename can put them back.
+  std::vector<std::string> backups(prepared_.size());
+  for (std::size_t i = 0; i < prepared_.size(); ++i) {
+    const std::string& target = prepared_[i].target_path;
+    for (int attempt = 0; attempt < 100; ++attempt) {
+      const std::string name = target + ".tmp." + std::to_string(::getpid()) + ".old" + std::to_string(i) + "_" +
+                               std::to_string(attempt);
+      if (::link(target.c_str(), name.c_str()) == 0) {
+        backups[i] = name;
+        break;
+      }
+      if (errno != EEXIST) break;  // no old target (ENOENT), or no hard links here: nothing to restore
+    }
+  }
+  auto remove_all = [&] {
+    for (const Prepared& p : prepared_) ::unlink(p.temp_path.c_str());
+    for (const std::string& b : backups)
+      if (!b.empty()) ::unlink(b.c_str());
+    prepared_.clear();
+  };
+  for (std::size_t i = 0; i < prepared_.size(); ++i) {
+    if (::rename(prepared_[i].temp_path.c_str(), prepared_[i].target_path.c_str()) == 0) continue;
+    const int error = errno;
+    const std::string what = "cannot rename '" + prepared_[i].temp_path + "' to '" + prepared_[i].target_path + "'";
+    for (std::size_t j = 0; j < i; ++j) {  // undo the renames made
+      if (!backups[j].empty()) {
+        if (::rename(backups[j].c_str(), prepared_[j].target_path.c_str()) == 0) backups[j].clear();
+      } else {
+        ::unlink(prepared_[j].target_path.c_str());
+      }
+    }
+    remove_all();
+    throw_errno(error, what);
+  }
+  for (const Prepared& p : prepared_) fsync_directory(p.target_path);
+  prepared_.clear();
+  remove_all();
+}
 
 AtomicFileWriter::AtomicFileWriter(std::string target_path, std::size_t buffer_bytes)
     : target_path_(std::move(target_path)), buffer_bytes_(buffer_bytes == 0 ? 1 : buffer_bytes) {
   if (target_path_.empty()) throw std::invalid_argument("AtomicFileWriter: empty output path");
   std::vector<char> name(target_path_.begin(), target_path_.end());
-  static constexpr char kSuffix[] = ".tmp.XXXXXX";
-  name.insert(name.end(), kSuffix, kSuffix + sizeof kSuffix);  // includes the NUL
+  remove_stale_temp_files(target_path_);
+  const std::string suffix = ".tmp." + std::to_string(::getpid()) + ".XXXXXX";
+  name.insert(name.end(), suffix.c_str(), suffix.c_str() + suffix.size() + 1);  // includes the NUL
   fd_ = ::mkostemp(name.data(), O_CLOEXEC);
   if (fd_ < 0) {
     throw_errno(errno, "cannot create a temporary file next to '" + target_path_ + "'");
@@ -121,18 +243,18 @@ void AtomicFileWriter::commit() {
   const int fd = fd_;
   fd_ = -1;
   if (::close(fd) != 0) throw_errno(errno, "cannot close '" + temp_path_ + "'");
+  if (t_transaction != nullptr) {  // the transaction renames it with the others
+    t_transaction->adopt(temp_path_, target_path_);
+    committed_ = true;
+    temp_path_.clear();
+    return;
+  }
   if (::rename(temp_path_.c_str(), target_path_.c_str()) != 0) {
     throw_errno(errno, "cannot rename '" + temp_path_ + "' to '" + target_path_ + "'");
   }
   committed_ = true;
   temp_path_.clear();
-  // Make the rename itself durable. Best effort: some file systems refuse
-  // fsync on a directory, and the data is already in place.
-  const int dir_fd = ::open(directory_of(target_path_).c_str(), O_RDONLY | O_DIRECTORY | O_CLOEXEC);
-  if (dir_fd >= 0) {
-    ::fsync(dir_fd);
-    ::close(dir_fd);
-  }
+  fsync_directory(target_path_);
 }
 
 void write_file_atomically(const std::string& path, std::string_view content) {

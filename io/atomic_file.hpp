@@ -3,15 +3,33 @@
 // A run that fails half way (bad sample, full disk, exception) must not leave
 // half a file behind, nor a temporary file: readers see either the complete
 // new file or whatever was there before (standard atomic replace).
-// AtomicFileWriter writes into "<target>.tmp.XXXXXX" (mkstemp, same directory
-// so rename() stays within one file system), buffered; commit() flushes,
-// fsyncs, and renames it over the target. An uncommitted writer's destructor
-// deletes the temporary file, and the target is never touched before commit().
+// AtomicFileWriter writes into "<target>.tmp.<pid>.XXXXXX" (mkstemp, same
+// directory so rename() stays within one file system), buffered; commit()
+// flushes, fsyncs, and renames it over the target. An uncommitted writer's
+// destructor deletes the temporary file, and the target is never touched
+// before commit().
+//
+// Stale temporary files (a writer killed by SIGKILL or a power cut cannot
+// delete its own): the pid in the name says whose a temporary file is. Each
+// new AtomicFileWriter removes the temporary files of its own target whose
+// pid no longer runs (kill(pid, 0) fails with ESRCH) and which belong to the
+// same user; those of a running process (this one included) are left alone.
+// A pid reused by an unrelated process only keeps a stale file a little
+// longer. Processes of other pid namespaces writing the same directory are
+// not told apart (the files of a dead writer there may stay).
+//
+// Several outputs of one command (an IMU file and a trajectory file) are
+// committed together with an OutputTransaction: while one is open on a
+// thread, AtomicFileWriter::commit() on that thread only prepares its file
+// (flushed, fsynced, closed) and hands it over; OutputTransaction::commit()
+// then renames them all. If any output fails before that, none is replaced.
 #pragma once
 
 #include <cstddef>
 #include <string>
 #include <string_view>
+#include <sys/types.h>
+#include <vector>
 
 namespace imuemu::io {
 
@@ -39,6 +57,8 @@ class AtomicFileWriter {
   // file), fsync, close, rename over the target, fsync the directory.
   // Throws std::system_error; on failure the temporary file is still removed
   // by the destructor and the old target (if any) is left as it was.
+  // Inside an OutputTransaction (same thread): everything but the rename;
+  // the transaction then owns the temporary file.
   void commit();
 
   // Deletes the temporary file now (idempotent; no-op after commit).
@@ -59,6 +79,45 @@ class AtomicFileWriter {
   int fd_ = -1;
   bool committed_ = false;
 };
+
+// The outputs of one command, replaced together (see the top of this file).
+// Open one before the first output is written; commit() after the last.
+// Destroyed without commit() (an exception, a failed output): every prepared
+// temporary file is removed and no target changes. Not nestable.
+class OutputTransaction {
+ public:
+  OutputTransaction();
+  ~OutputTransaction();
+  OutputTransaction(const OutputTransaction&) = delete;
+  OutputTransaction& operator=(const OutputTransaction&) = delete;
+
+  // Renames every prepared file over its target, in the order prepared. If
+  // a rename fails, the targets already replaced get their old content back
+  // (kept as a hard link until then; a target that did not exist is
+  // removed), every temporary file is removed, and std::system_error is
+  // thrown. Ends the transaction either way.
+  void commit();
+
+  // AtomicFileWriter::commit() inside the transaction.
+  void adopt(std::string temp_path, std::string target_path);
+
+ private:
+  struct Prepared {
+    std::string temp_path, target_path;
+  };
+  void end() noexcept;
+  std::vector<Prepared> prepared_;
+  bool open_ = true;
+};
+
+// Whose temporary file `name` (a file name, no directory) is, if it is one
+// of AtomicFileWriter's for the target file name `target_name`:
+// "<target_name>.tmp.<pid>.<suffix>" -> pid; else -1.
+pid_t temp_file_owner(std::string_view name, std::string_view target_name);
+
+// Removes the stale temporary files of target_path (see the top of this
+// file); returns how many. Never throws.
+std::size_t remove_stale_temp_files(const std::string& target_path) noexcept;
 
 // Writes the whole content atomically (AtomicFileWriter + commit).
 void write_file_atomically(const std::string& path, std::string_view content);

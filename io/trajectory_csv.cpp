@@ -1,5 +1,7 @@
 #include "io/trajectory_csv.hpp"
 
+#include "core/limits.hpp"
+
 #include <algorithm>
 #include <array>
 #include <charconv>
@@ -148,7 +150,18 @@ std::string format_double(double value) {
 }
 
 std::size_t count_lines(std::string_view text) noexcept {
-  return static_cast<std::size_t>(std::count(text.begin(), text.end(), '\n'));
+  // Lines with data only: a file of blank lines or comments must not reserve
+  // a record per line (200 MB of newlines asked for 20 GB).
+  std::size_t count = 0;
+  std::size_t pos = 0;
+  while (pos < text.size()) {
+    std::size_t end = text.find('\n', pos);
+    if (end == std::string_view::npos) end = text.size();
+    const std::string_view line = trim(text.substr(pos, end - pos));
+    if (!line.empty() && line.front() != '#') ++count;
+    pos = end + 1;
+  }
+  return count;
 }
 
 }  // namespace detail
@@ -166,18 +179,19 @@ struct ColumnSpec : ColumnRule {
 };
 
 constexpr double kInf = std::numeric_limits<double>::infinity();
+constexpr double kMaxM = limits::kMaxPositionM;  // core/limits.hpp
 
 constexpr std::array<ColumnSpec, 21> kColumns{{
     {{"time_s", "a time in decimal seconds (digits, optional sign and '.', no exponent)", 0, 0}, Group::time, 0},
     {{"lat_deg", "a latitude in [-90, 90] degrees", -90.0, 90.0}, Group::geodetic, 0},
     {{"lon_deg", "a finite longitude in degrees", -kInf, kInf}, Group::geodetic, 1},
-    {{"h_m", "a finite ellipsoidal height in metres", -kInf, kInf}, Group::geodetic, 2},
-    {{"x_m", "a finite ECEF coordinate in metres", -kInf, kInf}, Group::ecef, 0},
-    {{"y_m", "a finite ECEF coordinate in metres", -kInf, kInf}, Group::ecef, 1},
-    {{"z_m", "a finite ECEF coordinate in metres", -kInf, kInf}, Group::ecef, 2},
-    {{"north_m", "a finite coordinate in metres", -kInf, kInf}, Group::local_ned, 0},
-    {{"east_m", "a finite coordinate in metres", -kInf, kInf}, Group::local_ned, 1},
-    {{"down_m", "a finite coordinate in metres", -kInf, kInf}, Group::local_ned, 2},
+    {{"h_m", "an ellipsoidal height in [-1e9, 1e9] metres", -kMaxM, kMaxM}, Group::geodetic, 2},
+    {{"x_m", "an ECEF coordinate in [-1e9, 1e9] metres", -kMaxM, kMaxM}, Group::ecef, 0},
+    {{"y_m", "an ECEF coordinate in [-1e9, 1e9] metres", -kMaxM, kMaxM}, Group::ecef, 1},
+    {{"z_m", "an ECEF coordinate in [-1e9, 1e9] metres", -kMaxM, kMaxM}, Group::ecef, 2},
+    {{"north_m", "a coordinate in [-1e9, 1e9] metres", -kMaxM, kMaxM}, Group::local_ned, 0},
+    {{"east_m", "a coordinate in [-1e9, 1e9] metres", -kMaxM, kMaxM}, Group::local_ned, 1},
+    {{"down_m", "a coordinate in [-1e9, 1e9] metres", -kMaxM, kMaxM}, Group::local_ned, 2},
     {{"heading_deg", "a finite heading in degrees", -kInf, kInf}, Group::hpr, 0},
     {{"pitch_deg", "a pitch in [-90, 90] degrees", -90.0, 90.0}, Group::hpr, 1},
     {{"roll_deg", "a finite roll in degrees", -kInf, kInf}, Group::hpr, 2},
@@ -525,7 +539,13 @@ Trajectory parse_trajectory_csv(std::string_view text, const std::string& source
   trajectory.source = source_name;
   trajectory.position_kind = parser.position_kind();
   trajectory.attitude_kind = parser.attitude_kind();
-  trajectory.records.reserve(detail::count_lines(text) + 1);
+  // The records this text can hold (its data lines after the header),
+  // checked against the knot cap before they are reserved.
+  const std::size_t data_lines = detail::count_lines(text);
+  if (data_lines > limits::kMaxKnots + 1)
+    throw limits::SizeLimitError(file + ": " + std::to_string(data_lines - 1) + " records: more than the " +
+                                 std::to_string(limits::kMaxKnots) + " knots a trajectory may hold (split it)");
+  trajectory.records.reserve(data_lines);
 
   bool have_previous = false;
   TrajectoryLineParser::Predecessor previous;

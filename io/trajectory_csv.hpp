@@ -239,7 +239,8 @@ std::string printable(std::string_view field);
 // Shortest round-trip decimal of a double (std::to_chars).
 std::string format_double(double value);
 
-// Number of '\n' in text (to reserve record vectors before parsing).
+// Number of lines holding data (not blank, not a '#' comment): an upper bound
+// on the records of the text, to reserve record vectors before parsing.
 std::size_t count_lines(std::string_view text) noexcept;
 
 }  // namespace detail

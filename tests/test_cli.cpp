@@ -2,10 +2,16 @@
 // file/line/column, no output left behind on failure, and the closed loop of
 // acceptance item 5 (generate -> verify) with asserted drift bounds.
 #include <gtest/gtest.h>
+#include <sys/resource.h>
+#include <sys/wait.h>
+
+#include "tests/support/spawn.hpp"
 
 #include <iostream>
 
+#include <algorithm>
 #include <cstdio>
+#include <functional>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -294,4 +300,176 @@ TEST_F(Cli, RefusalAfterStreamingStartedLeavesNoOutput) {
     EXPECT_EQ(e.path().string().find(".tmp."), std::string::npos) << e.path();
   }
   EXPECT_EQ(files, 3u);
+}
+
+// ---------------------------------------------------------------- issue 13
+
+namespace {
+
+// Knots `step` (a decimal seconds string per index) apart in the flat scene.
+std::string knots_csv(int count, const std::function<std::string(int)>& time_of) {
+  std::string text = "time_s,north_m,east_m,down_m,heading_deg,pitch_deg,roll_deg\n";
+  for (int i = 0; i < count; ++i) text += time_of(i) + "," + std::to_string(i) + ",0,0,0,0,0\n";
+  return text;
+}
+
+// The child's exit code and peak RSS (KiB), via wait4.
+struct MeasuredRun {
+  int exit_code = -1;
+  long max_rss_kib = 0;
+  std::string output;
+};
+
+MeasuredRun run_measured(const std::vector<std::string>& args, const std::string& log_path) {
+  MeasuredRun r;
+  const pid_t pid = imuemu::test::spawn_logged(IMUEMU_CLI_PATH, args, log_path);
+  if (pid <= 0) return r;
+  int status = 0;
+  struct rusage usage {};
+  if (::wait4(pid, &status, 0, &usage) != pid) return r;
+  r.exit_code = WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+  r.max_rss_kib = usage.ru_maxrss;
+  std::ifstream in(log_path);
+  std::stringstream text;
+  text << in.rdbuf();
+  r.output = text.str();
+  return r;
+}
+
+}  // namespace
+
+// C2: every option converted from seconds or Hz to int64 ns or a sample count
+// is refused out of range with exit 2 naming it (was SIGABRT for --blend-s
+// 1e300, --knot-interval-s 1e300 and --rate 1000000 --knot-interval-s 3600;
+// --margin-s 1e300 ran with an overflowed delay). NaN passes CLI11's own
+// range checks, so it is tried everywhere too.
+TEST_F(Cli, SecondsAndRateOptionsOutOfRangeAreUsageErrorsNamingTheOption) {
+  write("c.csv", knots_csv(5, [](int i) { return std::to_string(i); }));
+  const std::string stream = "stream --source file:" + path("c.csv") + " --speed max --scene flat --out " + path("s.csv") + " ";
+  const std::string gen = "generate --quiet --in " + path("c.csv") + " --scene flat --out " + path("g.csv") + " ";
+  const std::vector<std::pair<std::string, std::string>> cases = {
+      {stream + "--blend-s 1e300", "--blend-s"},
+      {stream + "--blend-s nan", "--blend-s"},
+      {stream + "--knot-interval-s 1e300", "--knot-interval-s"},
+      {stream + "--rate 1000000 --knot-interval-s 3600", "--knot-interval-s"},
+      {stream + "--margin-s 1e300", "--margin-s"},
+      {stream + "--duration-s 1e300", "--duration-s"},
+      {stream + "--max-gap-s nan", "--max-gap-s"},
+      {stream + "--gravity nan", "--gravity"},
+      {gen + "--gravity nan", "--gravity"},
+      {gen + "--method min-accel --sigma nan", "--sigma"},
+      {gen + "--method min-accel --sigma 1e308", "--sigma"},
+      {gen + "--method min-accel --sigma -5", "--sigma"},  // the scene parser's range, [0, 3]
+      {gen + "--method min-accel --mu 4", "--mu"},
+      {gen + "--delta 0", "--delta"},
+      {gen + "--max-gap-s nan", "--max-gap-s"},
+      {gen + "--kernel seconds --kernel-half-width-s inf", "--kernel-half-width-s"},
+      {"verify --imu x --trajectory y --gravity nan", "--gravity"},
+      {"verify --imu x --trajectory y --start-s 1e300", "--start-s"},
+      {"sample-trajectory --out " + path("t.csv") + " --duration-s 1e300", "--duration-s"},
+      {"sample-trajectory --out " + path("t.csv") + " --period-s nan", "--period-s"},
+      {"sensors --rate nan", "--rate"},
+      {"emit --sample flight --device pty:" + path("p") + " --knot-interval-s 1e300", "--knot-interval-s"},
+      {"emit --sample flight --device pty:" + path("p") + " --margin-s 1e300", "--margin-s"},
+      {"emit --sample flight --device pty:" + path("p") + " --seconds nan", "--seconds"},
+      {"emit --sample flight --device pty:" + path("p") + " --gravity nan", "--gravity"},
+      {"budget --protocol native --rate nan", "--rate"},
+      {"status --timeout-s nan", "--timeout-s"},
+      {"status --timeout-s 1e300", "--timeout-s"},
+      {"allan " + path("c.csv") + " --rate nan", "--rate"},
+      {"allan " + path("c.csv") + " --fit-min-tau-s nan", "--fit-min-tau-s"},
+  };
+  for (const auto& [args, option] : cases) {
+    const CliRun r = run(args);
+    EXPECT_EQ(r.exit_code, 2) << args << "\n" << r.output;
+    EXPECT_NE(r.output.find(option), std::string::npos) << args << "\n" << r.output;
+    EXPECT_EQ(r.output.find("terminate called"), std::string::npos) << args << "\n" << r.output;
+  }
+  EXPECT_FALSE(fs::exists(path("g.csv")));
+  // In range, the same options still run.
+  EXPECT_EQ(run(stream + "--blend-s 3600 --margin-s 0").exit_code, 0);
+  EXPECT_EQ(run(gen + "--method min-accel --sigma 3 --mu 0").exit_code, 0);
+  EXPECT_EQ(run(gen + "--delta 0 --derivatives finite-difference").exit_code, 0);
+}
+
+// R1/R2: sizes derived from the input are checked against core/limits.hpp
+// before anything is allocated for them, refused with exit 4 naming why.
+TEST_F(Cli, DerivedSizesAreRefusedBeforeAllocating) {
+  // 1001 knots 1 us apart at 100 Hz: one output sample (README: exit 4); was
+  // rc 0 after 500 MB of virtual end knots.
+  write("us.csv", knots_csv(1001, [](int i) {
+          char t[32];
+          std::snprintf(t, sizeof t, "0.%06d", i);
+          return std::string(t);
+        }));
+  CliRun r = run("generate --quiet --scene flat --rate 100 --in " + path("us.csv") + " --out " + path("o.csv"));
+  EXPECT_EQ(r.exit_code, 4) << r.output;
+  EXPECT_NE(r.output.find("shorter than two output samples"), std::string::npos) << r.output;
+  // 1 ns apart: was bad_alloc.
+  write("ns.csv", knots_csv(1001, [](int i) {
+          char t[32];
+          std::snprintf(t, sizeof t, "0.%09d", i);
+          return std::string(t);
+        }));
+  r = run("generate --quiet --scene flat --rate 100 --in " + path("ns.csv") + " --out " + path("o.csv"));
+  EXPECT_EQ(r.exit_code, 4) << r.output;
+  EXPECT_NE(r.output.find("shorter than two output samples"), std::string::npos) << r.output;
+  // Two knots an hour apart at 4 kHz: the automatic window (14.4 million
+  // samples) was uncapped (bad_alloc); it now meets the one window cap.
+  write("hour.csv", knots_csv(2, [](int i) { return std::to_string(3600 * i); }));
+  r = run("generate --quiet --scene flat --rate 4000 --max-gap-s 4000 --in " + path("hour.csv") + " --out " + path("o.csv"));
+  EXPECT_EQ(r.exit_code, 4) << r.output;
+  EXPECT_NE(r.output.find("automatic window"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("1000000"), std::string::npos) << r.output;
+  // A sample trajectory beyond the knot cap.
+  r = run("sample-trajectory --out " + path("t.csv") + " --duration-s 2000000 --period-s 0.01");
+  EXPECT_EQ(r.exit_code, 4) << r.output;
+  EXPECT_NE(r.output.find("knots"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(path("o.csv")));
+  EXPECT_FALSE(fs::exists(path("t.csv")));
+}
+
+// R1: knots 1 us apart over 5 ms at 1 kHz are a valid trajectory, but the end
+// extrapolation placed its virtual knots 1 us apart over a whole second of
+// padding per end (a million knots, ~500 MB). Their number is capped
+// (limits::kMaxPaddingKnots): the run succeeds in bounded memory.
+TEST_F(Cli, DenseKnotsKeepTheEndPaddingBounded) {
+  write("dense.csv", knots_csv(5001, [](int i) {
+          char t[32];
+          std::snprintf(t, sizeof t, "0.%06d", i);
+          return std::string(t);
+        }));
+  const MeasuredRun r = run_measured({"generate", "--quiet", "--scene", "flat", "--rate", "1000", "--in", path("dense.csv"),
+                                      "--out", path("o.csv")},
+                                     path("log.txt"));
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_LT(r.max_rss_kib, 200 * 1024) << r.output;  // was ~500 MB
+  std::ifstream in(path("o.csv"));
+  std::string line;
+  int rows = 0;
+  while (std::getline(in, line)) ++rows;
+  EXPECT_EQ(rows, 1 + 6);  // header + samples at 0..5 ms
+}
+
+// F1: --out A --trajectory-out B with B unwritable: exit 5 and A as it was
+// (A used to be replaced before B failed); no temporary file left.
+TEST_F(Cli, GenerateReplacesAllOutputsOrNone) {
+  write("c.csv", knots_csv(5, [](int i) { return std::to_string(i); }));
+  write("imu.csv", "old imu\n");
+  const CliRun r = run("generate --quiet --scene flat --in " + path("c.csv") + " --out " + path("imu.csv") +
+                       " --trajectory-out " + path("missing_dir/traj.csv"));
+  EXPECT_EQ(r.exit_code, 5) << r.output;
+  EXPECT_NE(r.output.find("missing_dir/traj.csv"), std::string::npos) << r.output;
+  std::ifstream in(path("imu.csv"));
+  std::stringstream text;
+  text << in.rdbuf();
+  EXPECT_EQ(text.str(), "old imu\n");
+  std::vector<std::string> names;
+  for (const auto& e : fs::directory_iterator(dir_)) names.push_back(e.path().filename().string());
+  std::sort(names.begin(), names.end());
+  EXPECT_EQ(names, (std::vector<std::string>{"c.csv", "imu.csv"}));
+  // Writable: both are written.
+  EXPECT_EQ(run("generate --quiet --scene flat --in " + path("c.csv") + " --out " + path("imu.csv") +
+                " --trajectory-out " + path("traj.csv")).exit_code, 0);
+  EXPECT_TRUE(fs::exists(path("traj.csv")));
 }

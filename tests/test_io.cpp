@@ -2,10 +2,12 @@
 // error messages, the atomic writer and the sample/trajectory writers.
 #include <dirent.h>
 #include <sys/stat.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <bit>
 #include <charconv>
 #include <chrono>
@@ -15,6 +17,7 @@
 #include <cstdlib>
 #include <ctime>
 #include <cstring>
+#include <fstream>
 #include <iostream>
 #include <limits>
 #include <random>
@@ -22,6 +25,7 @@
 #include <system_error>
 #include <vector>
 
+#include "core/limits.hpp"
 #include "core/so3.hpp"
 #include "io/atomic_file.hpp"
 #include "io/decimal_time.hpp"
@@ -714,6 +718,129 @@ TEST(AtomicFile, UnwritableLocationsThrowSystemError) {
     EXPECT_NE(std::string(e.what()).find("missing_dir/x.csv"), std::string::npos) << e.what();
   }
   EXPECT_TRUE(dir.files().empty());
+}
+
+// Issue 13 F1: the outputs of one command are replaced together. The second
+// output's location is unwritable: the first keeps its old content, and no
+// temporary file is left.
+TEST(AtomicFile, TransactionReplacesNoOutputWhenOneFails) {
+  TempDir dir;
+  const std::string first = dir.file("imu.csv");
+  write_file_atomically(first, "old imu\n");
+  try {
+    OutputTransaction outputs;
+    write_file_atomically(first, "new imu\n");
+    EXPECT_EQ(slurp(first), "old imu\n");  // prepared, not yet renamed
+    write_file_atomically(dir.file("missing_dir/traj.csv"), "new traj\n");
+    outputs.commit();
+    ADD_FAILURE() << "the second output cannot be written";
+  } catch (const std::system_error&) {
+  }
+  EXPECT_EQ(slurp(first), "old imu\n");
+  EXPECT_EQ(dir.files(), std::vector<std::string>{"imu.csv"});
+  {
+    OutputTransaction outputs;
+    write_file_atomically(first, "new imu\n");
+    write_file_atomically(dir.file("traj.csv"), "new traj\n");
+    outputs.commit();
+  }
+  EXPECT_EQ(slurp(first), "new imu\n");
+  EXPECT_EQ(slurp(dir.file("traj.csv")), "new traj\n");
+  EXPECT_EQ(dir.files().size(), 2u);
+}
+
+// A rename that fails at commit (the second target is a non-empty
+// directory): the first target, already renamed, gets its old content back.
+TEST(AtomicFile, TransactionRenameFailureRestoresTheTargetsRenamed) {
+  TempDir dir;
+  const std::string first = dir.file("a.csv"), blocked = dir.file("b.csv");
+  write_file_atomically(first, "old a\n");
+  ASSERT_EQ(::mkdir(blocked.c_str(), 0755), 0);
+  write_file_atomically(blocked + "/inside", "x");
+  {
+    OutputTransaction outputs;
+    write_file_atomically(first, "new a\n");
+    write_file_atomically(blocked, "new b\n");
+    EXPECT_THROW(outputs.commit(), std::system_error);
+  }
+  EXPECT_EQ(slurp(first), "old a\n");
+  std::vector<std::string> names = dir.files();
+  std::sort(names.begin(), names.end());
+  EXPECT_EQ(names, (std::vector<std::string>{"a.csv", "b.csv"}));
+  ::unlink((blocked + "/inside").c_str());
+  ::rmdir(blocked.c_str());
+}
+
+// Issue 13: temporary files left by a writer killed with SIGKILL are named
+// with its pid; the next writer of the same target removes those of dead
+// pids and keeps those of running ones and of other targets.
+TEST(AtomicFile, StaleTemporaryFilesOfDeadWritersAreRemoved) {
+  TempDir dir;
+  const std::string target = dir.file("out.csv");
+  // A pid that surely is dead: a child that has exited and been reaped.
+  const pid_t child = ::fork();
+  if (child == 0) ::_exit(0);
+  ASSERT_GT(child, 0);
+  ASSERT_EQ(::waitpid(child, nullptr, 0), child);
+  const std::string dead = "out.csv.tmp." + std::to_string(child) + ".AbC123";
+  const std::string alive = "out.csv.tmp." + std::to_string(::getppid()) + ".XyZ789";
+  const std::string other_target = "other.csv.tmp." + std::to_string(child) + ".QqQ000";
+  const std::string not_a_temp = "out.csv.tmp.notapid.Z";
+  for (const std::string& n : {dead, alive, other_target, not_a_temp}) std::ofstream(dir.file(n)) << "x";
+  EXPECT_EQ(temp_file_owner(dead, "out.csv"), child);
+  EXPECT_EQ(temp_file_owner(not_a_temp, "out.csv"), -1);
+  EXPECT_EQ(temp_file_owner("out.csv.tmp.12", "out.csv"), -1);
+  EXPECT_EQ(temp_file_owner("xout.csv.tmp.12.a", "out.csv"), -1);
+  {
+    AtomicFileWriter w(target);
+    // The writer's own temporary file carries this process's pid.
+    EXPECT_EQ(temp_file_owner(w.temp_path().substr(w.temp_path().rfind('/') + 1), "out.csv"), ::getpid());
+    w.write("new\n");
+    w.commit();
+  }
+  std::vector<std::string> names = dir.files();
+  std::sort(names.begin(), names.end());
+  std::vector<std::string> expected{alive, not_a_temp, "out.csv", other_target};
+  std::sort(expected.begin(), expected.end());
+  EXPECT_EQ(names, expected);
+}
+
+// Issue 13 R2: 200 MB of blank lines asked reserve() for a record per line
+// (bad_alloc). Lines without data reserve nothing, and a text with more data
+// lines than limits::kMaxKnots is refused before any record is reserved.
+TEST(TrajectoryCsv, BlankLinesReserveNothingAndTheKnotCapComesFirst) {
+  EXPECT_EQ(detail::count_lines("\n\n   \n# c\n\t\r\n1,2\n  3\n"), 2u);
+  std::string blank(20'000'000, '\n');
+  const std::string header = "time_s,north_m,east_m,down_m,heading_deg,pitch_deg,roll_deg\n";
+  const Trajectory t = parse_trajectory_csv(header + blank + "0,0,0,0,0,0,0\n1,1,0,0,0,0,0\n" + blank, "blank.csv");
+  EXPECT_EQ(t.records.size(), 2u);
+  EXPECT_LE(t.records.capacity(), 3u);
+  std::string many = header;
+  many.reserve(header.size() + 2 * (limits::kMaxKnots + 1));
+  for (std::size_t i = 0; i < limits::kMaxKnots + 1; ++i) many += "0\n";
+  try {
+    (void)parse_trajectory_csv(many, "many.csv");
+    ADD_FAILURE() << "more records than the knot cap";
+  } catch (const limits::SizeLimitError& e) {
+    EXPECT_NE(std::string(e.what()).find("many.csv"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find(std::to_string(limits::kMaxKnots)), std::string::npos) << e.what();
+  }
+}
+
+// Issue 13: h_m = 1e300 passed the reader and ended as a NaN sample at the
+// writer (exit 4, an internal message); positions beyond limits::kMaxPositionM
+// are refused at file:line, naming the column.
+TEST(TrajectoryCsv, HugePositionsAreRefusedAtTheirLine) {
+  const std::string text = "time_s,lat_deg,lon_deg,h_m,heading_deg,pitch_deg,roll_deg\n"
+                           "0,41,2,100,0,0,0\n"
+                           "1,41,2,1e300,0,0,0\n";
+  try {
+    (void)parse_trajectory_csv(text, "huge.csv");
+    ADD_FAILURE();
+  } catch (const CsvFormatError& e) {
+    EXPECT_NE(std::string(e.what()).find("huge.csv:3"), std::string::npos) << e.what();
+    EXPECT_NE(std::string(e.what()).find("h_m"), std::string::npos) << e.what();
+  }
 }
 
 // ------------------------------------------------------- IMU sample files

@@ -19,6 +19,7 @@
 #include "daemon/default_scene.hpp"
 #include "daemon/scene_check.hpp"
 #include "daemon/scene_config.hpp"
+#include "daemon/scene_runner.hpp"
 
 using namespace imuemu;
 using namespace imuemu::scene;
@@ -486,5 +487,90 @@ TEST(SceneCheck, DevicesOnOneCanInterfaceShareItsBudget) {
     EXPECT_NE(std::string(e.what()).find("DroneCAN node id 10 on vcan0 is already used by imu[0] (can10)"),
               std::string::npos)
         << e.what();
+  }
+}
+
+// ---- issue 13: --check-config checks what a start would refuse ----
+
+namespace {
+
+std::string file_scene(const std::string& trajectory, const std::string& link, const std::string& extra_imu = "",
+                       const std::string& trajectory_keys = "") {
+  return "[scene]\nname = \"chk\"\nphysics = \"flat\"\n[trajectory]\nsource = \"file:" + trajectory + "\"\n" +
+         trajectory_keys + "[[imu]]\nname = \"a\"\nprotocol = \"native\"\nrate_hz = 100\n[imu.transport]\ntype = \"pty\"\nlink = \"" +
+         link + "\"\n" + extra_imu;
+}
+
+std::string second_imu(const std::string& link) {
+  return "[[imu]]\nname = \"b\"\nprotocol = \"native\"\nrate_hz = 100\n[imu.transport]\ntype = \"pty\"\nlink = \"" + link + "\"\n";
+}
+
+const char* const kHeader = "time_s,north_m,east_m,down_m,heading_deg,pitch_deg,roll_deg\n";
+
+// The message check_startable throws for a scene, or "" if it accepts it.
+std::string startable_error(const std::string& scene_path, const std::string& pty_link_dir = "") {
+  RunnerOptions options;
+  options.pty_link_dir = pty_link_dir;
+  try {
+    check_startable(parse_scene_file(scene_path), options);
+  } catch (const std::exception& e) {
+    return e.what();
+  }
+  return "";
+}
+
+}  // namespace
+
+TEST(CheckStartable, RefusesWhatAStartWouldRefuse) {
+  TempDir dir;
+  const std::string d = dir.path().string();
+  dir.write("good.csv", std::string(kHeader) + "0,0,0,0,0,0,0\n1,1,0,0,0,0,0\n2,2,0,0,0,0,0\n");
+  EXPECT_EQ(startable_error(dir.write("ok.toml", file_scene(d + "/good.csv", d + "/tty0"))), "");
+
+  // Malformed trajectory content: file:line.
+  dir.write("bad.csv", std::string(kHeader) + "0,0,0,0,0,0,0\n1,1,0,zz,0,0,0\n");
+  std::string e = startable_error(dir.write("bad.toml", file_scene(d + "/bad.csv", d + "/tty0")));
+  EXPECT_NE(e.find("bad.csv:3"), std::string::npos) << e;
+
+  // Knots the engine refuses: a 179-degree heading glitch within a window.
+  dir.write("glitch.csv", std::string(kHeader) + "0,0,0,0,0,0,0\n0.5,1,0,0,179,0,0\n1,2,0,0,0,0,0\n2,3,0,0,0,0,0\n");
+  e = startable_error(dir.write("glitch.toml", file_scene(d + "/glitch.csv", d + "/tty0")));
+  EXPECT_NE(e.find("imu 'a'"), std::string::npos) << e;
+  EXPECT_NE(e.find("knot 1"), std::string::npos) << e;
+
+  // Pty links that cannot be published.
+  e = startable_error(dir.write("root.toml", file_scene(d + "/good.csv", "/")));
+  EXPECT_NE(e.find("names a directory"), std::string::npos) << e;
+  e = startable_error(dir.write("dir.toml", file_scene(d + "/good.csv", d)));
+  EXPECT_NE(e.find("existing directory"), std::string::npos) << e;
+  e = startable_error(dir.write("long.toml", file_scene(d + "/good.csv", d + "/" + std::string(300, 'x'))));
+  EXPECT_NE(e.find("NAME_MAX"), std::string::npos) << e;
+
+  // Aliases of one link: "./x" and "//x" forms, and the same file name in
+  // two directories under --pty-link-dir.
+  e = startable_error(dir.write("alias.toml", file_scene(d + "/good.csv", d + "/tty0", second_imu(d + "/./tty0"))));
+  EXPECT_NE(e.find("same path"), std::string::npos) << e;
+  e = startable_error(dir.write("alias2.toml", file_scene(d + "/good.csv", d + "/tty0", second_imu("/" + d + "/tty0"))));
+  EXPECT_NE(e.find("same path"), std::string::npos) << e;
+  const std::string two_dirs = dir.write("two.toml", file_scene(d + "/good.csv", d + "/one/tty0", second_imu(d + "/two/tty0")));
+  EXPECT_EQ(startable_error(two_dirs), "");
+  e = startable_error(two_dirs, d + "/links");
+  EXPECT_NE(e.find("same path"), std::string::npos) << e;
+
+  // A control socket whose directory cannot be made (its parent is a file).
+  e = startable_error(dir.write("sock.toml", file_scene(d + "/good.csv", d + "/tty0") +
+                                                 "[daemon]\ncontrol_socket = \"" + d + "/good.csv/sub/s.sock\"\n"));
+  EXPECT_NE(e.find("control socket"), std::string::npos) << e;
+}
+
+// A 100 KB name is not echoed whole.
+TEST(SceneErrors, EchoedInputIsBounded) {
+  const std::string name(100000, 'n');
+  const std::string text = "[scene]\nname = \"" + name + "\"\n";
+  try {
+    (void)parse_scene_text(text, "big.toml", ".");
+    ADD_FAILURE();
+  } catch (const SceneError& e) {
+    EXPECT_LT(std::string(e.what()).size(), 4000u) << std::string(e.what()).substr(0, 300);
   }
 }
