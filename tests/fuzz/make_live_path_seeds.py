@@ -9,16 +9,10 @@ import os
 import struct
 import sys
 
+sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "loopback"))
+from loopback_checks import crc32c  # noqa: E402
+
 CRC_FLAG, MAGIC_FLAG, ECEF_FLAG, PAUSE_FLAG, OVERSAMPLE_FLAG, FINISH_FLAG = 1, 2, 4, 8, 16, 32
-
-
-def crc32c(data):
-    crc = 0xFFFFFFFF
-    for b in data:
-        crc ^= b
-        for _ in range(8):
-            crc = (crc >> 1) ^ (0x82F63B78 if crc & 1 else 0)
-    return crc ^ 0xFFFFFFFF
 
 
 def datagram(seq, t_ns, pos, att, pos_kind=2, att_kind=0):

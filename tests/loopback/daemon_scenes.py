@@ -40,7 +40,7 @@ import multiprocessing
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from loopback_checks import compare_with_reference, memory_dir, read_listened, read_reference  # noqa: E402
+from loopback_checks import compare_with_reference, crc32c, memory_dir, read_listened, read_reference  # noqa: E402
 
 # scene name -> (scene file or None for the built-in, imu name, protocol, rate, pty link name, listen extra args)
 SCENES = {
@@ -53,15 +53,6 @@ LIVE_PORT = 5005     # config/live-udp.toml
 LIVE_PERIOD_S = 0.02
 LIVE_WINDOW_S = 0.05
 
-
-
-def crc32c(data):
-    crc = 0xFFFFFFFF
-    for b in data:
-        crc ^= b
-        for _ in range(8):
-            crc = (crc >> 1) ^ (0x82F63B78 if crc & 1 else 0)
-    return crc ^ 0xFFFFFFFF
 
 
 def decimal_ns(text):

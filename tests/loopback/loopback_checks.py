@@ -8,6 +8,7 @@ protocol's resolution.
 """
 import csv
 import os
+import time
 
 FLOAT32_REL = 2.0 ** -24  # round-to-nearest float32: half an ulp, relative
 IMU_COLUMNS = ["gyro_x_rad_s", "gyro_y_rad_s", "gyro_z_rad_s", "accel_x_m_s2", "accel_y_m_s2", "accel_z_m_s2"]
@@ -90,3 +91,36 @@ def compare_with_reference(label, protocol, rate, rows, ref, summary):
                "rate_arrival_hz": round(summary["rate_from_arrival_hz"], 3),
                "arrival_jitter_p99_us": summary["arrival_jitter_us"]["p99"]}
     return failures, figures
+
+
+def _crc32c_table():
+    table = []
+    for i in range(256):
+        c = i
+        for _ in range(8):
+            c = (c >> 1) ^ 0x82F63B78 if c & 1 else c >> 1
+        table.append(c)
+    return table
+
+
+CRC_TABLE = _crc32c_table()
+
+
+def crc32c(data):
+    """CRC-32C (docs/native-protocol.md §2; also of the pose datagrams, docs/pose-wire-format.md)."""
+    crc = 0xFFFFFFFF
+    for b in data:
+        crc = CRC_TABLE[(crc ^ b) & 0xFF] ^ (crc >> 8)
+    return crc ^ 0xFFFFFFFF
+
+
+def wait_for_link(proc, link, what, timeout_s=20):
+    """Waits until `proc` (imuemu emit or imuemud) publishes its pty link;
+    raises RuntimeError naming `what` and the process's stderr if it exits or
+    the timeout passes first."""
+    deadline = time.monotonic() + timeout_s
+    while not os.path.islink(link):
+        if proc.poll() is not None or time.monotonic() > deadline:
+            _, err = proc.communicate()
+            raise RuntimeError(f"{what}: never published {link} (rc {proc.returncode}):\n{err}")
+        time.sleep(0.01)

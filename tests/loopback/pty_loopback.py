@@ -33,7 +33,7 @@ import tempfile
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from loopback_checks import compare_with_reference, memory_dir, read_listened, read_reference  # noqa: E402
+from loopback_checks import compare_with_reference, memory_dir, read_listened, read_reference, wait_for_link  # noqa: E402
 
 
 def run(cmd, **kw):
@@ -55,12 +55,7 @@ def start_pair(imuemu, protocol, workdir, trajectory, rate, seconds, delta):
          # encoder -> pty -> decoder; `imuemu bench timing` measures lateness.
          "--late-ticks", "send"],
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
-    deadline = time.monotonic() + 20
-    while not os.path.islink(link):
-        if emit.poll() is not None or time.monotonic() > deadline:
-            out, err = emit.communicate()
-            raise RuntimeError(f"{protocol}: emit never published {link} (rc {emit.returncode}): {err}")
-        time.sleep(0.01)
+    wait_for_link(emit, link, f"{protocol}: emit")
     listen = subprocess.Popen(
         [imuemu, "listen", "--protocol", protocol, "--device", link, "--json", "--quiet", "--out", got,
          "--expect-rate", str(rate), "--duration-s", str(seconds + 30)],

@@ -55,7 +55,7 @@ import time
 import tty
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
-from loopback_checks import memory_dir  # noqa: E402
+from loopback_checks import crc32c, memory_dir, wait_for_link  # noqa: E402
 
 RATE_HZ = 400
 A_SECONDS = 40
@@ -69,27 +69,6 @@ POSES = 1300                       # 26 s of poses
 
 
 # ---------------------------------------------------------------- native protocol decoder (docs/native-protocol.md)
-
-def _crc32c_table():
-    table = []
-    for i in range(256):
-        c = i
-        for _ in range(8):
-            c = (c >> 1) ^ 0x82F63B78 if c & 1 else c >> 1
-        table.append(c)
-    return table
-
-
-CRC_TABLE = _crc32c_table()
-
-
-def crc32c(data):
-    """CRC-32C (docs/native-protocol.md §2; also of the pose datagrams)."""
-    crc = 0xFFFFFFFF
-    for b in data:
-        crc = CRC_TABLE[(crc ^ b) & 0xFF] ^ (crc >> 8)
-    return crc ^ 0xFFFFFFFF
-
 
 class NativeDecoder:
     """§6 of docs/native-protocol.md: search A5 5A, check version/flags/length,
@@ -294,12 +273,7 @@ def start_daemon(imuemud, scene, work, name, seconds):
 
 
 def wait_link(proc, link, name):
-    deadline = time.monotonic() + 20
-    while not os.path.islink(link):
-        if proc.poll() is not None or time.monotonic() > deadline:
-            _, err = proc.communicate()
-            raise RuntimeError(f"{name}: imuemud never published {link} (rc {proc.returncode}):\n{err}")
-        time.sleep(0.01)
+    wait_for_link(proc, link, f"{name}: imuemud")
 
 
 def free_udp_port():
