@@ -8,6 +8,7 @@
 // as a reference implementation), a textbook Cox-de Boor evaluation of the
 // non-uniform spline in long double, and finite differences of the spline's
 // own attitude/position (its analytic derivatives must be their derivatives).
+#include "tests/support/sanitizer.hpp"
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
@@ -33,7 +34,7 @@ using namespace imuemu;
 
 namespace {
 
-#if defined(__SANITIZE_ADDRESS__)
+#if IMUEMU_UNDER_ASAN
 constexpr TimeNs kDuration_ns = 120 * kNsPerSecond;
 #else
 constexpr TimeNs kDuration_ns = 600 * kNsPerSecond;  // 10-minute runs

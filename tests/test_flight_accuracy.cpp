@@ -10,6 +10,7 @@
 // the window shrinks and vanishing for a C1 interpolant, global-chart breakage
 // at pi crossings only, Park-Ravani divergence). Wall time per sample is
 // informational only and never asserted.
+#include "tests/support/sanitizer.hpp"
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -33,7 +34,7 @@ namespace {
 
 // The sanitizer build flies 2 minutes (the same code paths; ASan+UBSan make
 // Eigen ~60x slower, and 10 minutes took ~110 s there).
-#if defined(__SANITIZE_ADDRESS__)
+#if IMUEMU_UNDER_ASAN
 constexpr TimeNs kFlight_ns = 120 * kNsPerSecond;
 // The flight's attitude crosses rotation angle pi only between ~1595 s and
 // ~1981 s, so the sanitizer build checks the global chart on a stretch of it

@@ -9,8 +9,9 @@
 // (Hermite base curve, fourth-order bump, kernel derivatives, local chart,
 // extrapolated ends), so a regression fails. A change of those defaults needs
 // the bounds re-measured.
-// The sanitizer build (__SANITIZE_ADDRESS__) runs case 7 over 20 minutes
+// The sanitizer build (IMUEMU_UNDER_ASAN) runs case 7 over 20 minutes
 // instead of 4 hours and case 10 up to 2 kHz on a shorter stretch.
+#include "tests/support/sanitizer.hpp"
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -41,7 +42,7 @@ constexpr double kPi = std::numbers::pi;
 constexpr double kDeg = kPi / 180.0;
 constexpr double kRadToDeg = 180.0 / kPi;
 
-#if defined(__SANITIZE_ADDRESS__)
+#if IMUEMU_UNDER_ASAN
 constexpr bool kSanitized = true;
 #else
 constexpr bool kSanitized = false;

@@ -6,6 +6,7 @@
 // are linear in time, and finite differences of the baseline's own outputs.
 // Also documents its failure at pitch near +-90 deg, where the B-spline
 // (core/bspline.hpp) is unaffected.
+#include "tests/support/sanitizer.hpp"
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
@@ -31,7 +32,7 @@ using namespace imuemu;
 
 namespace {
 
-#if defined(__SANITIZE_ADDRESS__)
+#if IMUEMU_UNDER_ASAN
 constexpr TimeNs kDuration_ns = 120 * kNsPerSecond;
 #else
 constexpr TimeNs kDuration_ns = 600 * kNsPerSecond;  // 10-minute runs

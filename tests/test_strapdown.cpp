@@ -8,6 +8,7 @@
 // Runtime: the long runs integrate one hour at 200 Hz (720k samples). Under
 // AddressSanitizer (CI) or with the environment variable IMUEMU_QUICK set they
 // integrate 10 minutes instead; every bound below holds for both lengths.
+#include "tests/support/sanitizer.hpp"
 #include <gtest/gtest.h>
 
 #include <cmath>
@@ -34,7 +35,7 @@ constexpr double kDeg = std::numbers::pi / 180.0;
 constexpr TimeNs k200Hz_ns = 5'000'000;
 
 bool quick() {
-#if defined(__SANITIZE_ADDRESS__)
+#if IMUEMU_UNDER_ASAN
   return true;
 #else
   return std::getenv("IMUEMU_QUICK") != nullptr;

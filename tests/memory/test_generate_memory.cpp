@@ -7,6 +7,7 @@
 // Label `memory` (tests/CMakeLists.txt): ~50 s of CPU in Release, and under the
 // sanitizers RSS measures their shadow memory and quarantine, not the program,
 // so there the tests skip (`ctest -LE memory` leaves them out).
+#include "tests/support/sanitizer.hpp"
 #include <gtest/gtest.h>
 
 #include <sys/resource.h>
@@ -26,7 +27,7 @@ namespace fs = std::filesystem;
 
 namespace {
 
-#if defined(__SANITIZE_ADDRESS__)
+#if IMUEMU_UNDER_ASAN
 constexpr bool kSanitized = true;
 #else
 constexpr bool kSanitized = false;
