@@ -41,6 +41,7 @@
 #include "core/time_arith.hpp"
 #include "io/pose_admission.hpp"
 #include "io/pose_wire.hpp"
+#include "tests/fuzz/reseal_datagram.hpp"
 
 namespace {
 
@@ -178,14 +179,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
     const std::size_t n = std::min(want, size - at);
     std::vector<std::uint8_t> d(data + at, data + at + n);
     at += n;
-    if ((flags & 2) != 0 && d.size() > kDatagramVersionOffset) {
-      std::copy(kPoseDatagramMagic.begin(), kPoseDatagramMagic.end(), d.begin());
-      d[kDatagramVersionOffset] = kPoseDatagramVersion;
-    }
-    if ((flags & 1) != 0 && d.size() == kPoseDatagramV1Size) {
-      const std::uint32_t crc = crc32c(std::span(d.data(), kDatagramCrcOffset));
-      for (std::size_t i = 0; i < 4; ++i) d[kDatagramCrcOffset + i] = static_cast<std::uint8_t>(crc >> (8 * i));
-    }
+    fuzz::reseal_datagram(d, flags);
 
     // Real time passes; what fell due meanwhile goes out first.
     path.now_ns += static_cast<TimeNs>(advance_ms) * 1'000'000;

@@ -18,6 +18,7 @@
 
 #include "io/pose_admission.hpp"
 #include "io/pose_wire.hpp"
+#include "tests/fuzz/reseal_datagram.hpp"
 
 namespace {
 
@@ -55,14 +56,7 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
 
   for (std::size_t at = 1; at < size; at += kPoseDatagramV1Size) {
     std::vector<std::uint8_t> d(data + at, data + std::min(size, at + kPoseDatagramV1Size));
-    if ((flags & 2) != 0 && d.size() > kDatagramVersionOffset) {
-      std::copy(kPoseDatagramMagic.begin(), kPoseDatagramMagic.end(), d.begin());
-      d[kDatagramVersionOffset] = kPoseDatagramVersion;
-    }
-    if ((flags & 1) != 0 && d.size() == kPoseDatagramV1Size) {
-      const std::uint32_t crc = crc32c(std::span(d.data(), kDatagramCrcOffset));
-      for (std::size_t i = 0; i < 4; ++i) d[kDatagramCrcOffset + i] = static_cast<std::uint8_t>(crc >> (8 * i));
-    }
+    fuzz::reseal_datagram(d, flags);
 
     PoseDatagram decoded;
     DatagramDecodeError error;
