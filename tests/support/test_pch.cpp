@@ -1,0 +1,1 @@
+// Compiles tests/support/test_pch.hpp once for every test binary (REUSE_FROM).
