@@ -158,6 +158,19 @@ const std::vector<std::string_view>& kinematics_schema(Physics physics) {
 
 // ------------------------------------------------------------ IMU samples
 
+char* write_imu_csv_fields(char* out, const ImuSample& sample) noexcept {
+  char* p = put_int64(out, sample.t_ns);
+  for (int k = 0; k < 3; ++k) {
+    *p++ = ',';
+    p = put_double(p, sample.gyro_rad_s[k]);
+  }
+  for (int k = 0; k < 3; ++k) {
+    *p++ = ',';
+    p = put_double(p, sample.accel_m_s2[k]);
+  }
+  return p;
+}
+
 ImuCsvWriter::ImuCsvWriter(const std::string& path) : file_(path) {
   file_.write(kImuCsvHeader);
   file_.write("\n");
@@ -168,16 +181,8 @@ void ImuCsvWriter::write(const ImuSample& sample) {
   require_increasing(kWho, count_, previous_ns_, sample.t_ns);
   require_finite(kWho, count_, sample.t_ns, "gyro_rad_s", sample.gyro_rad_s);
   require_finite(kWho, count_, sample.t_ns, "accel_m_s2", sample.accel_m_s2);
-  char row[256];  // 1 int64 (<= 20) + 6 doubles (<= 24 each) + separators
-  char* p = put_int64(row, sample.t_ns);
-  for (int k = 0; k < 3; ++k) {
-    *p++ = ',';
-    p = put_double(p, sample.gyro_rad_s[k]);
-  }
-  for (int k = 0; k < 3; ++k) {
-    *p++ = ',';
-    p = put_double(p, sample.accel_m_s2[k]);
-  }
+  char row[kMaxImuCsvFieldsChars + 1];
+  char* p = write_imu_csv_fields(row, sample);
   *p++ = '\n';
   file_.write(std::string_view(row, static_cast<std::size_t>(p - row)));
   previous_ns_ = sample.t_ns;
