@@ -132,9 +132,10 @@ std::optional<std::string> attitude_frame_warning(const Trajectory& trajectory) 
     return std::nullopt;
   const bool columns_local = trajectory.attitude_kind == AttitudeKind::quaternion;
   const std::vector<TrajectoryRecord>& r = trajectory.records;
-  // Knots 1..10 s apart: long enough that position noise of a few cm stays
-  // below 0.1 m/s^2 in the second difference, short enough to follow a turn.
-  constexpr TimeNs kMinStepNs = kNsPerSecond, kMaxStepNs = 10 * kNsPerSecond;
+  // Knots 2..10 s apart: long enough that GNSS-like position noise (sigma
+  // 2 m) stays near 1 m/s^2 (sqrt(6) sigma / h^2) in the second difference,
+  // a few degrees against g, and short enough to follow a turn.
+  constexpr TimeNs kMinStepNs = 2 * kNsPerSecond, kMaxStepNs = 10 * kNsPerSecond;
   std::vector<double> angle_as_written_deg, angle_other_deg, force_difference_m_s2, force_m_s2;
   std::size_t first_line = 0, last_line = 0;
   for (const std::size_t j : sample_indices(r.size())) {

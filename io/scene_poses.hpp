@@ -54,7 +54,7 @@ inline constexpr std::size_t kPlausibilitySamples = 64;
 
 // qw,qx,qy,qz holding q_b^e (or qw_ecef.. holding q_b^l) with an Earth-fixed
 // position: at sampled knots, the specific force the positions imply
-// (thesis Eq. 3.70 in ECEF: a + 2 omega_ie x v - g, from knots >= 1 s apart)
+// (thesis Eq. 3.70 in ECEF: a + 2 omega_ie x v - g, from knots 2-10 s apart)
 // is compared with the body's up axis under the columns' reading and under
 // the other one. A vehicle's specific force points near its up axis (gravity
 // when level or static, lift in a coordinated turn); a median angle above

@@ -235,6 +235,10 @@ TEST_F(Cli, StreamReplayEqualsGenerate) {
 #include "io/sample_writers.hpp"
 #include "io/scene_poses.hpp"
 #include "io/trajectory_csv.hpp"
+#include "core/attitude.hpp"
+#include "core/earth.hpp"
+#include "core/so3.hpp"
+#include "io/decimal_time.hpp"
 
 namespace {
 std::string file_bytes(const std::string& p) {
@@ -529,7 +533,30 @@ TEST_F(Cli, TrapQuaternionHoldingEcefAttitudeWarnsWithNumbers) {
   const double written_deg = std::stod(t.output.substr(t.output.rfind(" is ", at) + 4));
   EXPECT_GT(written_deg, 100.0);
   EXPECT_LT(written_deg, 160.0);
-  for (const std::string f : {"right.csv", "f.csv"}) {
+  // The same knots with q_b^l = R_l^e(lat, lon)^T q_b^e (Eq. 1.4, 1.5)
+  // under qw..qz (right) and under qw_ecef.. (the other confusion).
+  std::string local = "time_s,x_m,y_m,z_m,qw,qx,qy,qz\n";
+  std::string swapped = "time_s,x_m,y_m,z_m,qw_ecef,qx_ecef,qy_ecef,qz_ecef\n";
+  const imuemu::io::Trajectory ecef = imuemu::io::read_trajectory_csv(path("right.csv"));
+  for (const imuemu::io::TrajectoryRecord& rec : ecef.records) {
+    const imuemu::earth::Geodetic g = imuemu::earth::geodetic_from_ecef(rec.position);
+    const imuemu::Mat3 R_b_l = imuemu::attitude::ned_to_ecef(g.latitude_rad, g.longitude_rad).transpose() *
+                               imuemu::so3::matrix_from_quaternion(rec.attitude);
+    const Eigen::Vector4d q = imuemu::so3::quaternion_from_matrix(R_b_l);
+    std::string row = imuemu::io::format_decimal_seconds(rec.t_ns);
+    for (double v : {rec.position.x(), rec.position.y(), rec.position.z(), q[0], q[1], q[2], q[3]})
+      row += "," + imuemu::io::detail::format_double(v);
+    local += row + "\n";
+    swapped += row + "\n";
+  }
+  write("local.csv", local);
+  write("swapped.csv", swapped);
+  const CliRun sw = run("generate --quiet --scene ecef --in " + path("swapped.csv") + " --out " + path("o.csv"));
+  std::cout << sw.output;
+  EXPECT_NE(sw.output.find("the columns qw_ecef,qx_ecef,qy_ecef,qz_ecef are read as q_b^e"), std::string::npos)
+      << sw.output;
+  EXPECT_NE(sw.output.find("if so, name the columns qw,qx,qy,qz."), std::string::npos) << sw.output;
+  for (const std::string f : {"right.csv", "local.csv", "f.csv"}) {
     const CliRun ok = run("generate --quiet --scene ecef --in " + path(f) + " --out " + path("o.csv"));
     EXPECT_EQ(ok.exit_code, 0) << ok.output;
     EXPECT_EQ(ok.output.find("warning"), std::string::npos) << f << ": " << ok.output;
