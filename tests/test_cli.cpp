@@ -503,21 +503,23 @@ TEST_F(Cli, TrapQuaternionHoldingEcefAttitudeWarnsWithNumbers) {
   const CliRun k = run("generate --quiet --scene ecef --rate 10 --in " + path("f.csv") + " --out " + path("fi.csv") +
                        " --trajectory-out " + path("fk.csv"));
   ASSERT_EQ(k.exit_code, 0) << k.output;
+  // The same rows under the local-level names (qw..qz) and the ECEF ones.
+  const auto write_under_both_names = [&](const std::string& rows, const std::string& as_local,
+                                          const std::string& as_ecef) {
+    write(as_local, "time_s,x_m,y_m,z_m,qw,qx,qy,qz\n" + rows);
+    write(as_ecef, "time_s,x_m,y_m,z_m,qw_ecef,qx_ecef,qy_ecef,qz_ecef\n" + rows);
+  };
   // Whole-second states only: the knots of the original 1 Hz file.
-  std::string trap = "time_s,x_m,y_m,z_m,qw,qx,qy,qz\n";
-  std::string right = "time_s,x_m,y_m,z_m,qw_ecef,qx_ecef,qy_ecef,qz_ecef\n";
+  std::string q_b_e_rows;
   const std::vector<std::string> lines = text_lines(path("fk.csv"));
   ASSERT_EQ(lines.front().rfind("time_s,x_m,y_m,z_m,qw_ecef,qx_ecef,qy_ecef,qz_ecef,", 0), 0u) << lines.front();
   for (std::size_t i = 1; i < lines.size(); ++i) {
     std::stringstream ss(lines[i]);
     std::string field, row;
     for (int c = 0; c < 8 && std::getline(ss, field, ','); ++c) row += (c == 0 ? "" : ",") + field;
-    if (row.substr(0, row.find(',')).find('.') != std::string::npos) continue;
-    trap += row + "\n";
-    right += row + "\n";
+    if (row.substr(0, row.find(',')).find('.') == std::string::npos) q_b_e_rows += row + "\n";
   }
-  write("trap.csv", trap);
-  write("right.csv", right);
+  write_under_both_names(q_b_e_rows, "trap.csv", "right.csv");
   const CliRun t = run("generate --quiet --scene ecef --in " + path("trap.csv") + " --out " + path("o.csv"));
   std::cout << t.output;
   EXPECT_EQ(t.exit_code, 0) << t.output;  // a warning, not a refusal: the file may be what it says
@@ -535,8 +537,7 @@ TEST_F(Cli, TrapQuaternionHoldingEcefAttitudeWarnsWithNumbers) {
   EXPECT_LT(written_deg, 160.0);
   // The same knots with q_b^l = R_l^e(lat, lon)^T q_b^e (Eq. 1.4, 1.5)
   // under qw..qz (right) and under qw_ecef.. (the other confusion).
-  std::string local = "time_s,x_m,y_m,z_m,qw,qx,qy,qz\n";
-  std::string swapped = "time_s,x_m,y_m,z_m,qw_ecef,qx_ecef,qy_ecef,qz_ecef\n";
+  std::string q_b_l_rows;
   const imuemu::io::Trajectory ecef = imuemu::io::read_trajectory_csv(path("right.csv"));
   for (const imuemu::io::TrajectoryRecord& rec : ecef.records) {
     const imuemu::earth::Geodetic g = imuemu::earth::geodetic_from_ecef(rec.position);
@@ -546,11 +547,9 @@ TEST_F(Cli, TrapQuaternionHoldingEcefAttitudeWarnsWithNumbers) {
     std::string row = imuemu::io::format_decimal_seconds(rec.t_ns);
     for (double v : {rec.position.x(), rec.position.y(), rec.position.z(), q[0], q[1], q[2], q[3]})
       row += "," + imuemu::io::detail::format_double(v);
-    local += row + "\n";
-    swapped += row + "\n";
+    q_b_l_rows += row + "\n";
   }
-  write("local.csv", local);
-  write("swapped.csv", swapped);
+  write_under_both_names(q_b_l_rows, "local.csv", "swapped.csv");
   const CliRun sw = run("generate --quiet --scene ecef --in " + path("swapped.csv") + " --out " + path("o.csv"));
   std::cout << sw.output;
   EXPECT_NE(sw.output.find("the columns qw_ecef,qx_ecef,qy_ecef,qz_ecef are read as q_b^e"), std::string::npos)
