@@ -16,7 +16,7 @@ namespace {
 
 // Appends the shortest round-trip form of v (caller guarantees room).
 char* put_double(char* out, double v) {
-  return std::to_chars(out, out + 32, v).ptr;  // shortest form is at most 24 chars
+  return std::to_chars(out, out + 24, v).ptr;  // the shortest form of a double is at most 24 chars
 }
 
 char* put_int64(char* out, std::int64_t v) { return std::to_chars(out, out + 24, v).ptr; }

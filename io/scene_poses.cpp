@@ -151,7 +151,9 @@ std::optional<std::string> attitude_frame_warning(const Trajectory& trajectory) 
     // Eq. 3.70 in the rotating ECEF frame; normal gravity already holds the
     // centrifugal term.
     const Vec3 f_e = a + 2.0 * earth::rotation_rate_ecef().cross(v) - earth::normal_gravity_ecef(xj);
-    if (f_e.norm() < 0.5 * earth::kStandardGravity_m_s2) continue;  // near free fall: no up axis to compare
+    // Near free fall there is no up axis to compare; a non-finite force (a
+    // degenerate position) is skipped too, so the medians never see a NaN.
+    if (!(f_e.norm() >= 0.5 * earth::kStandardGravity_m_s2)) continue;
     const Mat3 Q = body_to_local(r[j]);  // the quaternion's matrix, whatever frame it is for
     const earth::Geodetic g = geodetic_of(r[j], xj);
     const Mat3 as_local = attitude::ned_to_ecef(g.latitude_rad, g.longitude_rad) * Q;  // read as R_b^l
@@ -171,7 +173,11 @@ std::optional<std::string> attitude_frame_warning(const Trajectory& trajectory) 
   }
   if (angle_as_written_deg.size() < 3) return std::nullopt;
   const double written_deg = median(angle_as_written_deg), other_deg = median(angle_other_deg);
-  if (!(written_deg > 45.0 && other_deg < 15.0)) return std::nullopt;
+  // A wide margin between the readings as well: a correct file can put the
+  // body's up axis near the other reading's by chance (inverted flight or a
+  // z-up body frame at high latitude); the confusion itself gives about
+  // 90 deg + latitude against a few degrees.
+  if (!(written_deg > 45.0 && other_deg < 15.0 && written_deg - other_deg > 60.0)) return std::nullopt;
   const std::string written_cols = columns_local ? "qw,qx,qy,qz" : "qw_ecef,qx_ecef,qy_ecef,qz_ecef";
   const std::string other_cols = columns_local ? "qw_ecef,qx_ecef,qy_ecef,qz_ecef" : "qw,qx,qy,qz";
   const std::string written_frame = columns_local ? "q_b^l (body to local NED)" : "q_b^e (body to ECEF)";

@@ -398,7 +398,7 @@ std::string integer_time_hint(std::string_view field, NumberStatus status) {
   const bool integer = !digits.empty() && std::all_of(digits.begin(), digits.end(), [](char c) {
     return c >= '0' && c <= '9';
   });
-  std::string hint = "; time_s is in seconds (at most +-9223372036.854775807 s)";
+  std::string hint = "; time_s is in seconds (from -9223372036.854775808 to 9223372036.854775807 s)";
   if (!integer || digits.size() <= 9) return hint;
   std::string seconds(sign);
   seconds.append(digits.substr(0, digits.size() - 9));

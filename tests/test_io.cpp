@@ -409,7 +409,7 @@ TEST(TrajectoryCsv, ValueErrorsNameFileLineAndColumn) {
 // divided by 1e9 fits, gives it exactly (the point moved 9 digits, no double).
 TEST(TrajectoryCsv, IntegerNanosecondTimesSayTheUnitAndTheValueInSeconds) {
   const std::string text = "time_s,lat_deg,lon_deg,h_m,heading_deg,pitch_deg,roll_deg\n0,41,2,100,0,0,0\n";
-  const std::string seconds = "time_s is in seconds (at most +-9223372036.854775807 s)";
+  const std::string seconds = "time_s is in seconds (from -9223372036.854775808 to 9223372036.854775807 s)";
   expect_error(text + "1717243200123456789,41,2,100,0,0,0\n", 3, "time_s", 1,
                {"got '1717243200123456789' (out of range); " + seconds,
                 ": if this is an integer count of nanoseconds, divide it by 1e9 and write '1717243200.123456789'"});
