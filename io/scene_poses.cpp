@@ -215,19 +215,24 @@ std::optional<std::string> flat_scene_warning(const Trajectory& trajectory, Phys
   }
   double extent_m = 0.0, speed_m_s = 0.0;
   const Vec3 origin = ecef_position(r.front());
-  Vec3 previous = origin;
+  // Speed over steps of at least 1 s: dense noisy fixes (100 Hz GNSS with
+  // metres of noise) would give hundreds of m/s knot to knot.
+  constexpr std::uint64_t kMinSpeedStepNs = 1'000'000'000;
+  std::size_t previous = 0;
   for (std::size_t i = 0; i < r.size(); ++i) {
     const Vec3 x = ecef_position(r[i]);
     extent_m = std::max(extent_m, (x - origin).norm());
-    if (i > 0)
-      speed_m_s = std::max(speed_m_s, (x - previous).norm() / (static_cast<double>(ns_between(r[i - 1].t_ns, r[i].t_ns)) * 1e-9));
-    previous = x;
+    const std::uint64_t step_ns = ns_between(r[previous].t_ns, r[i].t_ns);
+    if (step_ns >= kMinSpeedStepNs) {
+      speed_m_s = std::max(speed_m_s, (x - ecef_position(r[previous])).norm() / (static_cast<double>(step_ns) * 1e-9));
+      previous = i;
+    }
   }
   return trajectory.source + ": --scene flat on Earth-fixed (" + std::string(to_string(trajectory.position_kind)) +
          ") positions: they are put in the NED tangent frame of line " + std::to_string(r.front().line) +
          " and the flat physics leaves out the Earth rate (" + sci(earth::kRotationRate_rad_s) +
          " rad/s in the gyros), Coriolis (2 omega_ie v, up to " + sci(2.0 * earth::kRotationRate_rad_s * speed_m_s) +
-         " m/s^2 at the fastest knot-to-knot speed " + fixed(speed_m_s, 1) + " m/s) and gravity's turn across the " +
+         " m/s^2 at the fastest speed over 1 s or more, " + fixed(speed_m_s, 1) + " m/s) and gravity's turn across the " +
          fixed(extent_m, 0) + " m the trajectory reaches from that origin (g d/R = " + sci(g * extent_m / R) +
          " m/s^2 in the accelerometers); --scene ecef has them all";
 }
