@@ -1,16 +1,55 @@
 #include "core/pipeline.hpp"
 
 #include <algorithm>
+#include <charconv>
 #include <array>
 #include <optional>
 #include <cmath>
 #include <stdexcept>
 #include <string>
 
+#include "core/decimal_seconds.hpp"
 #include "core/limits.hpp"
+#include "core/time_arith.hpp"
 #include "core/stream.hpp"
 
 namespace imuemu {
+
+namespace {
+std::string default_knot_label(std::size_t index) { return "knot " + std::to_string(index); }
+
+std::string shortest(double v) {
+  char buf[32];
+  return std::string(buf, std::to_chars(buf, buf + sizeof buf, v).ptr);
+}
+
+// The one wording of every gap message (GapError::what() and describe()).
+std::string gap_message(GapError::Kind kind, const std::vector<std::size_t>& knots, const std::vector<TimeNs>& times_ns,
+                        double max_gap_s, const KnotLabel& label) {
+  const auto at = [&](std::size_t k) {
+    return label(knots[k]) + " (t=" + format_decimal_seconds(times_ns[k]) + " s)";
+  };
+  if (kind == GapError::Kind::isolated)
+    return at(0) + " is isolated between two gaps: a segment needs at least two knots";
+  // The interval exactly, as a time: two ordered times' distance fits uint64
+  // (ns_between); beyond int64 it is shown saturated.
+  const std::uint64_t step_ns = ns_between(times_ns[0], times_ns[1]);
+  const TimeNs shown_ns = step_ns > static_cast<std::uint64_t>(kMaxTimeNs) ? kMaxTimeNs : static_cast<TimeNs>(step_ns);
+  return at(0) + " and " + at(1) + " are " + format_decimal_seconds(shown_ns) + " s apart, more than the " +
+         shortest(max_gap_s) + " s gap limit: raise the limit or split the trajectory at gaps";
+}
+}  // namespace
+
+GapError::GapError(Kind kind_, std::vector<std::size_t> knots_, std::vector<TimeNs> times_ns_, double max_gap_s_)
+    : interp::InterpolationError(gap_message(kind_, knots_, times_ns_, max_gap_s_, default_knot_label)),
+      kind(kind_),
+      knots(std::move(knots_)),
+      times_ns(std::move(times_ns_)),
+      max_gap_s(max_gap_s_) {}
+
+std::string GapError::describe(const KnotLabel& label) const {
+  return gap_message(kind, knots, times_ns, max_gap_s, label);
+}
 
 Chart chart_from_string(const std::string& name) {
   if (name == "global") return Chart::global;

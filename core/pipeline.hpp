@@ -134,9 +134,27 @@ using ProgressFn = std::function<void(double)>;
 // stamps the sample with the integer floor (timestamps are int64 ns).
 double output_grid_fraction_ns(std::size_t k, std::int64_t rate_hz);
 
-// Thrown for knot spacings the gap policy refuses; names both knots.
+// Names a knot in a message from its 0-based index: "knot 15" by default;
+// a caller that knows where the knots came from names the file line instead
+// (daemon: "traj.csv:17").
+using KnotLabel = std::function<std::string(std::size_t knot_index)>;
+
+// Thrown for knot spacings the gap policy refuses. Names the knots (label)
+// and their times in exact decimal seconds (never rounded: epoch times keep
+// their nanoseconds).
 struct GapError : interp::InterpolationError {
-  using interp::InterpolationError::InterpolationError;
+  enum class Kind {
+    too_long,  // knots[0], knots[1]: an interval longer than max_gap_s
+    isolated,  // knots[0]: a knot alone between two gaps (GapPolicy::split)
+  };
+  GapError(Kind kind, std::vector<std::size_t> knots, std::vector<TimeNs> times_ns, double max_gap_s);
+  // The message with each knot named by `label` (what() uses "knot N").
+  std::string describe(const KnotLabel& label) const;
+
+  Kind kind;
+  std::vector<std::size_t> knots;  // 0-based indices, in time order
+  std::vector<TimeNs> times_ns;    // their times
+  double max_gap_s;
 };
 
 // Output samples a batch run over `knots` makes (the grid from the first to

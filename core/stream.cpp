@@ -1,5 +1,7 @@
 #include "core/stream.hpp"
 
+#include "core/decimal_seconds.hpp"
+
 #include "core/limits.hpp"
 
 #include <algorithm>
@@ -666,7 +668,8 @@ class StreamPipeline::Run {
 };
 
 namespace {
-std::string knot_time(TimeNs t_ns) { return std::to_string(static_cast<double>(t_ns) * 1e-9) + " s"; }
+// Exact decimal seconds: a double would round an epoch time to ~us.
+std::string knot_time(TimeNs t_ns) { return format_decimal_seconds(t_ns) + " s"; }
 }  // namespace
 
 StreamPipeline::StreamPipeline(const PipelineOptions& options) : options_(options) {
@@ -739,8 +742,7 @@ void StreamPipeline::check_last_run() const {
   if (knots_in_run() >= 2) return;
   if (knots_pushed_ < 2)
     throw interp::InterpolationError("interpolation needs at least 2 knots, got " + std::to_string(knots_pushed_));
-  throw GapError("knot " + std::to_string(run_first_knot_) + " (t=" + knot_time(last_knot_.t_ns) +
-                 ") is isolated between two gaps: a segment needs at least two knots");
+  throw GapError(GapError::Kind::isolated, {run_first_knot_}, {last_knot_.t_ns}, options_.max_gap_s);
 }
 
 void StreamPipeline::check_trajectory(const std::vector<Pose>& knots, const PipelineOptions& options) {
@@ -761,16 +763,12 @@ bool StreamPipeline::check_knot(const Pose& knot) const {
     const std::uint64_t step_ns = ns_between(last_knot_.t_ns, knot.t_ns);  // exact for any ordered pair
     if (step_ns > max_gap_ns) {
       if (options_.gap_policy == GapPolicy::error)
-        throw GapError("knots " + std::to_string(knots_pushed_ - 1) + " (t=" + knot_time(last_knot_.t_ns) + ") and " +
-                       std::to_string(knots_pushed_) + " (t=" + knot_time(knot.t_ns) + ") are " +
-                       std::to_string(static_cast<double>(step_ns) * 1e-9) + " s apart, more than the " +
-                       std::to_string(options_.max_gap_s) +
-                       " s gap limit: raise the limit or split the trajectory at gaps");
+        throw GapError(GapError::Kind::too_long, {knots_pushed_ - 1, knots_pushed_}, {last_knot_.t_ns, knot.t_ns},
+                       options_.max_gap_s);
       // GapPolicy::split: the stretch before the gap ends here, with its own
       // end windows; the next starts at this knot.
       if (knots_in_run() < 2)
-        throw GapError("knot " + std::to_string(run_first_knot_) + " (t=" + knot_time(last_knot_.t_ns) +
-                       ") is isolated between two gaps: a segment needs at least two knots");
+        throw GapError(GapError::Kind::isolated, {run_first_knot_}, {last_knot_.t_ns}, options_.max_gap_s);
       gap = true;
     }
   }

@@ -206,8 +206,17 @@ int generate(const GenerateArgs& args) {
     opt.kernel.width = smoothing::kernel_width_from_string(args.kernel);
     opt.kernel.half_width_s = args.kernel_half_width_s;
     opt.kernel.order = args.kernel_order;
+    // Input-convention traps (docs/trajectory-format.md): warnings with their
+    // numbers, printed even with --quiet (which silences progress, not doubts
+    // about the input).
+    for (const auto& warning : {io::attitude_frame_warning(trajectory), io::flat_scene_warning(trajectory, opt.scene.physics)})
+      if (warning) std::cerr << "imuemu: warning: " << *warning << "\n";
     const std::vector<Pose> knots = io::poses_in_scene(trajectory, opt.scene.physics);
-    trajectory = io::Trajectory{};  // the parsed file is dropped once it is poses: only the knots are held
+    // Each knot's file line, for the messages that name knots (gaps).
+    std::vector<std::size_t> knot_lines;
+    knot_lines.reserve(trajectory.records.size());
+    for (const io::TrajectoryRecord& rec : trajectory.records) knot_lines.push_back(rec.line);
+    trajectory = io::Trajectory{};  // the parsed file is dropped once it is poses: only the knots (and lines) are held
     if (args.delta < 0)
       opt.kernel.delta = auto_delta(knots, args.rate_hz, opt.interpolation.method == interp::Method::hermite ? 1.0 : 2.0);
     const scene::ErrorModelConfig model = scene::error_model_from_option(args.sensor.empty() ? "ideal" : args.sensor, args.seed);
@@ -217,9 +226,18 @@ int generate(const GenerateArgs& args) {
       // Streamed to both files sample by sample: O(window) memory
       // (batch_generation.hpp); neither file is replaced unless both are written.
       ProgressBar bar(!args.quiet);
-      counts = generate_to_files(knots, opt, model, "imu0",
-                                 {args.out_path, args.trajectory_out_path, opt.scene.physics},
-                                 [&](double f) { bar.update(f); });
+      try {
+        counts = generate_to_files(knots, opt, model, "imu0",
+                                   {args.out_path, args.trajectory_out_path, opt.scene.physics},
+                                   [&](double f) { bar.update(f); });
+      } catch (const GapError& e) {
+        // Named by file line (knot k is the record at knot_lines[k]), not by
+        // the 0-based knot index the core knows.
+        throw interp::InterpolationError(e.describe([&](std::size_t k) {
+          return k < knot_lines.size() ? "the knot at " + args.in_path + ":" + std::to_string(knot_lines[k])
+                                       : "knot " + std::to_string(k);
+        }));
+      }
     }
     report_saturation("imu0", counts.saturated_samples, args.quiet);
     if (!args.quiet) {

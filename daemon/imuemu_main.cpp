@@ -28,7 +28,7 @@ int main(int argc, char** argv) {
   g->add_option("--out", gen.out_path, "IMU CSV to write (time_ns, gyro rad/s, accel m/s^2)")->required();
   g->add_option("--trajectory-out", gen.trajectory_out_path, "Also write the smoothed trajectory CSV");
   g->add_option("--rate", gen.rate_hz, "Output rate in Hz (integer)")->capture_default_str()->check(CLI::Range(1, 1000000));
-  g->add_option("--delta", gen.delta, "Window half-length Delta of Eq. 3.68, in output samples (default: two median knot intervals; 0 only with --derivatives finite-difference)")->check(CLI::Range(std::int64_t{0}, imuemu::limits::kMaxWindowSamples));
+  g->add_option("--delta", gen.delta, "Window half-length Delta of Eq. 3.68, in output samples (default: one median knot interval of output samples with --method hermite, the default, two with the other methods; 0 only with --derivatives finite-difference)")->check(CLI::Range(std::int64_t{0}, imuemu::limits::kMaxWindowSamples));
   g->add_option("--method", gen.method, "Base curve: hermite (C2 in local charts), geodesic (Eq. 3.44), min-accel (Lemma 3.22), park-ravani (3.6.1)")->capture_default_str()
       ->check(CLI::IsMember({"hermite", "geodesic", "min-accel", "park-ravani"}));
   g->add_option("--kernel-order", gen.kernel_order, "Bump kernel order: 4 (preserves cubic motion) or 2 (the thesis' positive bump)")

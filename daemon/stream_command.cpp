@@ -26,6 +26,7 @@
 #include "daemon/commands.hpp"
 #include "daemon/error_model_config.hpp"
 #include "io/pose_source.hpp"
+#include "io/sample_writers.hpp"
 
 namespace imuemu::cli {
 namespace {
@@ -48,11 +49,15 @@ struct Output {
   }
 };
 
+// The IMU fields exactly as `generate` writes them (io/sample_writers.hpp:
+// shortest round-trip doubles), then the emission status.
 void write_row(std::FILE* f, const live::Emission& e) {
-  const ImuSample& s = e.imu;
-  std::fprintf(f, "%lld,%.17g,%.17g,%.17g,%.17g,%.17g,%.17g,%s\n", static_cast<long long>(s.t_ns), s.gyro_rad_s.x(),
-               s.gyro_rad_s.y(), s.gyro_rad_s.z(), s.accel_m_s2.x(), s.accel_m_s2.y(), s.accel_m_s2.z(),
-               to_string(e.status).c_str());
+  char row[io::kMaxImuCsvFieldsChars + 1];
+  char* const end = io::write_imu_csv_fields(row, e.imu);
+  *end = ',';
+  std::fwrite(row, 1, static_cast<std::size_t>(end - row) + 1, f);
+  std::fputs(to_string(e.status).c_str(), f);
+  std::fputc('\n', f);
 }
 
 }  // namespace
@@ -203,6 +208,9 @@ int stream(const StreamArgs& args) {
 
   std::vector<io::SourcedPose> batch;
   std::size_t refused = 0;
+  // --speed max writes the engine's samples directly, without the live
+  // emitter, whose counters then stay 0: these rows are counted here.
+  std::uint64_t replayed_exact = 0;
   bool input_done = false, finished = false;
   auto take_input = [&] {
     batch.clear();
@@ -225,17 +233,21 @@ int stream(const StreamArgs& args) {
       StreamSample s;
       while (!g_stop) {
         take_input();
-        while (engine.pop(s))
+        while (engine.pop(s)) {
           write_row(out.file, measured(scene::grid_index(engine.first_knot_ns(), s.imu.t_ns, po.rate_hz),
                                        {live::EmissionStatus::exact, s.kinematics, s.imu}));
+          ++replayed_exact;
+        }
         if (input_done) break;
         sleep_until_monotonic(io::monotonic_now_ns() + 1'000'000);
       }
       if (engine.knots_pushed() >= 2) {
         engine.finish();
-        while (engine.pop(s))
+        while (engine.pop(s)) {
           write_row(out.file, measured(scene::grid_index(engine.first_knot_ns(), s.imu.t_ns, po.rate_hz),
                                        {live::EmissionStatus::exact, s.kinematics, s.imu}));
+          ++replayed_exact;
+        }
       }
     } else {
       // Wait for the first pose: it fixes the output grid and the clock.
@@ -276,7 +288,7 @@ int stream(const StreamArgs& args) {
   const live::LiveCounters& lc = emitter.counters();
   std::cerr << "imuemu stream: poses " << c.accepted << " accepted, " << c.rejected() << " rejected (" << c.duplicate
             << " duplicate, " << c.out_of_order << " out of order), " << c.lost() << " lost, " << refused
-            << " refused by the method; samples " << lc.exact << " exact, " << lc.extrapolated << " extrapolated, "
+            << " refused by the method; samples " << lc.exact + replayed_exact << " exact, " << lc.extrapolated << " extrapolated, "
             << lc.blending << " blending, " << lc.paused << " paused, " << lc.waiting << " waiting (" << lc.underrun_events << " underruns, " << lc.stale_discarded << " stale)";
   if (sensor_model) std::cerr << ", " << saturated << " saturated";
   std::cerr << "\n";

@@ -21,6 +21,7 @@
 #include <string>
 #include <string_view>
 
+#include "core/decimal_seconds.hpp"
 #include "core/types.hpp"
 
 namespace imuemu::io {
@@ -76,15 +77,13 @@ TimeNs parse_decimal_seconds(std::string_view text);
 double parse_double(std::string_view text);
 std::int64_t parse_int64(std::string_view text);
 
-// Longest output of format_decimal_seconds: "-9223372036.854775808".
-inline constexpr std::size_t kMaxDecimalSecondsChars = 21;
-
 // int64 ns -> the shortest exact decimal seconds: 12'500'000'000 -> "12.5",
 // 0 -> "0", -1 -> "-0.000000001", 3'000'000'000 -> "3". Parsing the result with
 // try_parse_decimal_seconds gives back t_ns exactly, for every int64.
-std::string format_decimal_seconds(TimeNs t_ns);
-// Same, written at `out` (room for kMaxDecimalSecondsChars chars); returns the
-// end of what was written. No terminating NUL.
-char* write_decimal_seconds(char* out, TimeNs t_ns) noexcept;
+// Implemented in core/decimal_seconds.hpp (core's messages name times
+// exactly too); kMaxDecimalSecondsChars = 21 is its longest output.
+using imuemu::format_decimal_seconds;
+using imuemu::kMaxDecimalSecondsChars;
+using imuemu::write_decimal_seconds;
 
 }  // namespace imuemu::io

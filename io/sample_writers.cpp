@@ -16,7 +16,7 @@ namespace {
 
 // Appends the shortest round-trip form of v (caller guarantees room).
 char* put_double(char* out, double v) {
-  return std::to_chars(out, out + 32, v).ptr;  // shortest form is at most 24 chars
+  return std::to_chars(out, out + 24, v).ptr;  // the shortest form of a double is at most 24 chars
 }
 
 char* put_int64(char* out, std::int64_t v) { return std::to_chars(out, out + 24, v).ptr; }
@@ -158,6 +158,19 @@ const std::vector<std::string_view>& kinematics_schema(Physics physics) {
 
 // ------------------------------------------------------------ IMU samples
 
+char* write_imu_csv_fields(char* out, const ImuSample& sample) noexcept {
+  char* p = put_int64(out, sample.t_ns);
+  for (int k = 0; k < 3; ++k) {
+    *p++ = ',';
+    p = put_double(p, sample.gyro_rad_s[k]);
+  }
+  for (int k = 0; k < 3; ++k) {
+    *p++ = ',';
+    p = put_double(p, sample.accel_m_s2[k]);
+  }
+  return p;
+}
+
 ImuCsvWriter::ImuCsvWriter(const std::string& path) : file_(path) {
   file_.write(kImuCsvHeader);
   file_.write("\n");
@@ -168,16 +181,8 @@ void ImuCsvWriter::write(const ImuSample& sample) {
   require_increasing(kWho, count_, previous_ns_, sample.t_ns);
   require_finite(kWho, count_, sample.t_ns, "gyro_rad_s", sample.gyro_rad_s);
   require_finite(kWho, count_, sample.t_ns, "accel_m_s2", sample.accel_m_s2);
-  char row[256];  // 1 int64 (<= 20) + 6 doubles (<= 24 each) + separators
-  char* p = put_int64(row, sample.t_ns);
-  for (int k = 0; k < 3; ++k) {
-    *p++ = ',';
-    p = put_double(p, sample.gyro_rad_s[k]);
-  }
-  for (int k = 0; k < 3; ++k) {
-    *p++ = ',';
-    p = put_double(p, sample.accel_m_s2[k]);
-  }
+  char row[kMaxImuCsvFieldsChars + 1];
+  char* p = write_imu_csv_fields(row, sample);
   *p++ = '\n';
   file_.write(std::string_view(row, static_cast<std::size_t>(p - row)));
   previous_ns_ = sample.t_ns;

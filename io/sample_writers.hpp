@@ -30,6 +30,19 @@ class SampleFormatError : public CsvFormatError {
 inline constexpr std::string_view kImuCsvHeader =
     "time_ns,gyro_x_rad_s,gyro_y_rad_s,gyro_z_rad_s,accel_x_m_s2,accel_y_m_s2,accel_z_m_s2";
 
+// Longest text write_imu_csv_fields writes: an int64 (20 chars), six
+// doubles in their shortest round-trip form (at most 24 chars each) and six
+// commas.
+inline constexpr std::size_t kMaxImuCsvFieldsChars = 20 + 6 * 24 + 6;
+
+// The seven fields of one row of kImuCsvHeader, "time_ns,gyro_x,...,accel_z",
+// written at `out` (room for kMaxImuCsvFieldsChars) in the file's form:
+// integer ns and std::to_chars' shortest round-trip doubles. No newline; the
+// values are not checked. Returns the end of what was written. Every writer
+// of IMU rows (the file writer below, `imuemu stream`) goes through it, so
+// they write the same bytes for the same sample.
+char* write_imu_csv_fields(char* out, const ImuSample& sample) noexcept;
+
 // Streaming writer: one row per write(), header first. Nothing appears at
 // `path` until commit(); destroying an uncommitted writer leaves no file.
 class ImuCsvWriter {

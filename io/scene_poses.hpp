@@ -46,4 +46,29 @@ class ScenePoseConverter {
 // TrajectoryFormatError (naming the file and line) as convert() does.
 std::vector<Pose> poses_in_scene(const Trajectory& trajectory, Physics physics);
 
+// Plausibility checks of a whole file against the input-convention traps
+// (docs/trajectory-format.md "Plausibility warnings"). Each returns a warning
+// sentence with the numbers that show the trap, or nothing; they never refuse
+// (the file may be what it says) and read at most kPlausibilitySamples knots.
+inline constexpr std::size_t kPlausibilitySamples = 64;
+
+// qw,qx,qy,qz holding q_b^e (or qw_ecef.. holding q_b^l) with an Earth-fixed
+// position: at sampled knots, the specific force the positions imply
+// (thesis Eq. 3.70 in ECEF: a + 2 omega_ie x v - g, from knots 2-10 s apart)
+// is compared with the body's up axis under the columns' reading and under
+// the other one. A vehicle's specific force points near its up axis (gravity
+// when level or static, lift in a coordinated turn); a median angle above
+// 45 deg under the columns' reading and below 15 deg under the other says the
+// columns were named for the wrong frame.
+std::optional<std::string> attitude_frame_warning(const Trajectory& trajectory);
+
+// Flat physics (constant gravity along the fixed down axis, no Earth rate)
+// on Earth-scale coordinates: Earth-fixed positions, which the flat scene
+// puts in the tangent frame of the first record (what that leaves out, in
+// numbers: Earth rate, Coriolis at the fastest speed, gravity's turn across
+// the trajectory's extent), or local NED positions at the Earth's radius
+// from their origin with a down_m beyond 100 km (ECEF values in the
+// north_m,east_m,down_m columns).
+std::optional<std::string> flat_scene_warning(const Trajectory& trajectory, Physics physics);
+
 }  // namespace imuemu::io

@@ -383,6 +383,71 @@ void parse_header(const std::vector<std::string_view>& fields, std::size_t line,
   }
 }
 
+// An integer time too large for seconds is almost always an integer count of
+// nanoseconds (Unix or GPS time in ns has 19 digits: 1717243200123456789):
+// the refusal says that time_s is in seconds and, when the value divided by
+// 1e9 fits, gives it exactly (the decimal point moved 9 digits, no double).
+std::string integer_time_hint(std::string_view field, NumberStatus status) {
+  if (status != NumberStatus::out_of_range) return {};
+  std::string_view digits = field;
+  std::string_view sign;
+  if (!digits.empty() && (digits.front() == '+' || digits.front() == '-')) {
+    sign = digits.substr(0, 1);
+    digits.remove_prefix(1);
+  }
+  const bool integer = !digits.empty() && std::all_of(digits.begin(), digits.end(), [](char c) {
+    return c >= '0' && c <= '9';
+  });
+  std::string hint = "; time_s is in seconds (from -9223372036.854775808 to 9223372036.854775807 s)";
+  if (!integer || digits.size() <= 9) return hint;
+  std::string seconds(sign);
+  seconds.append(digits.substr(0, digits.size() - 9));
+  std::string_view fraction = digits.substr(digits.size() - 9);
+  while (!fraction.empty() && fraction.back() == '0') fraction.remove_suffix(1);
+  if (!fraction.empty()) {
+    seconds += '.';
+    seconds.append(fraction);
+  }
+  if (try_parse_decimal_seconds(seconds).status != NumberStatus::ok) return hint;
+  return hint + ": if this is an integer count of nanoseconds, divide it by 1e9 and write '" + seconds + "'";
+}
+
+// Whether the record's position is at a geographic pole: latitude +-90 deg,
+// or an ECEF position within 1 mm of the z axis (where a tool converting to
+// geodetic finds no meridian). A field that does not parse counts as not
+// at a pole (its own column reports it).
+bool record_at_pole(const HeaderLayout& layout, const std::vector<std::string_view>& fields) {
+  double value[3] = {0.0, 0.0, 0.0};
+  bool found[3] = {false, false, false};
+  for (std::size_t k = 0; k < layout.columns.size() && k < fields.size(); ++k) {
+    const ColumnSpec* spec = layout.columns[k].spec;
+    if (spec == nullptr || (spec->group != Group::geodetic && spec->group != Group::ecef)) continue;
+    const DoubleParse v = try_parse_double(fields[k]);
+    if (v.status != NumberStatus::ok) return false;
+    value[spec->slot] = v.value;
+    found[spec->slot] = true;
+  }
+  if (layout.position_kind == PositionKind::geodetic) return found[0] && std::abs(value[0]) == 90.0;
+  if (layout.position_kind == PositionKind::ecef) return found[0] && found[1] && std::hypot(value[0], value[1]) <= 1e-3;
+  return false;
+}
+
+// At a pole every direction is south (or north): a tool that writes the
+// heading as `nan` there is right that "heading from north" has no meaning.
+// imuemu's local NED frame at a pole is Eq. 1.5 at the record's own
+// longitude (core/attitude.hpp ned_to_ecef: north there is the northward
+// direction of the meridian at lon_deg), so the heading is
+// measured from that north; or the attitude is given in ECEF, which has no
+// singularity. The knot is refused rather than guessed: its attitude about
+// the vertical is the one thing the record does not give.
+std::string pole_heading_message(std::string_view field) {
+  return "got '" + detail::printable(field) +
+         "' at a pole, where heading from north is undefined; imuemu's north at a pole is the northward "
+         "direction of the record's own meridian (thesis Eq. 1.5 at latitude +-90 deg and the record's "
+         "longitude): write the heading from that north, or give the attitude as qw_ecef,qx_ecef,qy_ecef,qz_ecef "
+         "(body to ECEF, defined everywhere)";
+}
+
 // One data line against the header (docs/trajectory-format.md): field count,
 // number syntax, ranges, the predecessor's time, the unit quaternion.
 void parse_record_fields(const HeaderLayout& layout, const std::string& file,
@@ -407,12 +472,16 @@ void parse_record_fields(const HeaderLayout& layout, const std::string& file,
       if (t.status != NumberStatus::ok) {
         fail(file, line, layout.columns[i].name, i + 1, std::string(spec->expected),
              "expected " + std::string(spec->expected) + ", got '" + detail::printable(field) + "' (" +
-                 std::string(describe(t.status)) + ")");
+                 std::string(describe(t.status)) + ")" + integer_time_hint(field, t.status));
       }
       record.t_ns = t.ns;
       continue;
     }
     const DoubleParse v = try_parse_double(field);
+    if (v.status == NumberStatus::not_finite && spec->group == Group::hpr && spec->slot == 0 &&
+        record_at_pole(layout, fields)) {
+      fail(file, line, layout.columns[i].name, i + 1, std::string(spec->expected), pole_heading_message(field));
+    }
     if (v.status != NumberStatus::ok) {
       fail(file, line, layout.columns[i].name, i + 1, std::string(spec->expected),
            "expected " + std::string(spec->expected) + ", got '" + detail::printable(field) + "' (" +

@@ -235,6 +235,10 @@ TEST_F(Cli, StreamReplayEqualsGenerate) {
 #include "io/sample_writers.hpp"
 #include "io/scene_poses.hpp"
 #include "io/trajectory_csv.hpp"
+#include "core/attitude.hpp"
+#include "core/earth.hpp"
+#include "core/so3.hpp"
+#include "io/decimal_time.hpp"
 
 namespace {
 std::string file_bytes(const std::string& p) {
@@ -476,4 +480,212 @@ TEST_F(Cli, GenerateReplacesAllOutputsOrNone) {
   EXPECT_EQ(run("generate --quiet --scene flat --in " + path("c.csv") + " --out " + path("imu.csv") +
                 " --trajectory-out " + path("traj.csv")).exit_code, 0);
   EXPECT_TRUE(fs::exists(path("traj.csv")));
+}
+
+// ------------------------------------------- issue 14, acceptance 3: input-convention traps
+namespace {
+std::vector<std::string> text_lines(const std::string& file) {
+  std::ifstream in(file);
+  std::vector<std::string> lines;
+  for (std::string line; std::getline(in, line);) lines.push_back(line);
+  return lines;
+}
+}  // namespace
+
+// Trap 1: ECEF positions with qw,qx,qy,qz holding q_b^e (the smoothed
+// trajectory's own qw_ecef.. values under the local-level names) ran with
+// exit 0 and ~18 m/s^2 of accelerometer error, silently. Now a warning gives
+// the angle between the implied specific force and the body's up axis under
+// both readings; the same file with the right names, and the geodetic
+// heading-pitch-roll flight it came from, stay silent.
+TEST_F(Cli, TrapQuaternionHoldingEcefAttitudeWarnsWithNumbers) {
+  ASSERT_EQ(run("sample-trajectory --kind flight --duration-s 120 --period-s 1 --out " + path("f.csv")).exit_code, 0);
+  const CliRun k = run("generate --quiet --scene ecef --rate 10 --in " + path("f.csv") + " --out " + path("fi.csv") +
+                       " --trajectory-out " + path("fk.csv"));
+  ASSERT_EQ(k.exit_code, 0) << k.output;
+  // The same rows under the local-level names (qw..qz) and the ECEF ones.
+  const auto write_under_both_names = [&](const std::string& rows, const std::string& as_local,
+                                          const std::string& as_ecef) {
+    write(as_local, "time_s,x_m,y_m,z_m,qw,qx,qy,qz\n" + rows);
+    write(as_ecef, "time_s,x_m,y_m,z_m,qw_ecef,qx_ecef,qy_ecef,qz_ecef\n" + rows);
+  };
+  // Whole-second states only: the knots of the original 1 Hz file.
+  std::string q_b_e_rows;
+  const std::vector<std::string> lines = text_lines(path("fk.csv"));
+  ASSERT_EQ(lines.front().rfind("time_s,x_m,y_m,z_m,qw_ecef,qx_ecef,qy_ecef,qz_ecef,", 0), 0u) << lines.front();
+  for (std::size_t i = 1; i < lines.size(); ++i) {
+    std::stringstream ss(lines[i]);
+    std::string field, row;
+    for (int c = 0; c < 8 && std::getline(ss, field, ','); ++c) row += (c == 0 ? "" : ",") + field;
+    if (row.substr(0, row.find(',')).find('.') == std::string::npos) q_b_e_rows += row + "\n";
+  }
+  write_under_both_names(q_b_e_rows, "trap.csv", "right.csv");
+  const CliRun t = run("generate --quiet --scene ecef --in " + path("trap.csv") + " --out " + path("o.csv"));
+  std::cout << t.output;
+  EXPECT_EQ(t.exit_code, 0) << t.output;  // a warning, not a refusal: the file may be what it says
+  EXPECT_NE(t.output.find("warning: " + path("trap.csv") + ": the columns qw,qx,qy,qz are read as q_b^l"),
+            std::string::npos) << t.output;
+  EXPECT_NE(t.output.find("the file probably holds q_b^e (body to ECEF); if so, name the columns "
+                          "qw_ecef,qx_ecef,qy_ecef,qz_ecef"),
+            std::string::npos) << t.output;
+  // The numbers: the angle read as written is far from a vehicle's (Barcelona,
+  // level flight: 90 + latitude ~ 131 deg), the other reading near 0.
+  const std::size_t at = t.output.find(" deg (median) from the body's up axis");
+  ASSERT_NE(at, std::string::npos) << t.output;
+  const double written_deg = std::stod(t.output.substr(t.output.rfind(" is ", at) + 4));
+  EXPECT_GT(written_deg, 100.0);
+  EXPECT_LT(written_deg, 160.0);
+  // The same knots with q_b^l = R_l^e(lat, lon)^T q_b^e (Eq. 1.4, 1.5)
+  // under qw..qz (right) and under qw_ecef.. (the other confusion).
+  std::string q_b_l_rows;
+  const imuemu::io::Trajectory ecef = imuemu::io::read_trajectory_csv(path("right.csv"));
+  for (const imuemu::io::TrajectoryRecord& rec : ecef.records) {
+    const imuemu::earth::Geodetic g = imuemu::earth::geodetic_from_ecef(rec.position);
+    const imuemu::Mat3 R_b_l = imuemu::attitude::ned_to_ecef(g.latitude_rad, g.longitude_rad).transpose() *
+                               imuemu::so3::matrix_from_quaternion(rec.attitude);
+    const Eigen::Vector4d q = imuemu::so3::quaternion_from_matrix(R_b_l);
+    std::string row = imuemu::io::format_decimal_seconds(rec.t_ns);
+    for (double v : {rec.position.x(), rec.position.y(), rec.position.z(), q[0], q[1], q[2], q[3]})
+      row += "," + imuemu::io::detail::format_double(v);
+    q_b_l_rows += row + "\n";
+  }
+  write_under_both_names(q_b_l_rows, "local.csv", "swapped.csv");
+  const CliRun sw = run("generate --quiet --scene ecef --in " + path("swapped.csv") + " --out " + path("o.csv"));
+  std::cout << sw.output;
+  EXPECT_NE(sw.output.find("the columns qw_ecef,qx_ecef,qy_ecef,qz_ecef are read as q_b^e"), std::string::npos)
+      << sw.output;
+  EXPECT_NE(sw.output.find("if so, name the columns qw,qx,qy,qz."), std::string::npos) << sw.output;
+  for (const std::string f : {"right.csv", "local.csv", "f.csv"}) {
+    const CliRun ok = run("generate --quiet --scene ecef --in " + path(f) + " --out " + path("o.csv"));
+    EXPECT_EQ(ok.exit_code, 0) << ok.output;
+    EXPECT_EQ(ok.output.find("warning"), std::string::npos) << f << ": " << ok.output;
+  }
+}
+
+// Trap 2: integer nanoseconds in time_s were refused as "out of range" only.
+TEST_F(Cli, TrapIntegerNanosecondTimesSayTheUnitIsSeconds) {
+  write("ns.csv", "time_s,north_m,east_m,down_m,heading_deg,pitch_deg,roll_deg\n"
+                  "# a tool that writes integer ns\n"
+                  "1717243200123456789,0,0,0,0,0,0\n"
+                  "1717243201123456789,1,0,0,0,0,0\n");
+  const CliRun r = run("generate --quiet --scene flat --in " + path("ns.csv") + " --out " + path("o.csv"));
+  std::cout << r.output;
+  EXPECT_EQ(r.exit_code, 3) << r.output;
+  EXPECT_NE(r.output.find(path("ns.csv") + ":3: column 'time_s' (1): "), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("time_s is in seconds"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("divide it by 1e9 and write '1717243200.123456789'"), std::string::npos) << r.output;
+  EXPECT_FALSE(fs::exists(path("o.csv")));
+}
+
+// Trap 3: --scene flat on Earth-scale coordinates ran without a word. Now:
+// Earth-fixed input warns with what flat physics leaves out (Earth rate
+// 7.29e-5 rad/s, Coriolis, gravity's turn g d/R); ECEF values in the
+// north/east/down columns warn that they look like ECEF. A local circle
+// stays silent.
+TEST_F(Cli, TrapFlatSceneOnEarthScaleCoordinatesWarnsWithNumbers) {
+  ASSERT_EQ(run("sample-trajectory --kind flight --duration-s 60 --period-s 1 --out " + path("f.csv")).exit_code, 0);
+  const CliRun g = run("generate --quiet --scene flat --in " + path("f.csv") + " --out " + path("o.csv"));
+  std::cout << g.output;
+  EXPECT_EQ(g.exit_code, 0) << g.output;
+  EXPECT_NE(g.output.find("warning: " + path("f.csv") + ": --scene flat on Earth-fixed"), std::string::npos) << g.output;
+  EXPECT_NE(g.output.find("Earth rate (7.29e-05 rad/s in the gyros)"), std::string::npos) << g.output;
+  EXPECT_NE(g.output.find("m/s^2 in the accelerometers); --scene ecef has them all"), std::string::npos) << g.output;
+
+  // ECEF coordinates (Barcelona) under north_m,east_m,down_m.
+  write("ned.csv", "time_s,north_m,east_m,down_m,heading_deg,pitch_deg,roll_deg\n"
+                   "0,4789000.0,176000.0,4194000.0,0,0,0\n"
+                   "1,4789010.0,176000.0,4194000.0,0,0,0\n"
+                   "2,4789020.0,176000.0,4194000.0,0,0,0\n");
+  const CliRun n = run("generate --quiet --scene flat --in " + path("ned.csv") + " --out " + path("o.csv"));
+  std::cout << n.output;
+  EXPECT_NE(n.output.find("warning: " + path("ned.csv") + ":4: the flat scene's local NED position"), std::string::npos)
+      << n.output;
+  EXPECT_NE(n.output.find("6.37e+06 m from the frame origin"), std::string::npos) << n.output;
+  EXPECT_NE(n.output.find("these look like ECEF coordinates; name the columns x_m,y_m,z_m"), std::string::npos)
+      << n.output;
+
+  ASSERT_EQ(run("sample-trajectory --kind circle --duration-s 20 --period-s 0.1 --out " + path("c.csv")).exit_code, 0);
+  const CliRun c = run("generate --quiet --scene flat --in " + path("c.csv") + " --out " + path("o.csv"));
+  EXPECT_EQ(c.exit_code, 0) << c.output;
+  EXPECT_EQ(c.output.find("warning"), std::string::npos) << c.output;
+}
+
+// Trap 4: the --delta help said "two median knot intervals"; the default
+// method (hermite) uses one (daemon/commands.cpp auto_delta), the others two.
+// The summary line shows what the code chose: 1 Hz knots at 400 Hz.
+TEST_F(Cli, TrapDeltaHelpSaysWhatTheCodeDoes) {
+  const CliRun h = run("generate --help");
+  EXPECT_EQ(h.output.find("default: two median knot intervals"), std::string::npos) << h.output;
+  EXPECT_NE(h.output.find("default: one median knot interval of output samples with --method hermite, the default, "
+                          "two with the other methods"),
+            std::string::npos) << h.output;
+  ASSERT_EQ(run("sample-trajectory --kind circle --duration-s 30 --period-s 1 --out " + path("c.csv")).exit_code, 0);
+  const CliRun hermite = run("generate --scene flat --rate 400 --in " + path("c.csv") + " --out " + path("o.csv"));
+  EXPECT_NE(hermite.output.find("(flat, hermite, Delta 400,"), std::string::npos) << hermite.output;
+  const CliRun geodesic =
+      run("generate --scene flat --rate 400 --method geodesic --in " + path("c.csv") + " --out " + path("o.csv"));
+  EXPECT_NE(geodesic.output.find("(flat, geodesic, Delta 800,"), std::string::npos) << geodesic.output;
+}
+
+// Trap 5: `imuemu stream --speed max` said "samples 0 exact" after writing
+// every row exact, and wrote %.17g where generate writes the shortest exact
+// form. Now its seven IMU fields are generate's bytes and the count is right.
+TEST_F(Cli, TrapStreamWritesGenerateBytesAndCountsItsRows) {
+  ASSERT_EQ(run("sample-trajectory --kind circle --duration-s 20 --period-s 0.1 --out " + path("c.csv")).exit_code, 0);
+  ASSERT_EQ(run("generate --quiet --in " + path("c.csv") + " --out " + path("g.csv") + " --rate 200 --scene flat --delta 20")
+                .exit_code,
+            0);
+  const CliRun s = run("stream --source file:" + path("c.csv") + " --speed max --rate 200 --scene flat "
+                       "--knot-interval-s 0.1 --out " + path("s.csv"));
+  ASSERT_EQ(s.exit_code, 0) << s.output;
+  std::cout << s.output;
+  const std::vector<std::string> g = text_lines(path("g.csv")), st = text_lines(path("s.csv"));
+  ASSERT_EQ(g.size(), 4002u);
+  ASSERT_EQ(st.size(), g.size());
+  std::size_t differing = 0;
+  for (std::size_t i = 1; i < g.size(); ++i)
+    if (st[i] != g[i] + ",exact") ++differing;
+  EXPECT_EQ(differing, 0u) << st[1] << "\n" << g[1];
+  EXPECT_NE(s.output.find("samples 4001 exact, 0 extrapolated"), std::string::npos) << s.output;
+}
+
+// Trap 6: gap messages rounded times to us (std::to_string of a double) and
+// named 0-based knot indices. Now: exact decimal seconds and file lines.
+TEST_F(Cli, TrapGapMessageNamesExactTimesAndFileLines) {
+  std::string text = "time_s,north_m,east_m,down_m,heading_deg,pitch_deg,roll_deg\n";
+  for (int t = 0; t <= 60; ++t) text += std::to_string(1700000000 + t) + ".123456789," + std::to_string(10 * t) + ",0,0,0,0,0\n";
+  text += "1700000090.000000001,900,0,0,0,0,0\n";  // line 63, 29.876543212 s after line 62
+  write("gap.csv", text);
+  const CliRun r = run("generate --quiet --scene flat --in " + path("gap.csv") + " --out " + path("o.csv"));
+  std::cout << r.output;
+  EXPECT_EQ(r.exit_code, 4) << r.output;
+  EXPECT_NE(r.output.find("the knot at " + path("gap.csv") + ":62 (t=1700000060.123456789 s) and the knot at " +
+                          path("gap.csv") + ":63 (t=1700000090.000000001 s) are 29.876543212 s apart, more than the "
+                          "10 s gap limit"),
+            std::string::npos) << r.output;
+}
+
+// Trap 7: `nan` heading at a pole was refused as "not finite" only. At a
+// pole heading from north is undefined, and the record gives nothing else
+// about the rotation about the vertical: refused, saying how to write it.
+// A nan heading elsewhere keeps the plain message.
+TEST_F(Cli, TrapNanHeadingAtAPoleSaysHowToWriteThePole) {
+  write("pole.csv", "time_s,lat_deg,lon_deg,h_m,heading_deg,pitch_deg,roll_deg\n"
+                    "0,89.99,0,100,180,0,0\n"
+                    "1,90,0,100,nan,0,0\n"
+                    "2,89.99,180,100,0,0,0\n");
+  const CliRun r = run("generate --quiet --in " + path("pole.csv") + " --out " + path("o.csv"));
+  std::cout << r.output;
+  EXPECT_EQ(r.exit_code, 3) << r.output;
+  EXPECT_NE(r.output.find(path("pole.csv") + ":3: column 'heading_deg' (5): got 'nan' at a pole"), std::string::npos)
+      << r.output;
+  EXPECT_NE(r.output.find("northward direction of the record's own meridian"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("qw_ecef,qx_ecef,qy_ecef,qz_ecef"), std::string::npos) << r.output;
+  write("mid.csv", "time_s,lat_deg,lon_deg,h_m,heading_deg,pitch_deg,roll_deg\n"
+                   "0,41,2,100,0,0,0\n"
+                   "1,41,2,100,nan,0,0\n");
+  const CliRun m = run("generate --quiet --in " + path("mid.csv") + " --out " + path("o.csv"));
+  EXPECT_EQ(m.exit_code, 3) << m.output;
+  EXPECT_NE(m.output.find("(not finite (NaN or infinity))"), std::string::npos) << m.output;
+  EXPECT_EQ(m.output.find("at a pole"), std::string::npos) << m.output;
 }

@@ -393,8 +393,8 @@ TEST(HardCases, TenSecondGap) {
   } catch (const GapError& ex) {
     std::cout << "  [4] GapPolicy::error: " << ex.what() << "\n";
     const std::string what = ex.what();
-    EXPECT_NE(what.find("knots 15 (t=15"), std::string::npos) << what;
-    EXPECT_NE(what.find("and 16 (t=25"), std::string::npos) << what;
+    EXPECT_NE(what.find("knot 15 (t=15 s)"), std::string::npos) << what;
+    EXPECT_NE(what.find("and knot 16 (t=25 s)"), std::string::npos) << what;
   }
 
   // GapPolicy::split: two runs, the gap kept in time.

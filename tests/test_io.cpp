@@ -404,6 +404,47 @@ TEST(TrajectoryCsv, ValueErrorsNameFileLineAndColumn) {
   expect_error(text + "17,0,10,20,30,0,\x01\xff\n", 17, "roll_deg", 7, {"got '\\x01\\xff'"});
 }
 
+// Issue 14, trap 2: an integer count of nanoseconds in time_s is out of
+// range as seconds; the message says the unit is seconds and, when the value
+// divided by 1e9 fits, gives it exactly (the point moved 9 digits, no double).
+TEST(TrajectoryCsv, IntegerNanosecondTimesSayTheUnitAndTheValueInSeconds) {
+  const std::string text = "time_s,lat_deg,lon_deg,h_m,heading_deg,pitch_deg,roll_deg\n0,41,2,100,0,0,0\n";
+  const std::string seconds = "time_s is in seconds (from -9223372036.854775808 to 9223372036.854775807 s)";
+  expect_error(text + "1717243200123456789,41,2,100,0,0,0\n", 3, "time_s", 1,
+               {"got '1717243200123456789' (out of range); " + seconds,
+                ": if this is an integer count of nanoseconds, divide it by 1e9 and write '1717243200.123456789'"});
+  expect_error(text + "+1717243200000000000,41,2,100,0,0,0\n", 3, "time_s", 1, {"write '+1717243200'"});
+  expect_error(text + "-9223372036854775808,41,2,100,0,0,0\n", 3, "time_s", 1, {"write '-9223372036.854775808'"});
+  // Divided by 1e9 still out of range, or not an integer: the unit only.
+  for (const std::string field : {"99999999999999999999999999999", "-9223372036854775809", "12345678901.5"}) {
+    const std::string what = parse_error(text + field + ",41,2,100,0,0,0\n").what();
+    EXPECT_NE(what.find(seconds), std::string::npos) << what;
+    EXPECT_EQ(what.find("divide"), std::string::npos) << what;
+  }
+  // Other time refusals keep their own words.
+  const std::string precise = parse_error(text + "17.0000000005,41,2,100,0,0,0\n").what();
+  EXPECT_EQ(precise.find("in seconds"), std::string::npos) << precise;
+}
+
+// Issue 14, trap 7: `nan` heading at a pole (geodetic +-90, or ECEF on the
+// z axis) is refused saying how to write the pole; elsewhere it is the plain
+// "not finite" error.
+TEST(TrajectoryCsv, NanHeadingAtAPoleSaysHowToWriteIt) {
+  const std::vector<std::string> pole_words{"' at a pole, where heading from north is undefined",
+                                            "northward direction of the record's own meridian",
+                                            "qw_ecef,qx_ecef,qy_ecef,qz_ecef"};
+  expect_error("heading_deg,time_s,lat_deg,lon_deg,h_m,pitch_deg,roll_deg\nnan,0,-90,30,0,0,0\n", 2, "heading_deg", 1,
+               pole_words);
+  expect_error("time_s,x_m,y_m,z_m,heading_deg,pitch_deg,roll_deg\n0,0,0,6356752.3,NaN,0,0\n", 2, "heading_deg", 5,
+               pole_words);
+  const std::string near = parse_error("time_s,lat_deg,lon_deg,h_m,heading_deg,pitch_deg,roll_deg\n0,89.9999,30,0,nan,0,0\n").what();
+  EXPECT_NE(near.find("not finite"), std::string::npos) << near;
+  EXPECT_EQ(near.find("at a pole"), std::string::npos) << near;
+  // pitch and roll stay defined at a pole: their nan is not excused.
+  const std::string pitch = parse_error("time_s,lat_deg,lon_deg,h_m,heading_deg,pitch_deg,roll_deg\n0,90,30,0,0,nan,0\n").what();
+  EXPECT_NE(pitch.find("not finite"), std::string::npos) << pitch;
+}
+
 TEST(TrajectoryCsv, TimeOrderErrors) {
   // Lines 2..15 hold times -11.0 .. 2.0, line 16 holds 3.0.
   std::string text = kGeoHeader;
