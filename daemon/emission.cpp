@@ -875,8 +875,22 @@ EngineStats EmissionEngine::stats() const {
   s.poses_refused = m.poses_refused.load(std::memory_order_relaxed);
   if (m.live_input()) {
     const io::PoseSourceCounters c = m.options.source->counters();
-    s.pose_source = PoseSourceStats{m.options.source->name(), c.received,     c.accepted,         c.rejected(),
-                                    c.duplicate,              c.out_of_order, c.overflow_dropped, c.lost()};
+    PoseSourceStats& p = s.pose_source.emplace();
+    p.name = m.options.source->name();
+    p.received = c.received;
+    p.accepted = c.accepted;
+    p.rejected = c.rejected();
+    p.duplicate = c.duplicate;
+    p.out_of_order = c.out_of_order;
+    p.overflow_dropped = c.overflow_dropped;
+    p.lost = c.lost();
+    p.time_jump = c.time_jump;
+    p.resyncs = c.resyncs;
+    p.held = c.held;
+    p.connections = c.connections;
+    p.connections_refused = c.connections_refused;
+    p.connections_idle_closed = c.connections_idle_closed;
+    p.connections_replaced = c.connections_replaced;
   }
   s.realtime_priority = m.realtime_priority;
   s.memory_locked = m.memory_locked;
@@ -965,7 +979,9 @@ nlohmann::json to_json(const EngineStats& s) {
                    {"pps_pulses", d.gpio->pps_pulses},
                    {"skipped_pulses", d.gpio->skipped_pulses},
                    {"set_errors", d.gpio->set_errors},
-                   {"max_trailing_edge_delay_ns", d.gpio->max_trailing_edge_delay_ns}};
+                   {"max_trailing_edge_delay_ns", d.gpio->max_trailing_edge_delay_ns},
+                   {"helper_faults", d.gpio->helper_faults},
+                   {"down", d.gpio->down}};
     devices.push_back(std::move(j));
   }
   nlohmann::json j{{"devices", std::move(devices)},
@@ -995,7 +1011,14 @@ nlohmann::json to_json(const EngineStats& s) {
                         {"duplicate", s.pose_source->duplicate},
                         {"out_of_order", s.pose_source->out_of_order},
                         {"overflow_dropped", s.pose_source->overflow_dropped},
-                        {"lost", s.pose_source->lost}};
+                        {"lost", s.pose_source->lost},
+                        {"time_jump", s.pose_source->time_jump},
+                        {"resyncs", s.pose_source->resyncs},
+                        {"held", s.pose_source->held},
+                        {"connections", s.pose_source->connections},
+                        {"connections_refused", s.pose_source->connections_refused},
+                        {"connections_idle_closed", s.pose_source->connections_idle_closed},
+                        {"connections_replaced", s.pose_source->connections_replaced}};
   return j;
 }
 

@@ -157,6 +157,11 @@ struct PoseSourceStats {
   std::string name;
   std::uint64_t received = 0, accepted = 0, rejected = 0, duplicate = 0, out_of_order = 0, overflow_dropped = 0,
                 lost = 0;
+  // Live time (docs/pose-wire-format.md "Live time"): strays dropped, stream
+  // re-acquisitions, poses held now (a gauge).
+  std::uint64_t time_jump = 0, resyncs = 0, held = 0;
+  // TCP: clients accepted, refused (slot taken), closed idle, replaced while idle.
+  std::uint64_t connections = 0, connections_refused = 0, connections_idle_closed = 0, connections_replaced = 0;
 };
 
 struct EngineStats {

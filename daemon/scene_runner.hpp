@@ -52,7 +52,9 @@ std::vector<Pose> scene_trajectory(const SceneConfig& scene);
 // With [trajectory] loop = true: the trajectory followed by further copies,
 // each shifted in time by its span plus a gap beyond max_gap_s (so the
 // pipeline splits there: one-sided windows, no smoothing across the jump back
-// to the start, a silent gap on the wire), up to at least min_span_ns.
+// to the start, a silent gap on the wire), up to at least min_span_ns, but
+// at most limits::kMaxLoopKnots knots in all and only copies whose times fit
+// int64 ns (the run then restarts sooner).
 std::vector<Pose> looped(const std::vector<Pose>& once, const SceneConfig& scene, TimeNs min_span_ns);
 
 // The span loop = true covers before the daemon restarts the run.

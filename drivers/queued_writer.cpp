@@ -10,6 +10,8 @@
 #include <cstdio>
 #include <cstring>
 
+#include "daemon/log.hpp"
+
 namespace imuemu::drivers {
 namespace {
 
@@ -52,7 +54,9 @@ void emit_log(const std::function<void(std::string_view)>& sink, std::string_vie
     sink(line);
     return;
   }
-  std::fprintf(stderr, "imuemu: %.*s\n", static_cast<int>(line.size()), line.data());
+  // No sink: the project's log line (sd-daemon priority prefix, one write(2),
+  // bounded), so a daemon's journal keeps the level of these lines too.
+  service::log_warning("imuemu: " + std::string(line));
 }
 
 QueuedWriter::QueuedWriter(std::unique_ptr<WriterDevice> device, QueuedWriterOptions options)
