@@ -381,10 +381,10 @@ TEST_F(Cli, SecondsAndRateOptionsOutOfRangeAreUsageErrorsNamingTheOption) {
       {"allan " + path("c.csv") + " --fit-min-tau-s nan", "--fit-min-tau-s"},
       // listen used CLI11's NonNegativeNumber/PositiveNumber (NaN passes;
       // --duration-s 1e300 then overflowed llround(s * 1e9)).
-      {"listen --device " + path("none") + " --duration-s nan", "--duration-s"},
-      {"listen --device " + path("none") + " --duration-s 1e300", "--duration-s"},
-      {"listen --device " + path("none") + " --expect-rate nan", "--expect-rate"},
-      {"listen --device " + path("none") + " --rate-tolerance nan", "--rate-tolerance"},
+      {"listen --protocol native --device " + path("none") + " --duration-s nan", "--duration-s"},
+      {"listen --protocol native --device " + path("none") + " --duration-s 1e300", "--duration-s"},
+      {"listen --protocol native --device " + path("none") + " --expect-rate nan", "--expect-rate"},
+      {"listen --protocol native --device " + path("none") + " --rate-tolerance nan", "--rate-tolerance"},
   };
   for (const auto& [args, option] : cases) {
     const CliRun r = run(args);
