@@ -124,13 +124,7 @@ void GpioSyncOutput::pulse(std::uint64_t sample_counter, TimeNs t_ns) {
 // down, instead of std::terminate taking the emission with it.
 void GpioSyncOutput::run_helper() noexcept {
   pthread_setname_np(pthread_self(), "imuemu-gpio");
-  try {
-    end_pulses();
-  } catch (const std::exception& e) {
-    helper_failed(e.what());
-  } catch (...) {
-    helper_failed("an exception that is not a std::exception");
-  }
+  run_thread_body([this] { end_pulses(); }, [this](const char* what) { helper_failed(what); });
 }
 
 void GpioSyncOutput::helper_failed(std::string_view what) noexcept {

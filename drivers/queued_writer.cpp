@@ -59,6 +59,16 @@ void emit_log(const std::function<void(std::string_view)>& sink, std::string_vie
   service::log_warning("imuemu: " + std::string(line));
 }
 
+void run_thread_body(const std::function<void()>& body, const std::function<void(const char*)>& failed) noexcept {
+  try {
+    body();
+  } catch (const std::exception& e) {
+    failed(e.what());
+  } catch (...) {
+    failed("unknown exception");
+  }
+}
+
 QueuedWriter::QueuedWriter(std::unique_ptr<WriterDevice> device, QueuedWriterOptions options)
     : device_(std::move(device)),
       options_(std::move(options)),
@@ -327,13 +337,7 @@ void QueuedWriter::back_off_before_retry() {
 // daemon): the link is marked down, so every later frame is refused and
 // counted (dropped_link_down), and the reason is logged once.
 void QueuedWriter::run() noexcept {
-  try {
-    write_loop();
-  } catch (const std::exception& e) {
-    writer_failed(e.what());
-  } catch (...) {
-    writer_failed("unknown exception");
-  }
+  run_thread_body([this] { write_loop(); }, [this](const char* what) { writer_failed(what); });
 }
 
 void QueuedWriter::writer_failed(const char* what) noexcept {

@@ -132,6 +132,53 @@ std::optional<nlohmann::json> status_when(const fs::path& socket, Predicate read
 
 std::uint64_t emitted_of(const nlohmann::json& status) { return status["samples_emitted"].get<std::uint64_t>(); }
 
+// A UDP port free right now (the scene format wants 1..65535, not 0): bound
+// to port 0 and released; the daemon binds it a moment later.
+int free_udp_port() {
+  const int fd = ::socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+  sockaddr_in a{};
+  a.sin_family = AF_INET;
+  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  socklen_t length = sizeof a;
+  int port = -1;
+  if (::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0 &&
+      ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &length) == 0)
+    port = ntohs(a.sin_port);
+  ::close(fd);
+  return port;
+}
+
+// A live UDP scene at 127.0.0.1:PORT (flat, 50 Hz poses, max_gap_s 1 s as
+// config/live-udp.toml) into a 200 Hz native IMU on the null transport.
+std::string udp_scene_text(int port) {
+  return "[scene]\nname = \"udp\"\nphysics = \"flat\"\n[trajectory]\nsource = \"udp:127.0.0.1:" + std::to_string(port) +
+         "\"\nknot_interval_s = 0.02\n[smoothing]\nwindow_s = 0.05\nmax_gap_s = 1.0\n[live]\n"
+         "margin_s = 0.05\n[[imu]]\nname = \"n\"\nrate_hz = 200\nprotocol = \"native\"\n"
+         "[imu.transport]\ntype = \"null\"\n";
+}
+
+// The pose source's bound port from a status reply ("udp 127.0.0.1:PORT").
+int source_port(const nlohmann::json& status) {
+  const std::string name = status["engine"]["pose_source"]["name"].get<std::string>();
+  return std::stoi(name.substr(name.rfind(':') + 1));
+}
+
+// One pose datagram (at the origin, level) to 127.0.0.1:port.
+void send_still_pose(int fd, int port, std::uint64_t sequence, std::int64_t t_ns) {
+  sockaddr_in to{};
+  to.sin_family = AF_INET;
+  to.sin_port = htons(static_cast<std::uint16_t>(port));
+  to.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
+  imuemu::io::PoseDatagram d;
+  d.sequence = sequence;
+  d.record.t_ns = t_ns;
+  d.record.position_kind = imuemu::io::PositionKind::local_ned;
+  d.record.attitude_kind = imuemu::io::AttitudeKind::quaternion;
+  d.record.attitude = Eigen::Vector4d(1, 0, 0, 0);
+  const auto bytes = imuemu::io::encode_pose_datagram(d);
+  (void)::sendto(fd, bytes.data(), bytes.size(), 0, reinterpret_cast<const sockaddr*>(&to), sizeof to);
+}
+
 class Imuemud : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -145,6 +192,22 @@ class Imuemud : public ::testing::Test {
     const fs::path p = dir_ / name;
     std::ofstream(p) << text;
     return p;
+  }
+  // imuemud on udp_scene_text at a port free a moment ago (docs/daemon.md).
+  Child spawn_udp_daemon() {
+    const int free_port = free_udp_port();
+    return spawn_imuemud({"--scene", write("udp.toml", udp_scene_text(free_port)).string(), "--control-socket",
+                          (dir_ / "c.sock").string()},
+                         dir_ / "log");
+  }
+  // Waits until its engine runs: `port` its pose source's, `fd` a UDP socket to send from.
+  void udp_daemon_up(const Child& c, int& port, int& fd) {
+    const auto up = status_when(dir_ / "c.sock", [](const nlohmann::json& s) { return !s["engine"].is_null(); });
+    ASSERT_TRUE(up) << c.output();
+    port = source_port(*up);
+    ASSERT_GT(port, 0) << up->dump();
+    fd = ::socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
+    ASSERT_GE(fd, 0);
   }
   fs::path dir_;
 };
@@ -340,65 +403,11 @@ TEST_F(Imuemud, AnInstantBeyondInt64EndsTheGridInsteadOfAbortingTheDaemon) {
 // first pose aborted imuemud (std::overflow_error in the producer). It is
 // refused now (admission: |t| <= 2^62 ns, every later sum stays in int64),
 // and a stream near that bound is emitted: the daemon lives, counts, stops 0.
-// A UDP port free right now (the scene format wants 1..65535, not 0): bound
-// to port 0 and released; the daemon binds it a moment later.
-int free_udp_port() {
-  const int fd = ::socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
-  sockaddr_in a{};
-  a.sin_family = AF_INET;
-  a.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  socklen_t length = sizeof a;
-  int port = -1;
-  if (::bind(fd, reinterpret_cast<sockaddr*>(&a), sizeof a) == 0 &&
-      ::getsockname(fd, reinterpret_cast<sockaddr*>(&a), &length) == 0)
-    port = ntohs(a.sin_port);
-  ::close(fd);
-  return port;
-}
-
-// A live UDP scene at 127.0.0.1:PORT (flat, 50 Hz poses, max_gap_s 1 s as
-// config/live-udp.toml) into a 200 Hz native IMU on the null transport.
-std::string udp_scene_text(int port) {
-  return "[scene]\nname = \"udp\"\nphysics = \"flat\"\n[trajectory]\nsource = \"udp:127.0.0.1:" + std::to_string(port) +
-         "\"\nknot_interval_s = 0.02\n[smoothing]\nwindow_s = 0.05\nmax_gap_s = 1.0\n[live]\n"
-         "margin_s = 0.05\n[[imu]]\nname = \"n\"\nrate_hz = 200\nprotocol = \"native\"\n"
-         "[imu.transport]\ntype = \"null\"\n";
-}
-
-// The pose source's bound port from a status reply ("udp 127.0.0.1:PORT").
-int source_port(const nlohmann::json& status) {
-  const std::string name = status["engine"]["pose_source"]["name"].get<std::string>();
-  return std::stoi(name.substr(name.rfind(':') + 1));
-}
-
-// One pose datagram (at the origin, level) to 127.0.0.1:port.
-void send_still_pose(int fd, int port, std::uint64_t sequence, std::int64_t t_ns) {
-  sockaddr_in to{};
-  to.sin_family = AF_INET;
-  to.sin_port = htons(static_cast<std::uint16_t>(port));
-  to.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  imuemu::io::PoseDatagram d;
-  d.sequence = sequence;
-  d.record.t_ns = t_ns;
-  d.record.position_kind = imuemu::io::PositionKind::local_ned;
-  d.record.attitude_kind = imuemu::io::AttitudeKind::quaternion;
-  d.record.attitude = Eigen::Vector4d(1, 0, 0, 0);
-  const auto bytes = imuemu::io::encode_pose_datagram(d);
-  (void)::sendto(fd, bytes.data(), bytes.size(), 0, reinterpret_cast<const sockaddr*>(&to), sizeof to);
-}
-
 TEST_F(Imuemud, ADatagramNearTheInt64LimitIsRefusedAndTheStreamGoesOn) {
-  const int free_port = free_udp_port();
-  ASSERT_GT(free_port, 0);
-  const fs::path scene = write("udp.toml", udp_scene_text(free_port));
-  Child c = spawn_imuemud({"--scene", scene.string(), "--control-socket", (dir_ / "c.sock").string()}, dir_ / "log");
+  Child c = spawn_udp_daemon();
   ReapOnExit reap_c{c.pid};
-  const auto up = status_when(dir_ / "c.sock", [](const nlohmann::json& s) { return !s["engine"].is_null(); });
-  ASSERT_TRUE(up) << c.output();
-  const int port = source_port(*up);
-  ASSERT_GT(port, 0) << up->dump();
-  const int fd = ::socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
-  ASSERT_GE(fd, 0);
+  int port = 0, fd = -1;
+  ASSERT_NO_FATAL_FAILURE(udp_daemon_up(c, port, fd));
   auto send_pose = [&](std::uint64_t sequence, std::int64_t t_ns) { send_still_pose(fd, port, sequence, t_ns); };
   send_pose(0, std::numeric_limits<std::int64_t>::max() - 1);
   const std::int64_t base_ns = (std::int64_t{1} << 62) - 10'000'000'000;  // 10 s inside the bound
@@ -427,17 +436,10 @@ TEST_F(Imuemud, ADatagramNearTheInt64LimitIsRefusedAndTheStreamGoesOn) {
 // stall of samples_emitted across the restart is about 1 s. The re-acquisition
 // is in the status JSON (resyncs 1, nothing held, no stray).
 TEST_F(Imuemud, ASenderRestartResumesOutputAfterTheScenesGapLimit) {
-  const int free_port = free_udp_port();
-  ASSERT_GT(free_port, 0);
-  const fs::path scene = write("udp.toml", udp_scene_text(free_port));
-  Child c = spawn_imuemud({"--scene", scene.string(), "--control-socket", (dir_ / "c.sock").string()}, dir_ / "log");
+  Child c = spawn_udp_daemon();
   ReapOnExit reap_c{c.pid};
-  const auto up = status_when(dir_ / "c.sock", [](const nlohmann::json& s) { return !s["engine"].is_null(); });
-  ASSERT_TRUE(up) << c.output();
-  const int port = source_port(*up);
-  ASSERT_GT(port, 0) << up->dump();
-  const int fd = ::socket(AF_INET, SOCK_DGRAM | SOCK_CLOEXEC, 0);
-  ASSERT_GE(fd, 0);
+  int port = 0, fd = -1;
+  ASSERT_NO_FATAL_FAILURE(udp_daemon_up(c, port, fd));
   // 2 s of poses at 50 Hz from t = 1000 s, then the sender restarts (times
   // and sequence numbers from 0) and sends 5 s more, all in real time.
   std::atomic<bool> sending{true};
