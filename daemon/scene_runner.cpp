@@ -103,7 +103,13 @@ std::string pty_link_path(const ImuConfig& imu, const RunnerOptions& options) {
   return (std::filesystem::path(options.pty_link_dir) / std::filesystem::path(imu.transport.pty.link).filename()).string();
 }
 
-BuiltEngine build_engine(const SceneConfig& scene, const RunnerOptions& options) {
+std::string reuse_key(const ImuConfig& imu, const RunnerOptions& options) {
+  if (imu.transport.type != TransportType::pty) return {};
+  return "pty " + pty_link_path(imu, options) + " queue " + std::to_string(imu.transport.pty.queue_bytes) + " mode " +
+         std::to_string(imu.transport.pty.mode);
+}
+
+BuiltEngine build_engine(const SceneConfig& scene, const RunnerOptions& options, ReusableTransports* reuse) {
   BuiltEngine built;
   emission::EngineOptions eo;
   const bool live_input = scene.trajectory.kind == SourceKind::udp || scene.trajectory.kind == SourceKind::tcp ||
@@ -158,6 +164,17 @@ BuiltEngine build_engine(const SceneConfig& scene, const RunnerOptions& options)
       const TransportConfig& t = imu.transport;
       switch (t.type) {
         case TransportType::pty: {
+          if (reuse != nullptr) {
+            // The same pty as the previous scene's (a reload): kept open, so
+            // its reader sees no hang-up; the engine counts from here.
+            const auto kept = reuse->find(reuse_key(imu, options));
+            if (kept != reuse->end() && kept->second) {
+              dev.transport = std::move(kept->second);
+              reuse->erase(kept);
+              dev.transport_baseline = dev.transport->counters();
+              break;
+            }
+          }
           drivers::PtyTransportOptions po;
           po.link_path = pty_link_path(imu, options);
           po.queue_bytes = t.pty.queue_bytes;

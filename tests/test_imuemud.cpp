@@ -6,6 +6,7 @@
 // loopback_imuemud_scenes (tests/loopback/daemon_scenes.py).
 #include <gtest/gtest.h>
 
+#include <fcntl.h>
 #include <poll.h>
 #include <signal.h>
 #include <sys/socket.h>
@@ -13,12 +14,14 @@
 #include <netinet/in.h>
 #include <arpa/inet.h>
 #include <sys/wait.h>
+#include <termios.h>
 #include <unistd.h>
 
 #include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cstdio>
+#include <cstring>
 #include <filesystem>
 #include <fstream>
 #include <iostream>
@@ -654,9 +657,10 @@ TEST_F(Imuemud, DuringALongSceneBuildStatusAnswersTheWatchdogIsPingedAndSigtermE
   EXPECT_FALSE(fs::exists(dir_ / "c.sock")) << "the control socket is removed";
 }
 
-std::string file_scene(const fs::path& trajectory, const std::string& name) {
+std::string file_scene(const fs::path& trajectory, const std::string& name,
+                       const std::string& transport = "type = \"null\"\n") {
   return "[scene]\nname = \"" + name + "\"\nphysics = \"flat\"\n[trajectory]\nsource = \"file:" + trajectory.string() +
-         "\"\n[[imu]]\nname = \"n\"\nrate_hz = 100\nprotocol = \"native\"\n[imu.transport]\ntype = \"null\"\n";
+         "\"\n[[imu]]\nname = \"n\"\nrate_hz = 100\nprotocol = \"native\"\n[imu.transport]\n" + transport;
 }
 
 bool write_sample_trajectory(const fs::path& out, double duration_s) {
@@ -710,6 +714,75 @@ TEST_F(Imuemud, AReloadOfAGoodSceneSwitchesToIt) {
     return s["scene"] == "second" && emitted_of(s) > 0;
   });
   EXPECT_TRUE(second) << c.output();
+  ASSERT_EQ(::kill(c.pid, SIGTERM), 0);
+  const std::optional<int> rc = wait_exit_within(c, 20s);
+  ASSERT_TRUE(rc) << c.output();
+  EXPECT_EQ(*rc, 0) << c.output();
+}
+
+// Issue 13 H4 (last part): every reload closed the ptys and opened new ones,
+// so a reader (the system under test's driver) was hung up (EIO) at each
+// SIGHUP. A pty whose link, queue and mode are unchanged is now kept open
+// across the reload: the reader reads on, with no hang-up, from the same
+// /dev/pts, and the new scene's transport counters start from zero.
+TEST_F(Imuemud, AReloadKeepsAnUnchangedPtyOpenForItsReader) {
+  const fs::path trajectory = dir_ / "t.csv";
+  ASSERT_TRUE(write_sample_trajectory(trajectory, 600));
+  const fs::path link = dir_ / "ttyA";
+  const std::string pty = "type = \"pty\"\nlink = \"" + link.string() + "\"\n";
+  const fs::path scene = write("file.toml", file_scene(trajectory, "first", pty));
+  Child c = spawn_imuemud({"--scene", scene.string(), "--control-socket", (dir_ / "c.sock").string()}, dir_ / "log");
+  ReapOnExit reap_c{c.pid};
+  ASSERT_TRUE(status_when(dir_ / "c.sock", [](const nlohmann::json& s) { return emitted_of(s) > 0; })) << c.output();
+  const fs::path pts_before = fs::canonical(link);
+  const int fd = ::open(link.c_str(), O_RDONLY | O_NOCTTY | O_NONBLOCK | O_CLOEXEC);
+  ASSERT_GE(fd, 0) << std::strerror(errno);
+  termios raw{};
+  ASSERT_EQ(::tcgetattr(fd, &raw), 0);
+  ::cfmakeraw(&raw);
+  ASSERT_EQ(::tcsetattr(fd, TCSANOW, &raw), 0);
+  std::atomic<bool> reading{true}, hung_up{false};
+  std::atomic<std::uint64_t> bytes{0};
+  std::thread reader([&] {
+    char buffer[4096];
+    while (reading) {
+      pollfd p{fd, POLLIN, 0};
+      if (::poll(&p, 1, 50) < 0) continue;
+      if ((p.revents & (POLLHUP | POLLERR)) != 0) {
+        hung_up = true;
+        return;
+      }
+      if ((p.revents & POLLIN) == 0) continue;
+      const ssize_t n = ::read(fd, buffer, sizeof buffer);
+      if (n > 0) bytes += static_cast<std::uint64_t>(n);
+      else if (n == 0 || errno != EAGAIN) {
+        hung_up = true;
+        return;
+      }
+    }
+  });
+  std::this_thread::sleep_for(300ms);
+  const std::uint64_t bytes_before = bytes.load();
+  write("file.toml", file_scene(trajectory, "second", pty));
+  ASSERT_EQ(::kill(c.pid, SIGHUP), 0);
+  const auto second = status_when(dir_ / "c.sock", [](const nlohmann::json& s) {
+    return s["scene"] == "second" && emitted_of(s) > 0;
+  });
+  const std::uint64_t bytes_at_reload = bytes.load();
+  std::this_thread::sleep_for(500ms);
+  const auto later = status_of(dir_ / "c.sock");
+  reading = false;
+  reader.join();
+  ::close(fd);
+  ASSERT_TRUE(second) << c.output();
+  EXPECT_GT(bytes_before, 0u);
+  EXPECT_FALSE(hung_up) << "the reader was hung up by the reload\n" << c.output();
+  EXPECT_GT(bytes.load(), bytes_at_reload) << "nothing read after the reload";
+  EXPECT_EQ(fs::canonical(link), pts_before);
+  ASSERT_TRUE(later) << c.output();
+  const nlohmann::json& device = (*later)["engine"]["devices"][0];
+  // The second engine's counters: its own frames only.
+  EXPECT_LE(device["transport"]["frames_sent"].get<std::uint64_t>(), device["emitted"].get<std::uint64_t>()) << device.dump();
   ASSERT_EQ(::kill(c.pid, SIGTERM), 0);
   const std::optional<int> rc = wait_exit_within(c, 20s);
   ASSERT_TRUE(rc) << c.output();
