@@ -201,6 +201,8 @@ struct Device {
   LatenessHistogram lateness;
   mutable std::mutex live_mutex;  // producer <-> stats(), never the emission thread
   live::LiveCounters live_counters;
+  // The transport as it was when take_transports() moved it out.
+  std::optional<std::pair<std::string, drivers::TransportCounters>> transport_final;
   std::optional<drivers::GpioSyncCounters> gpio_final;  // after the lines were released
 
   Device(DeviceOptions o, std::size_t capacity) : options(std::move(o)), ring(capacity) {}
@@ -804,7 +806,27 @@ bool EmissionEngine::wait(std::chrono::milliseconds timeout) {
   return m.finished.load(std::memory_order_acquire);
 }
 
-void EmissionEngine::stop(std::chrono::milliseconds flush_timeout) {
+void EmissionEngine::stop(std::chrono::milliseconds flush_timeout) { stop_engine(flush_timeout, false); }
+
+void EmissionEngine::stop_keeping_transports(std::chrono::milliseconds flush_timeout) {
+  stop_engine(flush_timeout, true);
+}
+
+std::vector<std::unique_ptr<drivers::Transport>> EmissionEngine::take_transports() {
+  Impl& m = *impl_;
+  if (m.started && !m.stopped) throw std::logic_error("take_transports: the engine is running");
+  std::vector<std::unique_ptr<drivers::Transport>> out;
+  for (auto& d : m.devices) {
+    if (d->options.transport && d->options.stream_encoder) {
+      d->transport_final.emplace(d->options.stream_encoder->name() + " -> " + d->options.transport->describe(),
+                                 drivers::counters_since(d->options.transport->counters(), d->options.transport_baseline));
+    }
+    out.push_back(std::move(d->options.transport));
+  }
+  return out;
+}
+
+void EmissionEngine::stop_engine(std::chrono::milliseconds flush_timeout, bool keep_transports) {
   Impl& m = *impl_;
   if (!m.started || m.stopped) return;
   m.stopped = true;
@@ -815,7 +837,11 @@ void EmissionEngine::stop(std::chrono::milliseconds flush_timeout) {
   for (auto& d : m.devices) {
     // A bounded drain; what the device did not take by then is counted
     // (transport dropped_at_stop) before the final statistics are read.
-    if (d->options.transport) d->options.transport->stop(flush_timeout);
+    // Kept for the next engine: drained the same way, the link stays open.
+    if (d->options.transport) {
+      if (keep_transports) (void)d->options.transport->flush(flush_timeout);
+      else d->options.transport->stop(flush_timeout);
+    }
     if (d->options.can_output) d->options.can_output->stop(flush_timeout);
     if (d->options.gpio) {
       d->gpio_final = d->options.gpio->counters();
@@ -835,9 +861,12 @@ EngineStats EmissionEngine::stats() const {
     DeviceStats ds;
     ds.name = d.options.name;
     ds.rate_hz = d.options.rate_hz;
-    if (d.options.stream_encoder) {
+    if (d.transport_final) {
+      ds.output = d.transport_final->first;
+      ds.transport = d.transport_final->second;
+    } else if (d.options.stream_encoder) {
       ds.output = d.options.stream_encoder->name() + " -> " + d.options.transport->describe();
-      ds.transport = d.options.transport->counters();
+      ds.transport = drivers::counters_since(d.options.transport->counters(), d.options.transport_baseline);
     } else {
       ds.output = d.options.can_encoder->name() + " -> " + d.options.can_output->describe();
       ds.transport = d.options.can_output->counters();
@@ -875,8 +904,22 @@ EngineStats EmissionEngine::stats() const {
   s.poses_refused = m.poses_refused.load(std::memory_order_relaxed);
   if (m.live_input()) {
     const io::PoseSourceCounters c = m.options.source->counters();
-    s.pose_source = PoseSourceStats{m.options.source->name(), c.received,     c.accepted,         c.rejected(),
-                                    c.duplicate,              c.out_of_order, c.overflow_dropped, c.lost()};
+    PoseSourceStats& p = s.pose_source.emplace();
+    p.name = m.options.source->name();
+    p.received = c.received;
+    p.accepted = c.accepted;
+    p.rejected = c.rejected();
+    p.duplicate = c.duplicate;
+    p.out_of_order = c.out_of_order;
+    p.overflow_dropped = c.overflow_dropped;
+    p.lost = c.lost();
+    p.time_jump = c.time_jump;
+    p.resyncs = c.resyncs;
+    p.held = c.held;
+    p.connections = c.connections;
+    p.connections_refused = c.connections_refused;
+    p.connections_idle_closed = c.connections_idle_closed;
+    p.connections_replaced = c.connections_replaced;
   }
   s.realtime_priority = m.realtime_priority;
   s.memory_locked = m.memory_locked;
@@ -965,7 +1008,9 @@ nlohmann::json to_json(const EngineStats& s) {
                    {"pps_pulses", d.gpio->pps_pulses},
                    {"skipped_pulses", d.gpio->skipped_pulses},
                    {"set_errors", d.gpio->set_errors},
-                   {"max_trailing_edge_delay_ns", d.gpio->max_trailing_edge_delay_ns}};
+                   {"max_trailing_edge_delay_ns", d.gpio->max_trailing_edge_delay_ns},
+                   {"helper_faults", d.gpio->helper_faults},
+                   {"down", d.gpio->down}};
     devices.push_back(std::move(j));
   }
   nlohmann::json j{{"devices", std::move(devices)},
@@ -995,7 +1040,14 @@ nlohmann::json to_json(const EngineStats& s) {
                         {"duplicate", s.pose_source->duplicate},
                         {"out_of_order", s.pose_source->out_of_order},
                         {"overflow_dropped", s.pose_source->overflow_dropped},
-                        {"lost", s.pose_source->lost}};
+                        {"lost", s.pose_source->lost},
+                        {"time_jump", s.pose_source->time_jump},
+                        {"resyncs", s.pose_source->resyncs},
+                        {"held", s.pose_source->held},
+                        {"connections", s.pose_source->connections},
+                        {"connections_refused", s.pose_source->connections_refused},
+                        {"connections_idle_closed", s.pose_source->connections_idle_closed},
+                        {"connections_replaced", s.pose_source->connections_replaced}};
   return j;
 }
 

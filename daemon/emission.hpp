@@ -77,6 +77,9 @@ struct DeviceOptions {
   TimeNs blend_ns = 200'000'000;
   std::unique_ptr<drivers::StreamEncoder> stream_encoder;
   std::unique_ptr<drivers::Transport> transport;
+  // A transport reused from a previous engine (imuemud reload): its counters
+  // when this engine got it; the engine's statistics count from there.
+  drivers::TransportCounters transport_baseline;
   std::unique_ptr<drivers::CanEncoder> can_encoder;
   std::unique_ptr<CanOutput> can_output;
   std::unique_ptr<drivers::GpioSyncOutput> gpio;  // optional: pulse(k, t_k) after each sent sample
@@ -157,6 +160,11 @@ struct PoseSourceStats {
   std::string name;
   std::uint64_t received = 0, accepted = 0, rejected = 0, duplicate = 0, out_of_order = 0, overflow_dropped = 0,
                 lost = 0;
+  // Live time (docs/pose-wire-format.md "Live time"): strays dropped, stream
+  // re-acquisitions, poses held now (a gauge).
+  std::uint64_t time_jump = 0, resyncs = 0, held = 0;
+  // TCP: clients accepted, refused (slot taken), closed idle, replaced while idle.
+  std::uint64_t connections = 0, connections_refused = 0, connections_idle_closed = 0, connections_replaced = 0;
 };
 
 struct EngineStats {
@@ -211,6 +219,13 @@ class EmissionEngine {
   // request_stop + join + stop the transports (each a bounded drain of up to
   // flush_timeout, then what is left counted as dropped_at_stop) + release GPIO.
   void stop(std::chrono::milliseconds flush_timeout = std::chrono::milliseconds(500));
+  // As stop(), but the byte-stream transports are only flushed (bounded by
+  // flush_timeout), not stopped: take_transports() then hands them to the
+  // next engine, so a reload does not hang up a pty's reader.
+  void stop_keeping_transports(std::chrono::milliseconds flush_timeout = std::chrono::milliseconds(500));
+  // After a stop: each device's byte-stream transport (nullptr for CAN),
+  // moved out; stats() keeps reporting their counters as they were.
+  std::vector<std::unique_ptr<drivers::Transport>> take_transports();
 
   EngineStats stats() const;
   // CLOCK_MONOTONIC of the emission thread's last loop iteration (0 before
@@ -230,6 +245,7 @@ class EmissionEngine {
   std::optional<live::TimeMapping> mapping() const;
 
  private:
+  void stop_engine(std::chrono::milliseconds flush_timeout, bool keep_transports);
   struct Impl;
   std::unique_ptr<Impl> impl_;
 };

@@ -181,6 +181,7 @@ int emit(const EmitArgs& a) {
       io::PoseSourceOptions so;
       so.physics = scene.physics;
       so.log = [](std::string_view line) { std::cerr << line << "\n"; };
+      so.max_gap_ns = option_ns("--max-gap-s", dev.pipeline.max_gap_s);  // the engine's gap limit (re-acquisition)
       if (a.source.rfind("udp:", 0) == 0) source = io::make_udp_pose_source(endpoint_of(a.source, "udp"), so);
       else if (a.source.rfind("tcp:", 0) == 0) {
         io::NetEndpoint ep = endpoint_of(a.source, "tcp");

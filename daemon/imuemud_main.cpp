@@ -45,6 +45,7 @@
 #include <memory>
 #include <optional>
 #include <sstream>
+#include <set>
 #include <string>
 #include <thread>
 
@@ -135,6 +136,7 @@ struct BuildJob {
   std::string scene_path;       // validate: empty for the built-in scene
   sc::RunnerOptions runner;     // start (a copy: the worker shares nothing)
   TimeNs next_retry_ns = 0;     // start: back-off after this attempt (device_missing = "wait")
+  sc::ReusableTransports reuse;  // start: transports kept open from the previous engine (ptys across a reload)
   sc::BuiltEngine built;        // start: the result
   std::exception_ptr error;     // what the build threw
   TimeNs started_ns = 0;
@@ -143,7 +145,7 @@ struct BuildJob {
 
 void run_build_job(BuildJob& job) {
   if (job.kind == BuildJob::Kind::start) {
-    job.built = sc::build_engine(job.scene, job.runner);
+    job.built = sc::build_engine(job.scene, job.runner, &job.reuse);
     return;
   }
   sc::SceneConfig next = job.scene_path.empty() ? sc::default_scene() : sc::parse_scene_file(job.scene_path);
@@ -211,9 +213,12 @@ class Daemon {
   // when it is built; READY=1 once running.
   // A reload being read meanwhile ends in a start itself (of the new scene,
   // or of this one again when nothing is running).
-  void start() {
+  // reuse: transports of the previous engine the scene's devices take
+  // again (a reload, a loop restart): a pty stays open, its reader is not
+  // hung up.
+  void start(sc::ReusableTransports reuse = {}) {
     if (job_) return;
-    launch_start(seconds_ns(scene_.daemon.device_retry_initial_s));
+    launch_start(seconds_ns(scene_.daemon.device_retry_initial_s), std::move(reuse));
   }
 
   void stop(int exit_code) {
@@ -282,12 +287,13 @@ class Daemon {
     return text;
   }
 
-  void launch_start(TimeNs next_retry_ns) {
+  void launch_start(TimeNs next_retry_ns, sc::ReusableTransports reuse = {}) {
     if (stopping_) return;
     auto job = std::make_shared<BuildJob>();
     job->kind = BuildJob::Kind::start;
     job->scene = scene_;
     job->runner = runner_;
+    job->reuse = std::move(reuse);
     job->next_retry_ns = next_retry_ns;
     launch(std::move(job));
   }
@@ -340,16 +346,26 @@ class Daemon {
     }
     svc::log_notice("reload: " + job.scene.name + " read and checked (" +
                     seconds_text(monotonic_now_ns() - job.started_ns) +
-                    "): restarting emission with it (devices reopened, new time base)");
+                    "): restarting emission with it (ptys with the same link kept open, other devices reopened, "
+                    "new time base)");
     previous_scene_ = scene_;
-    stop_engine();
+    sc::ReusableTransports kept;
+    stop_engine(&kept);
     retry_timer_.cancel();
     waiting_for_device_ = false;
     scene_ = std::move(job.scene);
-    start();
+    // Only what the new scene opens again stays open (the rest is closed
+    // before its devices are opened: a changed pty may reuse the link).
+    std::set<std::string> wanted;
+    for (const sc::ImuConfig& imu : scene_.imus) wanted.insert(sc::reuse_key(imu, runner_));
+    for (auto it = kept.begin(); it != kept.end();) it = wanted.count(it->first) != 0 ? std::next(it) : kept.erase(it);
+    start(std::move(kept));
   }
 
   void on_built(BuildJob& job) {
+    // Transports the build did not take are closed now, before a retry or
+    // the previous scene opens its devices again.
+    job.reuse.clear();
     if (job.error) {
       try {
         std::rethrow_exception(job.error);
@@ -428,11 +444,21 @@ class Daemon {
     }
   }
 
-  void stop_engine() {
+  // keep: the byte-stream transports with a reuse_key() stay open and go
+  // there (the scene's devices are the engine's, in order); the rest close.
+  void stop_engine(sc::ReusableTransports* keep = nullptr) {
     if (!built_.engine) return;
-    built_.engine->stop();
+    if (keep != nullptr) built_.engine->stop_keeping_transports();
+    else built_.engine->stop();
     final_stats_ = built_.engine->stats();
     svc::log_info("emission stopped: " + summary_line(scene_, *final_stats_, true));
+    if (keep != nullptr) {
+      std::vector<std::unique_ptr<imuemu::drivers::Transport>> transports = built_.engine->take_transports();
+      for (std::size_t i = 0; i < transports.size() && i < scene_.imus.size(); ++i) {
+        const std::string key = sc::reuse_key(scene_.imus[i], runner_);
+        if (!key.empty() && transports[i]) (*keep)[key] = std::move(transports[i]);
+      }
+    }
     built_ = {};
   }
 
@@ -470,9 +496,11 @@ class Daemon {
     }
     if (s.finished) {
       if (scene_.trajectory.loop) {
-        svc::log_notice("the looped trajectory ended: restarting the run (devices reopened, new time base)");
-        stop_engine();
-        start();
+        svc::log_notice("the looped trajectory ended: restarting the run (ptys kept open, other devices reopened, "
+                        "new time base)");
+        sc::ReusableTransports kept;
+        stop_engine(&kept);
+        start(std::move(kept));
       } else {
         svc::log_notice(s.time_limit_ends > 0
                             ? "the stream reached the end of int64 nanosecond time (no later tick is representable): stopping"

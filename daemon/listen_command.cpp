@@ -19,6 +19,7 @@
 #include <vector>
 
 #include "daemon/arrival_jitter.hpp"
+#include "daemon/cli_options.hpp"
 #include "daemon/commands.hpp"
 #include "drivers/byte_stream_reader.hpp"
 #include "drivers/socketcan.hpp"
@@ -244,12 +245,15 @@ void validate(const ListenArgs& args) {
     throw std::invalid_argument("--protocol '" + args.protocol + "': expected one of " + names);
   }
   if (args.device.empty()) throw std::invalid_argument("--device: empty");
-  if (!std::isfinite(args.duration_s) || args.duration_s < 0.0)
-    throw std::invalid_argument("--duration-s: expected a finite number >= 0 (0 = no limit)");
-  if (!std::isfinite(args.expect_rate_hz) || args.expect_rate_hz < 0.0)
-    throw std::invalid_argument("--expect-rate: expected a finite rate in Hz >= 0 (0 = none)");
-  if (!std::isfinite(args.rate_tolerance) || args.rate_tolerance <= 0.0)
-    throw std::invalid_argument("--rate-tolerance: expected a fraction > 0");
+  // The command line checks the same ranges (finite_in, seconds_in: exit 2);
+  // these hold for callers of listen() that build ListenArgs themselves.
+  if (!std::isfinite(args.duration_s) || args.duration_s < 0.0 || args.duration_s > kMaxDurationS)
+    throw std::invalid_argument("--duration-s: expected a finite number in [0, " + bound_text(kMaxDurationS) +
+                                "] s (0 = no limit)");
+  if (!std::isfinite(args.expect_rate_hz) || args.expect_rate_hz < 0.0 || args.expect_rate_hz > 1e6)
+    throw std::invalid_argument("--expect-rate: expected a finite rate in [0, 1e+06] Hz (0 = none)");
+  if (!std::isfinite(args.rate_tolerance) || args.rate_tolerance <= 0.0 || args.rate_tolerance > 1.0)
+    throw std::invalid_argument("--rate-tolerance: expected a fraction in (0, 1]");
   if (args.every == 0) throw std::invalid_argument("--every: expected >= 1");
 }
 
@@ -283,7 +287,7 @@ ListenSummary listen(const ListenArgs& args, std::ostream& out, const std::atomi
   };
 
   const TimeNs start_ns = monotonic_now_ns();
-  const TimeNs end_ns = args.duration_s > 0.0 ? start_ns + static_cast<TimeNs>(std::llround(args.duration_s * 1e9))
+  const TimeNs end_ns = args.duration_s > 0.0 ? saturating_add_ns(start_ns, option_ns("--duration-s", args.duration_s))
                                               : std::numeric_limits<TimeNs>::max();
   Session session(args, out, on_sample);
   TimeNs arrival_ns = 0;
@@ -485,14 +489,14 @@ void add_listen_command(CLI::App& app, int& exit_code) {
   c->add_option("--stop-bits", a.serial.stop_bits, "Serial port: 1 or 2")->capture_default_str()->check(CLI::IsMember({1, 2}));
   c->add_option("--flow-control", options->flow_control, "Serial port: none|rtscts|xonxoff")->capture_default_str()
       ->check(CLI::IsMember({"none", "rtscts", "xonxoff"}));
-  c->add_option("--duration-s", a.duration_s, "Stop after this many seconds of wall time (0: no limit)")->check(CLI::NonNegativeNumber);
+  c->add_option("--duration-s", a.duration_s, "Stop after this many seconds of wall time (0: no limit)")->check(seconds_in(0.0, kMaxDurationS));
   c->add_option("--count", a.count, "Stop after this many samples (0: no limit)");
   c->add_flag("--json", a.json, "NDJSON: one object per sample line and a final summary object");
   c->add_flag("--quiet", a.quiet, "Print the summary only");
   c->add_option("--every", a.every, "Print every Nth sample")->capture_default_str()->check(CLI::PositiveNumber);
   c->add_option("--out", a.out_path, "CSV of every decoded sample (sequence, t_ns, gyro, accel, dtheta, dv, status)");
-  c->add_option("--expect-rate", a.expect_rate_hz, "Expected sample rate (Hz): the summary says whether it matches")->check(CLI::NonNegativeNumber);
-  c->add_option("--rate-tolerance", a.rate_tolerance, "Relative tolerance of --expect-rate")->capture_default_str()->check(CLI::PositiveNumber);
+  c->add_option("--expect-rate", a.expect_rate_hz, "Expected sample rate (Hz): the summary says whether it matches")->check(finite_in(0.0, 1e6));
+  c->add_option("--rate-tolerance", a.rate_tolerance, "Relative tolerance of --expect-rate")->capture_default_str()->check(finite_in(0.0, 1.0, true));
   c->add_option("--mavlink-sample-message", options->mavlink_message, "mavlink2: samples from hil_sensor (#107) or highres_imu (#105)")
       ->capture_default_str()->check(CLI::IsMember({"hil_sensor", "highres_imu"}));
   c->add_option("--mip-gps-time-at-t0-ns", options->mip_gps_time_at_t0_ns, "mip: GPS time (ns since 1980-01-06) of trajectory time 0, as the encoder was given")

@@ -2,11 +2,14 @@
 
 #include <unistd.h>
 
+#include <algorithm>
 #include <cmath>
 #include <cstdio>
 #include <cstdlib>
 #include <filesystem>
 
+#include "core/limits.hpp"
+#include "core/time_arith.hpp"
 #include "daemon/commands.hpp"
 #include "drivers/gpio_sync.hpp"
 #include "drivers/pty_transport.hpp"
@@ -70,16 +73,25 @@ std::vector<Pose> scene_trajectory(const SceneConfig& scene) {
 
 std::vector<Pose> looped(const std::vector<Pose>& once, const SceneConfig& scene, TimeNs min_span_ns) {
   if (once.size() < 2) return once;
-  const TimeNs span_ns = once.back().t_ns - once.front().t_ns;
+  // Every time sum saturates or is refused (core/time_arith.hpp): a copy
+  // whose times do not fit int64 ns is not made.
+  const TimeNs span_ns = saturating_sub_ns(once.back().t_ns, once.front().t_ns);
   // Beyond max_gap_s, so the pipeline splits the run there (gap_policy split).
-  const TimeNs gap_ns = seconds_to_ns(scene.smoothing.max_gap_s) + seconds_to_ns(scene.trajectory.knot_interval_s);
-  const TimeNs shift_ns = span_ns + gap_ns;
+  const TimeNs gap_ns = saturating_add_ns(seconds_to_ns(scene.smoothing.max_gap_s),
+                                          seconds_to_ns(scene.trajectory.knot_interval_s));
+  const TimeNs shift_ns = saturating_add_ns(span_ns, gap_ns);
+  // Copies to cover min_span_ns, at most limits::kMaxLoopKnots knots in all
+  // (the run restarts after them), and only those whose times fit.
+  const TimeNs wanted = std::max<TimeNs>(1, min_span_ns / shift_ns + (min_span_ns % shift_ns != 0 ? 1 : 0));
+  const auto fit = static_cast<TimeNs>(std::max<std::size_t>(1, limits::kMaxLoopKnots / once.size()));
+  const TimeNs in_range = (kMaxTimeNs - std::max<TimeNs>(once.back().t_ns, 0)) / shift_ns + 1;
+  const auto copies = static_cast<std::size_t>(std::min({wanted, fit, in_range}));
   std::vector<Pose> out;
-  const std::size_t copies = static_cast<std::size_t>(std::max<TimeNs>(1, (min_span_ns + shift_ns - 1) / shift_ns));
   out.reserve(once.size() * copies);
   for (std::size_t c = 0; c < copies; ++c) {
+    const TimeNs offset_ns = shift_ns * static_cast<TimeNs>(c);  // fits: c < in_range
     for (Pose p : once) {
-      p.t_ns += static_cast<TimeNs>(c) * shift_ns;
+      p.t_ns += offset_ns;
       out.push_back(p);
     }
   }
@@ -91,7 +103,13 @@ std::string pty_link_path(const ImuConfig& imu, const RunnerOptions& options) {
   return (std::filesystem::path(options.pty_link_dir) / std::filesystem::path(imu.transport.pty.link).filename()).string();
 }
 
-BuiltEngine build_engine(const SceneConfig& scene, const RunnerOptions& options) {
+std::string reuse_key(const ImuConfig& imu, const RunnerOptions& options) {
+  if (imu.transport.type != TransportType::pty) return {};
+  return "pty " + pty_link_path(imu, options) + " queue " + std::to_string(imu.transport.pty.queue_bytes) + " mode " +
+         std::to_string(imu.transport.pty.mode);
+}
+
+BuiltEngine build_engine(const SceneConfig& scene, const RunnerOptions& options, ReusableTransports* reuse) {
   BuiltEngine built;
   emission::EngineOptions eo;
   const bool live_input = scene.trajectory.kind == SourceKind::udp || scene.trajectory.kind == SourceKind::tcp ||
@@ -101,6 +119,10 @@ BuiltEngine build_engine(const SceneConfig& scene, const RunnerOptions& options)
     io::PoseSourceOptions so;
     so.physics = scene.physics.physics;
     so.log = options.log;
+    // A re-acquired stream is placed just beyond the engine's own gap limit
+    // (io/pose_source.hpp max_gap_ns): output resumes about max_gap_s after a
+    // sender restart.
+    so.max_gap_ns = seconds_to_ns(scene.smoothing.max_gap_s);
     io::NetEndpoint endpoint{scene.trajectory.address, scene.trajectory.port, 0};
     endpoint.tcp_idle_timeout_ns = seconds_to_ns(scene.trajectory.tcp_idle_timeout_s);
     if (scene.trajectory.kind == SourceKind::udp) built.source = io::make_udp_pose_source(endpoint, so);
@@ -142,6 +164,17 @@ BuiltEngine build_engine(const SceneConfig& scene, const RunnerOptions& options)
       const TransportConfig& t = imu.transport;
       switch (t.type) {
         case TransportType::pty: {
+          if (reuse != nullptr) {
+            // The same pty as the previous scene's (a reload): kept open, so
+            // its reader sees no hang-up; the engine counts from here.
+            const auto kept = reuse->find(reuse_key(imu, options));
+            if (kept != reuse->end() && kept->second) {
+              dev.transport = std::move(kept->second);
+              reuse->erase(kept);
+              dev.transport_baseline = dev.transport->counters();
+              break;
+            }
+          }
           drivers::PtyTransportOptions po;
           po.link_path = pty_link_path(imu, options);
           po.queue_bytes = t.pty.queue_bytes;

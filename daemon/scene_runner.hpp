@@ -6,6 +6,7 @@
 #pragma once
 
 #include <functional>
+#include <map>
 #include <memory>
 #include <optional>
 #include <stdexcept>
@@ -52,7 +53,9 @@ std::vector<Pose> scene_trajectory(const SceneConfig& scene);
 // With [trajectory] loop = true: the trajectory followed by further copies,
 // each shifted in time by its span plus a gap beyond max_gap_s (so the
 // pipeline splits there: one-sided windows, no smoothing across the jump back
-// to the start, a silent gap on the wire), up to at least min_span_ns.
+// to the start, a silent gap on the wire), up to at least min_span_ns, but
+// at most limits::kMaxLoopKnots knots in all and only copies whose times fit
+// int64 ns (the run then restarts sooner).
 std::vector<Pose> looped(const std::vector<Pose>& once, const SceneConfig& scene, TimeNs min_span_ns);
 
 // The span loop = true covers before the daemon restarts the run.
@@ -67,8 +70,17 @@ struct BuiltEngine {
   std::vector<std::string> outputs;        // per device: "imu0: native -> pty /dev/pts/3 (/run/imuemu/ttyIMU0)"
 };
 
+// Transports kept open across a reload, by reuse_key(): a new scene whose
+// device has the same key takes the open one (a pty's reader is not hung up).
+using ReusableTransports = std::map<std::string, std::unique_ptr<drivers::Transport>>;
+
+// What identifies an open transport for reuse: a pty's published link, queue
+// and slave mode; empty for the others (reopened at every start).
+std::string reuse_key(const ImuConfig& imu, const RunnerOptions& options);
+
 // Opens every device (throws DeviceOpenError naming the first that fails) and
-// builds the engine, not started.
-BuiltEngine build_engine(const SceneConfig& scene, const RunnerOptions& options);
+// builds the engine, not started. A device whose reuse_key() is in `reuse`
+// takes that transport (moved out of the map).
+BuiltEngine build_engine(const SceneConfig& scene, const RunnerOptions& options, ReusableTransports* reuse = nullptr);
 
 }  // namespace imuemu::scene

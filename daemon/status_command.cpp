@@ -113,11 +113,22 @@ void print_status_summary(const nlohmann::json& status, std::ostream& out) {
         << ": e.g. no reader on the pty; queue full " << count_of(transport, "dropped_queue_full")
         << "; refused by the kernel or invalid " << count_of(transport, "write_errors") << ")\n";
   }
-  if (const auto source = engine->find("pose_source"); source != engine->end() && source->is_object())
+  if (const auto source = engine->find("pose_source"); source != engine->end() && source->is_object()) {
     out << "  pose source " << text_of(*source, "name") << ": " << count_of(*source, "accepted") << " accepted of "
         << count_of(*source, "received") << " received, " << count_of(*source, "lost") << " lost, "
         << count_of(*source, "out_of_order") << " out of order, " << count_of(*source, "duplicate")
-        << " duplicates, " << count_of(*source, "rejected") << " rejected\n";
+        << " duplicates, " << count_of(*source, "rejected") << " rejected\n"
+        << "    live time: " << count_of(*source, "resyncs")
+        << " re-acquisitions (the sender's times jumped or restarted; the new stream placed on the running timeline), "
+        << count_of(*source, "time_jump") << " stray poses dropped (far from the stream, never confirmed), "
+        << count_of(*source, "held") << " held now (waiting for consistent poses)\n";
+    // Connections are a TCP source's (one client at a time).
+    if (text_of(*source, "name").rfind("tcp", 0) == 0)
+      out << "    connections: " << count_of(*source, "connections") << " accepted, "
+          << count_of(*source, "connections_refused") << " refused (slot taken), "
+          << count_of(*source, "connections_idle_closed") << " closed idle (nothing within the idle timeout), "
+          << count_of(*source, "connections_replaced") << " replaced (idle, taken over by a new client)\n";
+  }
 }
 
 nlohmann::json query_control_socket(const std::string& socket_path, const std::string& command,

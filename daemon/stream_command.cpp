@@ -158,6 +158,7 @@ int stream(const StreamArgs& args) {
   so.physics = po.scene.physics;
   so.log = [](std::string_view line) { std::cerr << line << "\n"; };
   try {
+    so.max_gap_ns = option_ns("--max-gap-s", po.max_gap_s);  // re-acquired streams just beyond the engine's gap limit
     if (!as_fast_as_possible) speed = live::parse_speed_factor(args.speed);
     if (args.source.rfind("file:", 0) == 0) {
       io::FileReplayOptions fr;

@@ -105,6 +105,11 @@ void GpioSyncOutput::raise(Output& output, std::atomic<std::uint64_t>& started) 
 }
 
 void GpioSyncOutput::pulse(std::uint64_t sample_counter, TimeNs t_ns) {
+  if (down_.load(std::memory_order_acquire)) {
+    // No thread ends pulses any more: a leading edge would stay on the line.
+    if (sample_counter % options_.every_n_samples == 0) skipped_.fetch_add(1, std::memory_order_relaxed);
+    return;
+  }
   if (sample_counter % options_.every_n_samples == 0) raise(*sync_, pulses_);
   if (pps_) {
     const bool whole_second_reached = previous_t_ns_ ? floor_seconds(t_ns) > floor_seconds(*previous_t_ns_)
@@ -114,8 +119,44 @@ void GpioSyncOutput::pulse(std::uint64_t sample_counter, TimeNs t_ns) {
   previous_t_ns_ = t_ns;
 }
 
-void GpioSyncOutput::run_helper() {
+// No exception leaves the thread (a LineWriter may throw, a std::function
+// may be empty): it is recorded, counted, logged, and the sync output marked
+// down, instead of std::terminate taking the emission with it.
+void GpioSyncOutput::run_helper() noexcept {
   pthread_setname_np(pthread_self(), "imuemu-gpio");
+  run_thread_body([this] { end_pulses(); }, [this](const char* what) { helper_failed(what); });
+}
+
+void GpioSyncOutput::helper_failed(std::string_view what) noexcept {
+  helper_faults_.fetch_add(1, std::memory_order_relaxed);
+  down_.store(true, std::memory_order_release);
+  try {
+    {
+      const std::lock_guard lock(failure_mutex_);
+      failure_ = what;
+    }
+    emit_log(options_.log, "GPIO sync: the trailing-edge thread failed: " + std::string(what) +
+                               "; sync output down, later pulses skipped");
+  } catch (...) {  // out of memory or a throwing log sink: the counters still say it
+  }
+  // Leave no line active: pulse() raises none once down_ is set, and an
+  // output whose pulse did not end keeps its active flag, so raise() skips it.
+  for (Output* output : {sync_.get(), pps_.get()}) {
+    if (output == nullptr || !output->write) continue;
+    try {
+      output->write(false);
+    } catch (...) {
+    }
+  }
+}
+
+std::string GpioSyncOutput::failure() const {
+  const std::lock_guard lock(failure_mutex_);
+  return failure_;
+}
+
+// The helper's loop: ends each pulse when its timer fires, until stop_fd_.
+void GpioSyncOutput::end_pulses() {
   Output* outputs[2] = {sync_.get(), pps_.get()};
   pollfd fds[3] = {{stop_fd_, POLLIN, 0}, {sync_->timer_fd, POLLIN, 0}, {pps_ ? pps_->timer_fd : -1, POLLIN, 0}};
   const nfds_t count = pps_ ? 3 : 2;
@@ -210,7 +251,10 @@ void GpioSyncOutput::start_helper() {
 void GpioSyncOutput::release_all() noexcept {
   for (Output* output : {sync_.get(), pps_.get()}) {
     if (output == nullptr) continue;
-    if (output->write) output->write(false);  // inactive, whatever the polarity
+    try {
+      if (output->write) output->write(false);  // inactive, whatever the polarity
+    } catch (...) {  // a LineWriter that throws: nothing leaves a noexcept release
+    }
     if (output->line != nullptr) ::gpiod_line_release(output->line);
     if (output->timer_fd >= 0) ::close(output->timer_fd);
   }
@@ -278,6 +322,8 @@ GpioSyncCounters GpioSyncOutput::counters() const {
   c.skipped_pulses = skipped_.load(std::memory_order_relaxed);
   c.set_errors = set_errors_.load(std::memory_order_relaxed);
   c.max_trailing_edge_delay_ns = max_delay_ns_.load(std::memory_order_relaxed);
+  c.helper_faults = helper_faults_.load(std::memory_order_relaxed);
+  c.down = down_.load(std::memory_order_acquire);
   return c;
 }
 

@@ -27,6 +27,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <string>
 #include <string_view>
@@ -66,6 +67,11 @@ struct GpioSyncCounters {
   std::uint64_t skipped_pulses = 0;  // due while the previous pulse on the same line had not ended
   std::uint64_t set_errors = 0;      // failed line writes
   TimeNs max_trailing_edge_delay_ns = 0;  // worst lateness of a trailing edge after its due time
+  // The trailing-edge thread ended with an exception (caught there, never
+  // leaving the thread): counted, logged, and the sync output is down; later
+  // pulses are not raised (counted skipped_pulses).
+  std::uint64_t helper_faults = 0;
+  bool down = false;
 };
 
 class GpioSyncOutput {
@@ -94,6 +100,8 @@ class GpioSyncOutput {
   std::string describe() const;
   // Whether the trailing-edge thread got SCHED_FIFO (trailing_edge_priority).
   bool trailing_edges_realtime() const noexcept { return helper_realtime_; }
+  // What the trailing-edge thread's exception said; empty while it runs.
+  std::string failure() const;
 
  private:
   struct Output;
@@ -102,7 +110,9 @@ class GpioSyncOutput {
   void start_helper();
   void release_all() noexcept;
   void raise(Output& output, std::atomic<std::uint64_t>& started);
-  void run_helper();
+  void run_helper() noexcept;
+  void end_pulses();
+  void helper_failed(std::string_view what) noexcept;
 
   GpioSyncOptions options_;
   gpiod_chip* chip_ = nullptr;
@@ -115,6 +125,10 @@ class GpioSyncOutput {
   std::thread helper_;
   std::atomic<std::uint64_t> pulses_{0}, pps_pulses_{0}, skipped_{0}, set_errors_{0};
   std::atomic<TimeNs> max_delay_ns_{0};
+  std::atomic<std::uint64_t> helper_faults_{0};
+  std::atomic<bool> down_{false};
+  mutable std::mutex failure_mutex_;
+  std::string failure_;
 };
 
 }  // namespace imuemu::drivers

@@ -10,6 +10,8 @@
 #include <cstdio>
 #include <cstring>
 
+#include "daemon/log.hpp"
+
 namespace imuemu::drivers {
 namespace {
 
@@ -52,7 +54,19 @@ void emit_log(const std::function<void(std::string_view)>& sink, std::string_vie
     sink(line);
     return;
   }
-  std::fprintf(stderr, "imuemu: %.*s\n", static_cast<int>(line.size()), line.data());
+  // No sink: the project's log line (sd-daemon priority prefix, one write(2),
+  // bounded), so a daemon's journal keeps the level of these lines too.
+  service::log_warning("imuemu: " + std::string(line));
+}
+
+void run_thread_body(const std::function<void()>& body, const std::function<void(const char*)>& failed) noexcept {
+  try {
+    body();
+  } catch (const std::exception& e) {
+    failed(e.what());
+  } catch (...) {
+    failed("unknown exception");
+  }
 }
 
 QueuedWriter::QueuedWriter(std::unique_ptr<WriterDevice> device, QueuedWriterOptions options)
@@ -323,13 +337,7 @@ void QueuedWriter::back_off_before_retry() {
 // daemon): the link is marked down, so every later frame is refused and
 // counted (dropped_link_down), and the reason is logged once.
 void QueuedWriter::run() noexcept {
-  try {
-    write_loop();
-  } catch (const std::exception& e) {
-    writer_failed(e.what());
-  } catch (...) {
-    writer_failed("unknown exception");
-  }
+  run_thread_body([this] { write_loop(); }, [this](const char* what) { writer_failed(what); });
 }
 
 void QueuedWriter::writer_failed(const char* what) noexcept {

@@ -205,7 +205,12 @@ class QueuedWriter {
 // strerror for messages (thread-safe).
 std::string errno_message(int error);
 
-// Writes a log line through `sink`, or to stderr when it is empty.
+// Writes a log line through `sink`, or to stderr (the project's log line,
+// daemon/log.hpp, warning) when it is empty.
 void emit_log(const std::function<void(std::string_view)>& sink, std::string_view line);
+
+// A thread's body: an exception that would leave it (std::terminate) goes to
+// `failed` with its message instead. `failed` must not throw.
+void run_thread_body(const std::function<void()>& body, const std::function<void(const char*)>& failed) noexcept;
 
 }  // namespace imuemu::drivers

@@ -43,6 +43,26 @@ struct TransportCounters {
   std::uint64_t input_bytes_discarded = 0;  // bytes the peer sent us (commands to the emulated device), read and dropped
 };
 
+// What `now` counted since `base` (a transport reused by a new emission
+// engine across a reload: its counters start there). `queued` is a gauge,
+// taken as is.
+inline TransportCounters counters_since(const TransportCounters& now, const TransportCounters& base) noexcept {
+  TransportCounters d = now;
+  d.frames -= base.frames;
+  d.bytes -= base.bytes;
+  d.frames_sent -= base.frames_sent;
+  d.bytes_sent -= base.bytes_sent;
+  d.dropped_queue_full -= base.dropped_queue_full;
+  d.dropped_link_down -= base.dropped_link_down;
+  d.write_errors -= base.write_errors;
+  d.dropped_at_stop -= base.dropped_at_stop;
+  d.link_down_events -= base.link_down_events;
+  d.link_restored -= base.link_restored;
+  d.retries -= base.retries;
+  d.input_bytes_discarded -= base.input_bytes_discarded;
+  return d;
+}
+
 class Transport {
  public:
   virtual ~Transport() = default;

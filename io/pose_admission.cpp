@@ -1,11 +1,11 @@
 #include "io/pose_admission.hpp"
 
 #include <algorithm>
-#include <cstdio>
 #include <utility>
 
 #include "core/so3.hpp"
 #include "core/time_arith.hpp"
+#include "daemon/log.hpp"
 #include "io/decimal_time.hpp"
 
 namespace imuemu::io {
@@ -81,7 +81,9 @@ void RateLimitedLog::emit(std::string_view line) {
   if (sink_) {
     sink_(line);
   } else {
-    std::fprintf(stderr, "%.*s\n", static_cast<int>(line.size()), line.data());
+    // No sink: the project's log line (sd-daemon priority prefix, one write(2),
+    // bounded): a refused pose is a warning in a daemon's journal.
+    service::log_warning(line);
   }
 }
 
@@ -174,6 +176,7 @@ PoseAdmission::PoseAdmission(const PoseSourceOptions& options)
       log_(options.log, options.log_interval_ns),
       max_chart_angle_rad_(options.max_chart_angle_rad),
       max_time_step_ns_(std::max<TimeNs>(1, options.max_time_step_ns)),
+      max_gap_ns_(std::max<TimeNs>(0, options.max_gap_ns)),
       resync_poses_(std::max<std::size_t>(1, options.resync_poses)) {}
 
 void PoseAdmission::log(std::string_view key, std::string_view message) {
@@ -378,11 +381,13 @@ bool PoseAdmission::admit(const TrajectoryRecord& record, std::optional<std::uin
   if (!locked_) return release_candidates(0, out);  // acquired: the sender's own times
   // Re-acquisition: the new stream continues the output timeline where real
   // time says it should (the receive time elapsed since the last accepted
-  // pose), and at least one gap limit later, so that the smoother starts a
-  // new segment instead of interpolating across the discontinuity.
+  // pose), and just beyond the engine's gap limit (max_gap_ns, the scene's
+  // max_gap_s), so that the smoother starts a new segment instead of
+  // interpolating across the discontinuity. Not max_time_step_ns: output
+  // would then stay silent that long (10 s) after every sender restart.
   const TimeNs elapsed_ns = std::max<TimeNs>(saturating_sub_ns(candidates_.front().receive_ns, last_receive_ns_), 0);
   const TimeNs first_out_ns =
-      saturating_add_ns(last_accepted_->t_ns, std::max(elapsed_ns, saturating_add_ns(max_time_step_ns_, 1)));
+      saturating_add_ns(last_accepted_->t_ns, std::max(elapsed_ns, saturating_add_ns(max_gap_ns_, 1)));
   const std::optional<TimeNs> offset_ns = checked_sub_ns(first_out_ns, candidates_.front().pose.t_ns);
   const TimeNs from_ns = last_sender_ns_, to_ns = candidates_.front().pose.t_ns;
   if (!offset_ns) {

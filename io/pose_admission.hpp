@@ -200,6 +200,7 @@ class PoseAdmission {
 
   double max_chart_angle_rad_;
   TimeNs max_time_step_ns_;
+  TimeNs max_gap_ns_;  // the engine's gap limit: where a re-acquired stream is placed
   std::size_t resync_poses_;
   bool locked_ = false;
   TimeNs offset_ns_ = 0;        // output time = sender time + offset (changed by a resync)

@@ -141,6 +141,13 @@ struct PoseSourceOptions {
   // default step equals the smoother's default gap limit (max_gap_s = 10 s).
   TimeNs max_time_step_ns = 10 * kNsPerSecond;
   std::size_t resync_poses = 2;
+  // The engine's gap limit (the scene's smoothing.max_gap_s; StreamPipeline
+  // with gap_policy split starts a new segment after a longer knot interval).
+  // A re-acquired stream is placed just beyond it after the last accepted
+  // pose (or later, if more real time elapsed), so the smoother never
+  // interpolates across the discontinuity and output resumes about this long
+  // after a sender restart, not max_time_step_ns later.
+  TimeNs max_gap_ns = 10 * kNsPerSecond;
   // Receives each log line (without '\n'); empty: written to stderr.
   std::function<void(std::string_view)> log;
   // At most one log line per rejection reason per interval; the next line

@@ -383,6 +383,12 @@ TEST_F(Cli, SecondsAndRateOptionsOutOfRangeAreUsageErrorsNamingTheOption) {
       {"status --timeout-s 1e300", "--timeout-s"},
       {"allan " + path("c.csv") + " --rate nan", "--rate"},
       {"allan " + path("c.csv") + " --fit-min-tau-s nan", "--fit-min-tau-s"},
+      // listen used CLI11's NonNegativeNumber/PositiveNumber (NaN passes;
+      // --duration-s 1e300 then overflowed llround(s * 1e9)).
+      {"listen --protocol native --device " + path("none") + " --duration-s nan", "--duration-s"},
+      {"listen --protocol native --device " + path("none") + " --duration-s 1e300", "--duration-s"},
+      {"listen --protocol native --device " + path("none") + " --expect-rate nan", "--expect-rate"},
+      {"listen --protocol native --device " + path("none") + " --rate-tolerance nan", "--rate-tolerance"},
   };
   for (const auto& [args, option] : cases) {
     const CliRun r = run(args);

@@ -367,6 +367,46 @@ TEST(StatusSummary, NamesEachCounterFromTheDaemonsJson) {
   EXPECT_EQ(text.find("pose source"), std::string::npos);  // a trajectory scene has none
 }
 
+// Issue 13: the live-time counters (time_jump, resyncs, held) and the TCP
+// connection counters were counted by the pose source but missing from the
+// status JSON and the summary. Each has its own value here, so a swapped
+// field shows.
+TEST(StatusSummary, LiveTimeAndConnectionCountersAreInTheJsonAndExplained) {
+  imuemu::emission::EngineStats s;
+  imuemu::emission::PoseSourceStats& p = s.pose_source.emplace();
+  p.name = "tcp 127.0.0.1:5006";
+  p.received = 900;
+  p.accepted = 880;
+  p.time_jump = 3;
+  p.resyncs = 2;
+  p.held = 1;
+  p.connections = 7;
+  p.connections_refused = 5;
+  p.connections_idle_closed = 4;
+  p.connections_replaced = 6;
+  const json engine = imuemu::emission::to_json(s);
+  const json& source = engine["pose_source"];
+  EXPECT_EQ(source["time_jump"], 3u) << source.dump();
+  EXPECT_EQ(source["resyncs"], 2u) << source.dump();
+  EXPECT_EQ(source["held"], 1u) << source.dump();
+  EXPECT_EQ(source["connections"], 7u) << source.dump();
+  EXPECT_EQ(source["connections_refused"], 5u) << source.dump();
+  EXPECT_EQ(source["connections_idle_closed"], 4u) << source.dump();
+  EXPECT_EQ(source["connections_replaced"], 6u) << source.dump();
+  const json status{{"scene", "live"}, {"pid", 9}, {"uptime_s", 2.0}, {"samples_emitted", 800},
+                    {"emitter_progressing", true}, {"engine", engine}};
+  std::ostringstream out;
+  imuemu::cli::print_status_summary(status, out);
+  const std::string text = out.str();
+  std::cout << text;
+  EXPECT_NE(text.find("pose source tcp 127.0.0.1:5006: 880 accepted of 900 received"), std::string::npos) << text;
+  EXPECT_NE(text.find("live time: 2 re-acquisitions"), std::string::npos) << text;
+  EXPECT_NE(text.find("3 stray poses dropped"), std::string::npos) << text;
+  EXPECT_NE(text.find("1 held now"), std::string::npos) << text;
+  EXPECT_NE(text.find("connections: 7 accepted, 5 refused (slot taken), 4 closed idle"), std::string::npos) << text;
+  EXPECT_NE(text.find("6 replaced"), std::string::npos) << text;
+}
+
 TEST(StatusSummary, AnEngineNotRunningIsSaidSo) {
   const json status{{"scene", "bench"}, {"pid", 7}, {"uptime_s", 1.0}, {"samples_emitted", 0},
                     {"emitter_progressing", false}, {"engine", nullptr}, {"waiting_for_device", true}};

@@ -756,11 +756,12 @@ std::vector<SourcedPose> admit_all(PoseAdmission& a, const std::vector<Trajector
 }
 
 // The smoother's output for the released poses; every push must be accepted.
-std::vector<StreamSample> smooth(const std::vector<SourcedPose>& poses, std::size_t& refused) {
+std::vector<StreamSample> smooth(const std::vector<SourcedPose>& poses, std::size_t& refused, double max_gap_s = 10.0) {
   PipelineOptions o;
   o.rate_hz = 100;
   o.kernel.delta = 20;
   o.gap_policy = GapPolicy::split;
+  o.max_gap_s = max_gap_s;
   StreamPipeline engine(o);
   std::vector<StreamSample> samples;
   StreamSample x;
@@ -858,6 +859,36 @@ TEST(LiveTime, JumpsAndRestartsAreReacquiredOnTheRunningTimeline) {
   const std::vector<StreamSample> got = smooth(poses, refused);
   EXPECT_EQ(refused, 0u);
   for (const StreamSample& x : got) ASSERT_TRUE(x.imu.gyro_rad_s.allFinite() && x.imu.accel_m_s2.allFinite());
+}
+
+// Issue 13 (left open): a re-acquired stream was placed max_time_step_ns
+// (10 s) after the last pose whatever the engine's gap limit, so live output
+// stayed silent 10 s after a sender restart. It is placed just beyond the
+// engine's gap limit (max_gap_ns, the scene's max_gap_s): with max_gap_s = 1 s
+// the hole in the released times is 1 s + 1 ns, the smoother starts a new
+// segment there (nothing refused), and its output has a 1 s hole, not 10 s.
+TEST(LiveTime, ARestartIsPlacedJustBeyondTheEnginesGapLimit) {
+  const TimeNs t0 = 1'700'000'000 * kNsPerSecond;
+  std::vector<TrajectoryRecord> records;
+  for (int k = 0; k < 100; ++k) records.push_back(circle_record(t0, k));
+  for (int k = 0; k < 150; ++k) records.push_back(circle_record(0, k));  // the sender restarted: t from 0
+  PoseSourceOptions options;
+  options.name = "unit";
+  options.max_gap_ns = kNsPerSecond;  // config/live-udp.toml: max_gap_s = 1.0
+  PoseAdmission a(options);
+  const std::vector<SourcedPose> poses = admit_all(a, records);
+  ASSERT_EQ(poses.size(), 250u);
+  EXPECT_EQ(a.counters().resyncs, 1u);
+  // Receive times 10 ms apart: less real time elapsed than the gap limit.
+  EXPECT_EQ(poses[100].pose.t_ns - poses[99].pose.t_ns, kNsPerSecond + 1);
+  std::size_t refused = 0;
+  const std::vector<StreamSample> got = smooth(poses, refused, 1.0);
+  EXPECT_EQ(refused, 0u);
+  TimeNs hole_ns = 0;
+  for (std::size_t i = 1; i < got.size(); ++i) hole_ns = std::max(hole_ns, got[i].imu.t_ns - got[i - 1].imu.t_ns);
+  // The silent interval of the output: the gap limit, to one sample period.
+  EXPECT_GE(hole_ns, kNsPerSecond);
+  EXPECT_LE(hole_ns, kNsPerSecond + 10'000'000) << "silent for " << hole_ns << " ns";
 }
 
 // W2 through admission: a 179 deg heading glitch is below pi (not an

@@ -13,6 +13,7 @@
 #include <numbers>
 #include <sstream>
 
+#include "core/limits.hpp"
 #include "core/mounting.hpp"
 #include "core/pipeline.hpp"
 #include "core/reference_motion.hpp"
@@ -573,4 +574,39 @@ TEST(SceneErrors, EchoedInputIsBounded) {
   } catch (const SceneError& e) {
     EXPECT_LT(std::string(e.what()).size(), 4000u) << std::string(e.what()).substr(0, 300);
   }
+}
+
+// Issue 13: loop = true held 24 h of copies whatever the trajectory's size:
+// 20 000 knots 1 ms apart (a 20 s flight) made 4115 copies, 82 M poses
+// (~9 GB). The copies are capped at limits::kMaxLoopKnots knots in all (the
+// run restarts after them, as after 24 h); each copy is the flight shifted by
+// its span plus max_gap_s plus one knot interval (the silent seam).
+TEST(SceneLoop, LoopedCopiesAreCappedInKnots) {
+  SceneConfig scene = parse_scene_text(
+      "[scene]\nname = \"loop\"\nphysics = \"flat\"\n[trajectory]\nsource = \"sample:flight\"\nloop = true\n"
+      "knot_interval_s = 0.001\n[smoothing]\nmax_gap_s = 1.0\n[[imu]]\nname = \"a\"\nprotocol = \"native\"\n"
+      "rate_hz = 100\n[imu.transport]\ntype = \"null\"\n",
+      "loop.toml", ".");
+  std::vector<Pose> once(20'000);
+  for (std::size_t i = 0; i < once.size(); ++i) {
+    once[i].t_ns = static_cast<TimeNs>(i) * 1'000'000;
+    once[i].position_m = Vec3(static_cast<double>(i), 0.0, 0.0);
+    once[i].attitude = Mat3::Identity();
+  }
+  const std::vector<Pose> loop = looped(once, scene, kLoopSpanNs);
+  ASSERT_LE(loop.size(), limits::kMaxLoopKnots);
+  ASSERT_EQ(loop.size() % once.size(), 0u);
+  const std::size_t copies = loop.size() / once.size();
+  EXPECT_EQ(copies, limits::kMaxLoopKnots / once.size());  // 50
+  const TimeNs shift_ns = 19'999'000'000 + 1'000'000'000 + 1'000'000;  // span + max_gap_s + knot interval
+  for (std::size_t c = 0; c < copies; ++c) {
+    ASSERT_EQ(loop[c * once.size()].t_ns, static_cast<TimeNs>(c) * shift_ns) << c;
+    ASSERT_EQ(loop[c * once.size() + once.size() - 1].t_ns, static_cast<TimeNs>(c) * shift_ns + 19'999'000'000) << c;
+  }
+  // A short trajectory still covers the 24 h.
+  const std::vector<Pose> few(once.begin(), once.begin() + 2);
+  const std::vector<Pose> day = looped(few, scene, kLoopSpanNs);
+  const TimeNs few_shift_ns = 1'000'000 + 1'000'000'000 + 1'000'000;
+  EXPECT_EQ(day.size(), 2u * static_cast<std::size_t>((kLoopSpanNs + few_shift_ns - 1) / few_shift_ns));
+  EXPECT_GE(day.back().t_ns, kLoopSpanNs - few_shift_ns);
 }

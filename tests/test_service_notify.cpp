@@ -25,6 +25,8 @@
 #include <boost/asio/post.hpp>
 
 #include "daemon/log.hpp"
+#include "drivers/queued_writer.hpp"
+#include "io/pose_admission.hpp"
 #include "tests/support/io_thread.hpp"
 #include "daemon/service_notify.hpp"
 #include "daemon/service_signals.hpp"
@@ -240,6 +242,23 @@ TEST(ServiceLog, WritesToStderrAboveThreshold) {
   const std::string out = capture.finish();
   svc::set_log_threshold(saved);
   EXPECT_EQ(out, "<3>e1\n<6>i1\n<7>d1\n");
+}
+
+// Issue 13: two stderr fallbacks (a transport's log with no sink, a pose
+// source's with no sink) wrote bare lines, without the sd-daemon <N> prefix
+// every other daemon line has: journald filed them without a level. Both are
+// now the project's log lines (warning), newlines flattened.
+TEST(ServiceLog, TransportAndPoseSourceFallbacksCarryThePriorityPrefix) {
+  const svc::LogLevel saved = svc::log_threshold();
+  svc::set_log_threshold(svc::LogLevel::info);
+  StderrCapture capture;
+  imuemu::drivers::emit_log({}, "pty /tmp/x: reader gone");
+  imuemu::io::RateLimitedLog pose_log({}, 1'000'000'000);
+  pose_log.log("bad_crc", "udp 127.0.0.1:5005: dropped datagram (bad_crc):\nfrom 127.0.0.1", 0);
+  const std::string out = capture.finish();
+  svc::set_log_threshold(saved);
+  EXPECT_EQ(out, "<4>imuemu: pty /tmp/x: reader gone\n"
+                 "<4>udp 127.0.0.1:5005: dropped datagram (bad_crc): from 127.0.0.1\n");
 }
 
 TEST(RateLimiter, BurstThenSuppressedCountReported) {

@@ -28,6 +28,7 @@
 #include <fstream>
 #include <functional>
 #include <mutex>
+#include <stdexcept>
 #include <string>
 #include <thread>
 #include <vector>
@@ -1160,6 +1161,47 @@ TEST(GpioSync, APulseDueWhileTheLastIsStillOnIsSkippedNotMerged) {
   EXPECT_EQ(error, "") << "a skipped pulse must not touch the line";
   ASSERT_EQ(pulses.size(), 2u);
   for (const auto& p : pulses) EXPECT_GE(p.fall_ns - p.rise_ns, 200'000'000);
+}
+
+// Issue 13: no exception leaves the trailing-edge thread. A line writer that
+// throws there (the line gone, a bad writer) ended the process through
+// std::terminate; now the thread records it, counts it, logs it and marks the
+// sync output down: later pulses are skipped and touch no line.
+TEST(GpioSync, AnExceptionOnTheTrailingEdgeThreadMarksTheSyncDown) {
+  imuemu::drivers::GpioSyncOptions options;
+  std::mutex log_mutex;
+  std::string log;
+  options.log = [&](std::string_view line) {
+    std::lock_guard lock(log_mutex);
+    log += std::string(line) + "\n";
+  };
+  std::atomic<int> writes{0};
+  // The initial "inactive" and the leading edge work; every later write
+  // (the trailing edge, on the helper thread) throws.
+  imuemu::drivers::GpioSyncOutput gpio(options, [&](bool) {
+    if (++writes > 2) throw std::runtime_error("line gone");
+    return true;
+  }, nullptr);
+  gpio.pulse(0, 0);
+  const auto until = std::chrono::steady_clock::now() + std::chrono::seconds(10);
+  while (!gpio.counters().down && std::chrono::steady_clock::now() < until)
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  auto c = gpio.counters();
+  ASSERT_TRUE(c.down);
+  EXPECT_EQ(c.helper_faults, 1u);
+  EXPECT_EQ(c.pulses, 1u);
+  EXPECT_EQ(gpio.failure(), "line gone");
+  {
+    std::lock_guard lock(log_mutex);
+    EXPECT_NE(log.find("GPIO sync: the trailing-edge thread failed: line gone; sync output down"), std::string::npos)
+        << log;
+  }
+  const int writes_when_down = writes.load();
+  gpio.pulse(1, 1'000'000);
+  c = gpio.counters();
+  EXPECT_EQ(writes.load(), writes_when_down);  // no leading edge nobody would end
+  EXPECT_EQ(c.pulses, 1u);
+  EXPECT_EQ(c.skipped_pulses, 1u);
 }
 
 TEST(GpioSync, AFailedLineWriteIsCounted) {

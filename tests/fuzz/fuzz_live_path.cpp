@@ -81,6 +81,7 @@ struct LivePath {
     PoseSourceOptions o;
     o.physics = (flags & 4) != 0 ? Physics::ecef : Physics::flat;
     o.log = [](std::string_view) {};
+    o.max_gap_ns = kNsPerSecond;  // the engine's gap limit (po.max_gap_s below), as imuemud sets it
     return o;
   }
   static PipelineOptions pipeline_options(std::uint8_t flags) {

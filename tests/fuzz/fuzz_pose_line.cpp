@@ -74,8 +74,8 @@ extern "C" int LLVMFuzzerTestOneInput(const std::uint8_t* data, std::size_t size
         if (!(p.t_ns > previous->t_ns)) __builtin_trap();
         // Within one stream the attitude step rule holds between released
         // poses. A re-acquired stream (the live-time rule) is placed more than
-        // max_time_step_ns after the last pose, where the engine starts a new
-        // segment, so no attitude step is implied across it.
+        // max_gap_ns (default: max_time_step_ns) after the last pose, where the
+        // engine starts a new segment, so no attitude step is implied across it.
         const bool same_stream = p.t_ns - previous->t_ns <= options.max_time_step_ns;
         if (same_stream && !(so3::angle(previous->attitude.transpose() * p.attitude) < options.max_attitude_step_rad))
           __builtin_trap();

@@ -473,7 +473,8 @@ def main():
     if status_json is not None:
         ps = status_json.get("pose_source", {})
         want = {"received": sent, "rejected": expected_rejected, "accepted": sent - expected_rejected,
-                "duplicate": 0, "out_of_order": 0, "overflow_dropped": 0, "lost": 0}
+                "duplicate": 0, "out_of_order": 0, "overflow_dropped": 0, "lost": 0,
+                "resyncs": 2, "held": 0}  # re-acquired after the clock jump and after the restart
         for k, v in want.items():
             if ps.get(k) != v:
                 failures.append(f"live: status pose_source.{k} = {ps.get(k)}, expected {v} (sent {sent})")
