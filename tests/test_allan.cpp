@@ -69,6 +69,14 @@ double true_avar(const Synthetic& c, std::int64_t m) {
          0.5 * c.ramp_r * c.ramp_r * tau * tau;
 }
 
+// The per-tau tests look at no fitted term's interval: they skip its
+// covariance (AnalysisOptions::coefficient_covariance).
+const allan::AnalysisOptions kPointsOnly = [] {
+  allan::AnalysisOptions o;
+  o.coefficient_covariance = false;
+  return o;
+}();
+
 // Direct definition: averages of m samples, differences of adjacent averages
 // at every start (IEEE Std 1139-2008 overlapping form), without the
 // cumulative sum.
@@ -204,7 +212,7 @@ TEST(AllanEstimate, NinetyPercentIntervalsCoverTheTruthNinetyPercentOfTheTime) {
     std::vector<double> taus;
     for (int s = 0; s < kSeeds; ++s) {
       const std::vector<double> y = generate(c, kSamples, 5000 + static_cast<std::uint64_t>(s));
-      const allan::Analysis a = allan::analyse(y, c.tau0_s);
+      const allan::Analysis a = allan::analyse(y, c.tau0_s, kPointsOnly);
       const std::size_t n = a.points.size();
       const std::size_t picks[] = {0, n / 3, 2 * n / 3, n - 1};
       covered.resize(4, 0);
@@ -338,7 +346,7 @@ TEST(AllanEstimate, FlickerIntervalsCoverTheTruthNinetyPercentOfTheTime) {
   std::vector<double> taus(4, 0.0);
   for (int s = 0; s < kSeeds; ++s) {
     const std::vector<double> y = src.series(9000 + static_cast<std::uint64_t>(s));
-    const allan::Analysis a = allan::analyse(y, src.tau0_s);
+    const allan::Analysis a = allan::analyse(y, src.tau0_s, kPointsOnly);
     const std::size_t n = a.points.size();
     const std::size_t picks[] = {1, n / 3, 2 * n / 3, n - 1};
     for (std::size_t i = 0; i < 4; ++i) {
@@ -448,6 +456,36 @@ TEST(AllanCovariance, MatchesMonteCarloForEachNoise) {
         const double model_rho = model / std::sqrt(model_uu * model_vv);
         EXPECT_NEAR(model_rho, rho, 0.08) << what;
       }
+    }
+  }
+}
+
+// The sampled lag sum of allan_variance_covariance (supports wider than 512
+// lags) against the exact one, through scaling: multiplying m1, m2 and the
+// record by 10 leaves the correlation structure of the differences unchanged
+// up to O(1/m^2) discreteness, and scales the covariance by the square of
+// each term's Allan variance scaling (white FM 10^-2, flicker 1, rate random
+// walk 10^2); white PM's differences are correlated only at isolated lags,
+// not over a span that grows with m, so ten times the record is ten times the
+// independent differences: 10^-4 x 10^-1. (32, 64) over 4096 samples is summed lag by
+// lag (193 lags), (320, 640) over 40960 is sampled (1921 lags).
+TEST(AllanCovariance, SampledLagSumMatchesTheExactOneByScaling) {
+  const double tau0 = 0.01;
+  struct Case {
+    const char* name;
+    std::array<double, allan::kTermCount> c;
+    double scale;
+  };
+  const Case cases[] = {{"white FM", {0.0, 1e-6, 0.0, 0.0, 0.0}, 1e-2},
+                        {"flicker FM", {0.0, 0.0, 4e-6, 0.0, 0.0}, 1.0},
+                        {"rate random walk", {0.0, 0.0, 0.0, 1e-8, 0.0}, 1e2},
+                        {"white PM", {4e-10, 0.0, 0.0, 0.0, 0.0}, 1e-5}};
+  for (const Case& c : cases) {
+    for (const auto& [m1, m2] : {std::pair<std::int64_t, std::int64_t>{32, 64}, {64, 64}, {32, 32}}) {
+      const double exact = allan::allan_variance_covariance(c.c, tau0, 4096, m1, m2);
+      const double sampled = allan::allan_variance_covariance(c.c, tau0, 40960, 10 * m1, 10 * m2);
+      const double bound = 0.02;
+      EXPECT_NEAR(sampled / (c.scale * exact), 1.0, bound) << c.name << " m " << m1 << ", " << m2;
     }
   }
 }

@@ -193,8 +193,9 @@ double pair_count(double count1, double count2, double l) {
 // sum over integer l in [lo, hi] of E[d1_0 d2_l]^2 x pair_count(l): exact
 // (every lag) up to kCoreLagSamples lags, otherwise that many evenly spaced
 // lags, each standing for its share of the range (the summand is piecewise
-// polynomial with kinks every m1 and m2 lags, 2 (m1 + m2) wide, so 512
-// samples put at least 128 in each piece).
+// polynomial with kinks every m1 and m2 lags over 2 (m1 + m2) lags, so 512
+// samples put at least 128 in each piece; tests/test_allan.cpp checks the
+// sampled sum against the exact one through the scaling of each term).
 constexpr std::int64_t kCoreLagSamples = 512;
 double lag_sum(const std::array<double, kTermCount>& c, double tau0_s, double m1, double m2, double count1,
                double count2, std::int64_t lo, std::int64_t hi) {
@@ -223,7 +224,7 @@ double lag_sum(const std::array<double, kTermCount>& c, double tau0_s, double m1
 // side of 0) and falls as l^-4: midpoints of kTailSamples geometric cells.
 double tail_sum(const std::array<double, kTermCount>& c, double tau0_s, double m1, double m2, double count1,
                 double count2, double near, double far, double sign) {
-  constexpr int kTailSamples = 64;
+  constexpr int kTailSamples = 32;
   if (!(far > near)) return 0.0;
   const double ratio = std::pow(far / near, 1.0 / kTailSamples);
   double sum = 0.0, edge = near;
@@ -438,7 +439,29 @@ double allan_variance_covariance(const std::array<double, kTermCount>& c, double
   // White PM .. random walk: E[d1_0 d2_l] = 0 outside [-2 m2, 2 m1] (every
   // argument of G on one side of 0, where G is a polynomial of degree <= 3 in
   // l + b m2 - a m1, which the two second differences annihilate).
-  double sum = lag_sum(c, tau0_s, m1d, m2d, count1, count2, -2 * m2, 2 * m1);
+  const std::int64_t lo = -2 * m2, hi = 2 * m1;
+  double sum = 0.0;
+  if (hi - lo + 1 <= kCoreLagSamples || c[quantization] <= 0.0) {
+    sum = lag_sum(c, tau0_s, m1d, m2d, count1, count2, lo, hi);
+  } else {
+    // White PM's G is a spike at lag 0, so E[d1_0 d2_l] has spikes at the
+    // nine lags a m1 - b m2 that a sample grid would miss: sample the rest,
+    // then add at those lags (each once) what the spike changes.
+    std::array<double, kTermCount> smooth = c;
+    smooth[quantization] = 0.0;
+    sum = lag_sum(smooth, tau0_s, m1d, m2d, count1, count2, lo, hi);
+    std::array<std::int64_t, 9> spikes{};
+    for (int a = 0; a < 3; ++a)
+      for (int b = 0; b < 3; ++b) spikes[static_cast<std::size_t>(3 * a + b)] = a * m1 - b * m2;
+    std::sort(spikes.begin(), spikes.end());
+    const auto end = std::unique(spikes.begin(), spikes.end());
+    for (auto it = spikes.begin(); it != end; ++it) {
+      const double ld = to_double(*it);
+      const double full = difference_covariance(c, tau0_s, m1d, m2d, ld);
+      const double rest = difference_covariance(smooth, tau0_s, m1d, m2d, ld);
+      sum += (full * full - rest * rest) * pair_count(count1, count2, ld);
+    }
+  }
   if (c[bias_instability] > 0.0) {
     // Flicker's tail, E[d1 d2] ~ l^-2: out to 16 x the support each side
     // (what is left is of order 16^-3 of the tail's start).
@@ -618,7 +641,7 @@ Analysis analyse(std::span<const double> rate, double tau0_s, const AnalysisOpti
       }
     }
     exact_where_white_pm();  // a point the last identification made white PM
-    if (!index.empty()) sandwich = sandwich_variance(coefficient, tau0_s, n, out.points, index, weight);
+    if (!index.empty() && options.coefficient_covariance) sandwich = sandwich_variance(coefficient, tau0_s, n, out.points, index, weight);
   }
 
   for (Point& pt : out.points) {
