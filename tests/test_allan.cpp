@@ -460,7 +460,7 @@ TEST(AllanCovariance, MatchesMonteCarloForEachNoise) {
   }
 }
 
-// The sampled lag sum of allan_variance_covariance (supports wider than 512
+// The sampled lag sum of allan_variance_covariance (supports wider than 256
 // lags) against the exact one, through scaling: multiplying m1, m2 and the
 // record by 10 leaves the correlation structure of the differences unchanged
 // up to O(1/m^2) discreteness, and scales the covariance by the square of

@@ -191,12 +191,12 @@ double pair_count(double count1, double count2, double l) {
 }
 
 // sum over integer l in [lo, hi] of E[d1_0 d2_l]^2 x pair_count(l): exact
-// (every lag) up to kCoreLagSamples lags, otherwise that many evenly spaced
-// lags, each standing for its share of the range (the summand is piecewise
-// polynomial with kinks every m1 and m2 lags over 2 (m1 + m2) lags, so 512
-// samples put at least 128 in each piece; tests/test_allan.cpp checks the
+// (every lag) up to kCoreLagSamples lags, otherwise every step-th lag (at
+// most that many), each standing for its cell (the summand is piecewise
+// polynomial with kinks every m1 and m2 lags over 2 (m1 + m2) lags, so 256
+// samples put at least 64 in each piece; tests/test_allan.cpp checks the
 // sampled sum against the exact one through the scaling of each term).
-constexpr std::int64_t kCoreLagSamples = 512;
+constexpr std::int64_t kCoreLagSamples = 256;
 double lag_sum(const std::array<double, kTermCount>& c, double tau0_s, double m1, double m2, double count1,
                double count2, std::int64_t lo, std::int64_t hi) {
   if (hi < lo) return 0.0;
@@ -210,11 +210,15 @@ double lag_sum(const std::array<double, kTermCount>& c, double tau0_s, double m1
     }
     return sum;
   }
-  const double step = to_double(width) / to_double(kCoreLagSamples);
-  for (std::int64_t k = 0; k < kCoreLagSamples; ++k) {
-    const double ld = std::round(to_double(lo) + (to_double(k) + 0.5) * step - 0.5);
+  // An integer step, each sample the middle lag of its cell (a fractional
+  // step would skip single lags, which near the peak of the summand is a
+  // per-cent error when the width is just above the threshold).
+  const std::int64_t step = (width + kCoreLagSamples - 1) / kCoreLagSamples;
+  for (std::int64_t start = lo; start <= hi; start += step) {
+    const std::int64_t cell = std::min(step, hi - start + 1);
+    const double ld = to_double(start + (cell - 1) / 2);
     const double e = difference_covariance(c, tau0_s, m1, m2, ld);
-    sum += e * e * pair_count(count1, count2, ld) * step;
+    sum += e * e * pair_count(count1, count2, ld) * to_double(cell);
   }
   return sum;
 }

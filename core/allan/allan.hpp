@@ -155,7 +155,7 @@ struct AnalysisOptions {
   // See stride_for: 0 computes every overlapping difference.
   std::int64_t overlap_ratio = 64;
   // The fitted terms' sandwich covariance (FittedTerm::sigma), which costs
-  // O(points^2 x 512) evaluations (about 15 ms for a 4096-sample series, 50 ms
+  // O(points^2 x 256) evaluations (about 15 ms for a 4096-sample series, 50 ms
   // for a 2-hour 200 Hz one). false: `sigma`, `low` and `high` come from the
   // independent-tau covariance (formal_sigma), too narrow; for callers that
   // use only the per-tau intervals.
@@ -207,8 +207,8 @@ Analysis analyse(std::span<const double> rate, double tau0_s, const AnalysisOpti
 // in (rate x samples)^2. Each gives the Allan variance of its basis (the
 // flicker G exactly at every m, the random walk's as (2m^2 + 1)/(6m) tau0 K^2;
 // tests/test_allan.cpp). The sum over lags is exact while the support is at
-// most 512 lags wide (white PM .. random walk: E[d1 d2] = 0 outside
-// -2 m2 <= l <= 2 m1); wider ranges are sampled at 512 points (the summand is
+// most 256 lags wide (white PM .. random walk: E[d1 d2] = 0 outside
+// -2 m2 <= l <= 2 m1); wider ranges are sampled at 256 points (the summand is
 // piecewise polynomial; white PM's spikes at the lags a m1 - b m2 are added
 // exactly), and the flicker's long-range tail (E[d1 d2] ~ l^-2)
 // is summed on 32 geometric cells a side out to 16 x the support.
