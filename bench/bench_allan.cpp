@@ -63,7 +63,7 @@ BENCHMARK(BM_allan_analysis)->Arg(720'000)->Arg(17'280'000)->Unit(benchmark::kMi
 // scatter of the fitted coefficients over 40 seeds of 4 h at 50 Hz with
 // quantisation, white noise and rate random walk (each dominant over a decade
 // or more). Counters: <term>_scatter_over_formal and _over_reported (the
-// reported sigma includes AnalysisOptions::correlation_inflation), and the
+// reported sigma is the sandwich covariance over the correlated tau), and the
 // mean fitted value over the configured one.
 static void BM_allan_fit_scatter(benchmark::State& state) {
   const double tau0 = 0.02, white_n = 1e-3, rrw_k = 2e-5, quant_q = 2e-4;

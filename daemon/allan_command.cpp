@@ -496,7 +496,7 @@ void print_table(std::ostream& out, const AllanInput& in, const std::vector<alla
       out << line;
     }
     out << "  fit: sigma^2 = 3Q^2/tau^2 + N^2/tau + (2 ln2/pi) B^2 + K^2 tau/3 + R^2 tau^2/2 (IEEE Std 952-1997 "
-           "Annex C), weighted NNLS; +- 1-sigma (formal x correlation inflation), [" << fmt(args.confidence * 100.0, 3)
+           "Annex C), weighted NNLS; +- 1-sigma (sandwich covariance over the correlated tau), [" << fmt(args.confidence * 100.0, 3)
         << " % interval]\n";
     for (int k = 0; k < allan::kTermCount; ++k) {
       const allan::FittedTerm& t = a.terms[static_cast<std::size_t>(k)];

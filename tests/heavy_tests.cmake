@@ -14,6 +14,7 @@ set(IMUEMU_HEAVY_TESTS
   Pipeline.ClosedFormPositionSmoothingEqualsTheDenseSum
   Cli.ClosedLoopOneHourFlightDriftStaysWithinBounds
   AllanEstimate.NinetyPercentIntervalsCoverTheTruthNinetyPercentOfTheTime
+  AllanCovariance.MatchesMonteCarloForEachNoise
   # hours of emulated time per preset (issue 15 acceptance 1)
   AllanPresets.Icm42688pOneHourAt1kHz
   AllanPresets.Adis16470SixHoursAt100Hz

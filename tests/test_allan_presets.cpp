@@ -10,6 +10,7 @@
 // explains the durations and what a static Allan analysis cannot see.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstdlib>
@@ -98,10 +99,22 @@ Expectation expectation(const imuemu::sensor::TriadSpec& t, double rate_hz) {
 
 struct Tally {
   int checks = 0, inside = 0;
+  // Sum of squared normalised errors (fitted - truth) / reported sigma over
+  // the `normalised` checks whose term was fitted (sigma > 0); their RMS is 1
+  // when the reported sigma is honest.
+  double sum_z2 = 0.0;
+  int normalised = 0;
+  void add(const Tally& o) {
+    checks += o.checks;
+    inside += o.inside;
+    sum_z2 += o.sum_z2;
+    normalised += o.normalised;
+  }
 };
 
-// Every configured term within 10 % (rate random walk 20 %) on each axis; the
-// truth inside the reported 90 % interval is tallied (see the tests); an
+// Every configured term within 10 % (rate random walk 20 %) and within 4
+// reported sigma on each axis; the truth inside the reported 90 % interval is
+// tallied (run_preset bounds the misses); an
 // unconfigured term the fit reports must stay below the configured noise at
 // every tau of the grid (it never dominates: the fit found nothing of its own).
 void check_triad(const std::string& preset, const cli::AllanInput& in, const std::vector<allan::Analysis>& analyses,
@@ -125,19 +138,37 @@ void check_triad(const std::string& preset, const cli::AllanInput& in, const std
         const bool inside = f.low <= ci_truth && ci_truth <= f.high;
         ++tally.checks;
         tally.inside += inside ? 1 : 0;
+        if (f.sigma > 0.0) {
+          const double z = (f.value - ci_truth) / f.sigma;
+          tally.sum_z2 += z * z;
+          ++tally.normalised;
+          // No term 4 reported sigma off (a normal variable is, once in
+          // 16 000): a bias or an interval far too narrow, which the count
+          // of misses below would let through as one of its few.
+          EXPECT_LE(std::abs(z), 4.0) << axis << " " << allan::term_name(k) << ": fitted " << f.value << " truth "
+                                      << ci_truth << " sigma " << f.sigma;
+        } else {
+          ADD_FAILURE() << axis << " " << allan::term_name(k) << ": configured but not fitted";
+        }
         std::printf("  %-20s %-16s configured %.5g fitted %.5g (%+.2f %%) 90 %% interval [%.5g, %.5g]%s\n", axis.c_str(),
                     allan::term_name(k).c_str(), configured, f.value, 100.0 * (f.value / configured - 1.0), f.low,
                     f.high, inside ? "" : "  truth outside");
-      } else if (f.value > 0.0 && f.low > 0.0) {
-        // A term the preset does not have, fitted with an interval that
-        // excludes 0: it must stay below the configured noise over the
-        // fitted tau (a minor share the fit moved around, not a noise of its own).
+      } else if (f.value > 0.0 && f.sigma > 0.0 && f.value / (2.0 * f.sigma) > 3.0) {
+        // A term the preset does not have, fitted significantly: its squared
+        // coefficient c = value^2 more than 3 sigma_c = 3 x 2 value sigma
+        // above 0 (a null term gets there by chance 0.13 % of the time; the
+        // 90 % interval excluding 0, as once here, happens by chance on some
+        // of the 18 unconfigured (term, axis) pairs of a preset once the
+        // intervals are honest). It must stay below the configured noise over
+        // the fitted tau (a minor share the fit moved around, not a noise of
+        // its own).
         for (const allan::Point& p : a.points) {
           if (!p.in_fit) continue;
           const double spurious = std::sqrt(f.value * f.value * allan::term_basis(k, p.tau_s));
           EXPECT_LT(spurious, allan::model_adev(truth, p.tau_s))
               << axis << ": the unconfigured " << allan::term_name(k) << " (" << f.value << ", 90 % interval ["
-              << f.low << ", " << f.high << "]) dominates at tau " << p.tau_s << " s";
+              << f.low << ", " << f.high << "]) dominates at tau " << p.tau_s << " s; measured " << p.adev << " ["
+              << p.ci_low << ", " << p.ci_high << "]";
         }
       }
     }
@@ -150,7 +181,24 @@ struct PresetCase {
   double hours;
   std::int64_t seed;
   double accel_fit_min_tau_s = 0.0;  // --fit-min-tau-s of the accelerometer analysis
+  bool assert_coverage = true;
 };
+
+// Honest 90 % intervals miss their truth once in 10 checks, independently
+// across axes (separate noise streams): the misses among n checks are
+// Binomial(n, 0.1). The smallest x with P(misses > x) < `tail`: with tail 1 %,
+// 3 for 6 or 9 checks, 4 for 12. (Every term inside its 90 % interval at
+// once happens with probability 0.9^n only, 28 % for 12 checks, so it cannot
+// be asserted of honest intervals.)
+int binomial_misses_bound(int n, double p, double tail) {
+  double pmf = std::pow(1.0 - p, n), cdf = 0.0;
+  for (int x = 0; x <= n; ++x) {
+    cdf += pmf;
+    if (1.0 - cdf < tail) return x;
+    pmf *= static_cast<double>(n - x) / static_cast<double>(x + 1) * p / (1.0 - p);
+  }
+  return n;
+}
 
 Tally run_preset(const PresetCase& c) {
   StaticRun run = static_run(c.preset, c.rate_hz, c.hours, c.seed);
@@ -172,6 +220,11 @@ Tally run_preset(const PresetCase& c) {
   const auto a = cli::analyse_allan_input(accel, cli::allan_options(accel_args));
   check_triad(c.preset, accel, a, expectation(spec.accel, static_cast<double>(c.rate_hz)), tally);
   std::printf("%s: truth inside the 90 %% interval in %d of %d\n", c.preset.c_str(), tally.inside, tally.checks);
+  if (c.assert_coverage) {
+    const int allowed = binomial_misses_bound(tally.checks, 0.10, 0.01);
+    EXPECT_LE(tally.checks - tally.inside, allowed)
+        << c.preset << ": more terms outside their 90 % interval than honest intervals miss in 99 % of runs";
+  }
   return tally;
 }
 
@@ -200,5 +253,38 @@ TEST(AllanPresets, Stim300TwoDaysAt20Hz) { run_preset({"stim300", 20, 48.0, 1});
 // random walk (it is flicker only over its range), which the five-term model
 // reads as rate random walk; the analysis is therefore `--fit-min-tau-s 100`.
 TEST(AllanPresets, Hg9900TwoHundredHoursAt5Hz) { run_preset({"hg9900", 5, 200.0, 1, 100.0}); }
+
+// Not run by ctest (DISABLED_): the calibration of the fitted terms' 90 %
+// intervals over seeds, for docs/allan.md. Prints, per preset and in all,
+// how often the truth is inside the interval and the RMS of
+// (fitted - truth) / reported sigma (1 when the sigma is honest):
+//   build/release/tests/test_allan_presets --gtest_also_run_disabled_tests
+//     --gtest_filter='*Coverage*' | grep coverage
+TEST(AllanPresets, DISABLED_CoverageOverSeeds) {
+  const std::vector<PresetCase> cases = {{"icm42688p", 1000, 1.0, 0},
+                                         {"adis16470", 100, 6.0, 0},
+                                         {"stim300", 20, 48.0, 0},
+                                         {"hg9900", 5, 200.0, 0, 100.0}};
+  constexpr int kSeeds = 8;
+  Tally all;
+  for (const PresetCase& base : cases) {
+    Tally preset;
+    for (int seed = 1; seed <= kSeeds; ++seed) {
+      PresetCase c = base;
+      c.seed = seed;
+      c.assert_coverage = false;  // measured here, not asserted
+      const Tally t = run_preset(c);
+      std::printf("coverage %s seed %d: %d of %d inside\n", base.preset.c_str(), seed, t.inside, t.checks);
+      preset.add(t);
+    }
+    std::printf("coverage %s: %d of %d inside, RMS of normalised error %.3f over %d\n", base.preset.c_str(),
+                preset.inside, preset.checks, std::sqrt(preset.sum_z2 / std::max(1, preset.normalised)),
+                preset.normalised);
+    all.add(preset);
+  }
+  std::printf("coverage all: %d of %d inside (%.1f %%), RMS of normalised error %.3f over %d\n", all.inside, all.checks,
+              100.0 * all.inside / std::max(1, all.checks), std::sqrt(all.sum_z2 / std::max(1, all.normalised)),
+              all.normalised);
+}
 
 }  // namespace

@@ -91,7 +91,7 @@ NoiseType noise_of_slope(double variance_slope) {
 
 struct SubsetFit {
   std::array<double, kTermCount> coefficient{};  // squared coefficients c_k = value^2
-  std::array<double, kTermCount> variance{};     // their covariance diagonal
+  std::array<double, kTermCount> variance{};     // their covariance diagonal (independent tau)
   double cost = std::numeric_limits<double>::infinity();
 };
 
@@ -159,6 +159,87 @@ double model_variance(const std::array<double, kTermCount>& c, double tau_s) {
   double v = 0.0;
   for (int k = 0; k < kTermCount; ++k) v += c[static_cast<std::size_t>(k)] * term_basis(k, tau_s);
   return v;
+}
+
+// The generalised covariance G(l) of the integrated series of the five-term
+// model at lag l samples (header: allan_variance_covariance), in
+// (rate x samples)^2. Only second differences of it are ever used.
+double generalized_covariance(const std::array<double, kTermCount>& c, double tau0_s, double lag) {
+  const double l = std::abs(lag);
+  double g = -c[white] * l / (2.0 * tau0_s) + c[rate_random_walk] * tau0_s * (l * l * l - l) / 12.0;
+  if (l == 0.0) {
+    g += c[quantization] / (tau0_s * tau0_s);
+  } else {
+    g += c[bias_instability] * l * l * std::log(l) / (2.0 * std::numbers::pi);
+  }
+  return g;
+}
+
+// E[d1_0 d2_l]: the covariance of the second differences of span m1 (start 0)
+// and m2 (start l).
+double difference_covariance(const std::array<double, kTermCount>& c, double tau0_s, double m1, double m2, double l) {
+  static constexpr double kTap[3] = {1.0, -2.0, 1.0};
+  double sum = 0.0;
+  for (int a = 0; a < 3; ++a)
+    for (int b = 0; b < 3; ++b) sum += kTap[a] * kTap[b] * generalized_covariance(c, tau0_s, l + b * m2 - a * m1);
+  return sum;
+}
+
+// Number of (i, j), 0 <= i < count1, 0 <= j < count2, with j - i = l.
+double pair_count(double count1, double count2, double l) {
+  return std::max(0.0, std::min(count1, count2 - l) - std::max(0.0, -l));
+}
+
+// sum over integer l in [lo, hi] of E[d1_0 d2_l]^2 x pair_count(l): exact
+// (every lag) up to kCoreLagSamples lags, otherwise every step-th lag (at
+// most that many), each standing for its cell (the summand is piecewise
+// polynomial with kinks every m1 and m2 lags over 2 (m1 + m2) lags, so 256
+// samples put at least 64 in each piece; tests/test_allan.cpp checks the
+// sampled sum against the exact one through the scaling of each term).
+constexpr std::int64_t kCoreLagSamples = 256;
+double lag_sum(const std::array<double, kTermCount>& c, double tau0_s, double m1, double m2, double count1,
+               double count2, std::int64_t lo, std::int64_t hi) {
+  if (hi < lo) return 0.0;
+  const std::int64_t width = hi - lo + 1;
+  double sum = 0.0;
+  if (width <= kCoreLagSamples) {
+    for (std::int64_t l = lo; l <= hi; ++l) {
+      const double ld = to_double(l);
+      const double e = difference_covariance(c, tau0_s, m1, m2, ld);
+      sum += e * e * pair_count(count1, count2, ld);
+    }
+    return sum;
+  }
+  // An integer step, each sample the middle lag of its cell (a fractional
+  // step would skip single lags, which near the peak of the summand is a
+  // per-cent error when the width is just above the threshold).
+  const std::int64_t step = (width + kCoreLagSamples - 1) / kCoreLagSamples;
+  for (std::int64_t start = lo; start <= hi; start += step) {
+    const std::int64_t cell = std::min(step, hi - start + 1);
+    const double ld = to_double(start + (cell - 1) / 2);
+    const double e = difference_covariance(c, tau0_s, m1, m2, ld);
+    sum += e * e * pair_count(count1, count2, ld) * to_double(cell);
+  }
+  return sum;
+}
+
+// The flicker tail: sum over |l| in [near, far] on one side (sign +1: l > 0)
+// of the same summand, which is smooth there (every argument of G on one
+// side of 0) and falls as l^-4: midpoints of kTailSamples geometric cells.
+double tail_sum(const std::array<double, kTermCount>& c, double tau0_s, double m1, double m2, double count1,
+                double count2, double near, double far, double sign) {
+  constexpr int kTailSamples = 32;
+  if (!(far > near)) return 0.0;
+  const double ratio = std::pow(far / near, 1.0 / kTailSamples);
+  double sum = 0.0, edge = near;
+  for (int k = 0; k < kTailSamples; ++k) {
+    const double next = edge * ratio;
+    const double ld = sign * std::sqrt(edge * next);
+    const double e = difference_covariance(c, tau0_s, m1, m2, ld);
+    sum += e * e * pair_count(count1, count2, ld) * (next - edge);
+    edge = next;
+  }
+  return sum;
 }
 
 }  // namespace
@@ -351,6 +432,102 @@ double model_adev(const std::array<FittedTerm, kTermCount>& terms, double tau_s)
   return std::sqrt(v);
 }
 
+double allan_variance_covariance(const std::array<double, kTermCount>& c, double tau0_s, std::int64_t sample_count,
+                                 std::int64_t m1, std::int64_t m2) {
+  if (m1 < 1 || m2 < 1 || 2 * m1 >= sample_count + 1 || 2 * m2 >= sample_count + 1)
+    throw std::invalid_argument("allan: averaging factors " + std::to_string(m1) + " and " + std::to_string(m2) +
+                                " need more than twice as many samples, have " + std::to_string(sample_count));
+  if (!(tau0_s > 0.0)) throw std::invalid_argument("allan: the sample interval must be positive");
+  const double m1d = to_double(m1), m2d = to_double(m2);
+  const double count1 = to_double(sample_count + 1 - 2 * m1), count2 = to_double(sample_count + 1 - 2 * m2);
+  // White PM .. random walk: E[d1_0 d2_l] = 0 outside [-2 m2, 2 m1] (every
+  // argument of G on one side of 0, where G is a polynomial of degree <= 3 in
+  // l + b m2 - a m1, which the two second differences annihilate).
+  const std::int64_t lo = -2 * m2, hi = 2 * m1;
+  double sum = 0.0;
+  if (hi - lo + 1 <= kCoreLagSamples || c[quantization] <= 0.0) {
+    sum = lag_sum(c, tau0_s, m1d, m2d, count1, count2, lo, hi);
+  } else {
+    // White PM's G is a spike at lag 0, so E[d1_0 d2_l] has spikes at the
+    // nine lags a m1 - b m2 that a sample grid would miss: sample the rest,
+    // then add at those lags (each once) what the spike changes.
+    std::array<double, kTermCount> smooth = c;
+    smooth[quantization] = 0.0;
+    sum = lag_sum(smooth, tau0_s, m1d, m2d, count1, count2, lo, hi);
+    std::array<std::int64_t, 9> spikes{};
+    for (int a = 0; a < 3; ++a)
+      for (int b = 0; b < 3; ++b) spikes[static_cast<std::size_t>(3 * a + b)] = a * m1 - b * m2;
+    std::sort(spikes.begin(), spikes.end());
+    const auto end = std::unique(spikes.begin(), spikes.end());
+    for (auto it = spikes.begin(); it != end; ++it) {
+      const double ld = to_double(*it);
+      const double full = difference_covariance(c, tau0_s, m1d, m2d, ld);
+      const double rest = difference_covariance(smooth, tau0_s, m1d, m2d, ld);
+      sum += (full * full - rest * rest) * pair_count(count1, count2, ld);
+    }
+  }
+  if (c[bias_instability] > 0.0) {
+    // Flicker's tail, E[d1 d2] ~ l^-2: out to 16 x the support each side
+    // (what is left is of order 16^-3 of the tail's start).
+    const double support = 2.0 * (m1d + m2d);
+    sum += tail_sum(c, tau0_s, m1d, m2d, count1, count2, 2.0 * m1d + 0.5, 16.0 * support, +1.0);
+    sum += tail_sum(c, tau0_s, m1d, m2d, count1, count2, 2.0 * m2d + 0.5, 16.0 * support, -1.0);
+  }
+  return 2.0 * sum / (4.0 * m1d * m1d * m2d * m2d * count1 * count2);
+}
+
+namespace {
+
+// Variance of each fitted squared coefficient when the weighted least squares
+// c = G A^T W s, G = (A^T W A)^-1, meets estimates s whose covariance S is
+// not diagonal: Cov(c) = G A^T W S W A G (the sandwich; Huber 1967, White
+// 1980). S is allan_variance_covariance under the fitted model c itself;
+// the weights W are those of the last solve. The weights depend on the data
+// only through the model, whose first-order effect on c multiplies the
+// residual and vanishes in expectation, so the fixed weights' formula holds
+// to first order. Only the fitted (positive) terms enter A: a term the
+// non-negative fit dropped has no interval.
+std::array<double, kTermCount> sandwich_variance(const std::array<double, kTermCount>& c, double tau0_s,
+                                                 std::int64_t n, const std::vector<Point>& points,
+                                                 const std::vector<std::size_t>& index, const std::vector<double>& weight) {
+  std::array<double, kTermCount> out{};
+  std::vector<int> members;
+  for (int k = 0; k < kTermCount; ++k)
+    if (c[static_cast<std::size_t>(k)] > 0.0) members.push_back(k);
+  const auto rows = static_cast<Eigen::Index>(index.size());
+  const auto cols = static_cast<Eigen::Index>(members.size());
+  if (cols == 0 || rows < cols || weight.size() != index.size()) return out;
+  Eigen::MatrixXd a(rows, cols);  // sqrt(W) A, columns scaled to unit norm
+  Eigen::VectorXd scale(cols);
+  for (Eigen::Index col = 0; col < cols; ++col) {
+    for (Eigen::Index j = 0; j < rows; ++j) {
+      const auto ju = static_cast<std::size_t>(j);
+      a(j, col) = std::sqrt(weight[ju]) * term_basis(members[static_cast<std::size_t>(col)], points[index[ju]].tau_s);
+    }
+    scale[col] = a.col(col).norm();
+    if (scale[col] <= 0.0) scale[col] = 1.0;
+    a.col(col) /= scale[col];
+  }
+  const Eigen::MatrixXd normal = a.transpose() * a;
+  const Eigen::MatrixXd g = normal.ldlt().solve(Eigen::MatrixXd::Identity(cols, cols));
+  // sqrt(W) S sqrt(W), symmetric.
+  Eigen::MatrixXd s(rows, rows);
+  for (Eigen::Index i = 0; i < rows; ++i) {
+    for (Eigen::Index j = i; j < rows; ++j) {
+      const auto iu = static_cast<std::size_t>(i), ju = static_cast<std::size_t>(j);
+      const double cov = allan_variance_covariance(c, tau0_s, n, points[index[iu]].m, points[index[ju]].m);
+      s(i, j) = s(j, i) = std::sqrt(weight[iu] * weight[ju]) * cov;
+    }
+  }
+  const Eigen::MatrixXd b = g * a.transpose();  // (cols x rows)
+  const Eigen::MatrixXd v = b * s * b.transpose();
+  for (Eigen::Index col = 0; col < cols; ++col)
+    out[static_cast<std::size_t>(members[static_cast<std::size_t>(col)])] = std::max(0.0, v(col, col)) / (scale[col] * scale[col]);
+  return out;
+}
+
+}  // namespace
+
 Analysis analyse(std::span<const double> rate, double tau0_s, const AnalysisOptions& options) {
   if (!(tau0_s > 0.0) || !std::isfinite(tau0_s)) throw std::invalid_argument("allan: the sample interval must be positive");
   if (!(options.confidence > 0.0 && options.confidence < 1.0))
@@ -398,6 +575,7 @@ Analysis analyse(std::span<const double> rate, double tau0_s, const AnalysisOpti
 
   std::array<double, kTermCount> coefficient{};
   std::array<double, kTermCount> variance{};
+  std::array<double, kTermCount> sandwich{};
   const bool any_term = std::any_of(options.terms.begin(), options.terms.end(), [](bool b) { return b; });
   if (max_s2 > 0.0 && any_term) {
     std::vector<double> tau, est, edf_of, weight;
@@ -467,6 +645,7 @@ Analysis analyse(std::span<const double> rate, double tau0_s, const AnalysisOpti
       }
     }
     exact_where_white_pm();  // a point the last identification made white PM
+    if (!index.empty() && options.coefficient_covariance) sandwich = sandwich_variance(coefficient, tau0_s, n, out.points, index, weight);
   }
 
   for (Point& pt : out.points) {
@@ -475,16 +654,16 @@ Analysis analyse(std::span<const double> rate, double tau0_s, const AnalysisOpti
     pt.ci_high = ci.high;
   }
   const double z = std::sqrt(chi_squared_quantile(options.confidence, 1.0));  // two-sided normal quantile
-  const double inflation = options.correlation_inflation > 0.0
-                               ? options.correlation_inflation
-                               : std::sqrt(static_cast<double>(options.points_per_decade) / 2.5);
   for (int k = 0; k < kTermCount; ++k) {
     const auto ku = static_cast<std::size_t>(k);
     FittedTerm& t = out.terms[ku];
     t.enabled = options.terms[ku];
     const double c = coefficient[ku];
     if (c <= 0.0) continue;
-    const double sigma_c = inflation * std::sqrt(variance[ku]);
+    // The sandwich variance; the independent-tau one if the former is not
+    // positive (a degenerate design), which it never is for a fitted term.
+    const double var_c = sandwich[ku] > 0.0 ? sandwich[ku] : variance[ku];
+    const double sigma_c = std::sqrt(var_c);
     t.value = std::sqrt(c);
     t.formal_sigma = std::sqrt(variance[ku]) / (2.0 * t.value);
     t.sigma = sigma_c / (2.0 * t.value);

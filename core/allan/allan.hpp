@@ -128,17 +128,19 @@ struct FittedTerm {
   // The coefficient (Q, N, B, K or R, input units as in the header comment),
   // >= 0; 0 when the non-negative fit drops the term.
   double value = 0.0;
-  // 1-sigma uncertainty of `value`: the formal one from the weighted
-  // least-squares covariance of the squared coefficient (formal_sigma), times
-  // the correlation inflation of AnalysisOptions. The formal covariance
-  // treats every tau as independent; the overlapping estimates at 10 points
-  // per decade are not, and the scatter of fitted coefficients over seeds is
-  // 1.5-2.2x the formal sigma (bench/bench_allan.cpp BM_allan_fit_scatter,
-  // docs/allan.md). 0 for a dropped term.
+  // 1-sigma uncertainty of `value`, from the covariance of the squared
+  // coefficient carried to the coefficient as sigma_c / (2 value).
+  // `sigma` is honest: the sandwich covariance of the weighted least squares
+  // with the full covariance of the Allan variance estimates across tau
+  // (allan_variance_covariance), which are strongly correlated (neighbouring
+  // tau share most of their differences). `formal_sigma` is what the weighted
+  // least squares reports when it treats every tau as independent,
+  // (A^T W A)^-1; kept for comparison, it is 1.5-3x too small at 10 points
+  // per decade (docs/allan.md). 0 for a dropped term.
   double sigma = 0.0;
   double formal_sigma = 0.0;
-  // Interval of `value` at the analysis' confidence from that (inflated)
-  // variance, normal on the squared coefficient, clipped at 0.
+  // Interval of `value` at the analysis' confidence: normal on the squared
+  // coefficient with `sigma`'s variance, clipped at 0.
   double low = 0.0, high = 0.0;
 };
 
@@ -152,11 +154,12 @@ struct AnalysisOptions {
   double fit_min_tau_s = 0.0, fit_max_tau_s = 0.0;
   // See stride_for: 0 computes every overlapping difference.
   std::int64_t overlap_ratio = 64;
-  // Factor on the formal uncertainty of the fitted coefficients; <= 0:
-  // sqrt(points_per_decade / 2.5), i.e. as if 2.5 tau per decade were
-  // independent (2.0 at 10 per decade; calibrated by simulation, see
-  // FittedTerm::sigma).
-  double correlation_inflation = 0.0;
+  // The fitted terms' sandwich covariance (FittedTerm::sigma), which costs
+  // O(points^2 x 256) evaluations (about 15 ms for a 4096-sample series, 50 ms
+  // for a 2-hour 200 Hz one). false: `sigma`, `low` and `high` come from the
+  // independent-tau covariance (formal_sigma), too narrow; for callers that
+  // use only the per-tau intervals.
+  bool coefficient_covariance = true;
 };
 
 struct Analysis {
@@ -178,10 +181,40 @@ struct Analysis {
 // the largest share of the fitted model there (before the first fit: the
 // local slope of the estimate). Non-negativity: exact, by solving every
 // subset of the enabled terms and keeping the best feasible one (5 terms:
-// 31 subsets). std::invalid_argument for tau0 <= 0, fewer than
+// 31 subsets). The fitted terms' covariance is the sandwich
+// G A^T W S W A G, G = (A^T W A)^-1, with S the covariance of the estimates
+// across tau under the fitted model (allan_variance_covariance), not the
+// independent-tau G alone. std::invalid_argument for tau0 <= 0, fewer than
 // kMinSamples samples or a non-finite value (naming the sample index).
 inline constexpr std::int64_t kMinSamples = 32;
 Analysis analyse(std::span<const double> rate, double tau0_s, const AnalysisOptions& options = {});
+
+// Covariance of the overlapping Allan variance estimates at factors m1 and
+// m2 (every start, n rate samples at tau0) when the rate is the five-term
+// model with squared coefficients c (Q^2, N^2, B^2, K^2, R^2; the ramp is
+// deterministic and adds none), for Gaussian noise. Each estimate is
+// s^2(m) = 1/(2 m^2 M) sum_i d_i^2 with d_i the second difference of the
+// integrated series at span m, M = n + 1 - 2m, so
+//   Cov(s^2(m1), s^2(m2)) = 2 / (4 m1^2 m2^2 M1 M2) sum_i sum_j E[d1_i d2_j]^2
+// (Isserlis), and E[d1_i d2_j] = sum_a sum_b h1_a h2_b G(j - i + b - a) with
+// h = (1, -2, 1) at offsets (0, m, 2m) and G the generalised covariance of
+// the integrated series (the second difference annihilates constants and
+// lines, so G matters only up to a linear term; Matheron 1973):
+//   quantisation (white PM, theta white of variance Q^2/tau0^2): G = Q^2/tau0^2 [l = 0]
+//   white FM (random-walk theta, step variance N^2/tau0): G = -N^2 |l| / (2 tau0)
+//   flicker FM: G = B^2 l^2 ln|l| / (2 pi)
+//   rate random walk (integrated random walk, rate step variance K^2 tau0): G = K^2 tau0 (|l|^3 - |l|) / 12
+// in (rate x samples)^2. Each gives the Allan variance of its basis (the
+// flicker G exactly at every m, the random walk's as (2m^2 + 1)/(6m) tau0 K^2;
+// tests/test_allan.cpp). The sum over lags is exact while the support is at
+// most 256 lags wide (white PM .. random walk: E[d1 d2] = 0 outside
+// -2 m2 <= l <= 2 m1); wider ranges are sampled at 256 points (the summand is
+// piecewise polynomial; white PM's spikes at the lags a m1 - b m2 are added
+// exactly), and the flicker's long-range tail (E[d1 d2] ~ l^-2)
+// is summed on 32 geometric cells a side out to 16 x the support.
+// std::invalid_argument unless 1 <= m and 2m < n + 1 for both.
+double allan_variance_covariance(const std::array<double, kTermCount>& squared_coefficients, double tau0_s,
+                                 std::int64_t sample_count, std::int64_t m1, std::int64_t m2);
 
 // Deviation of the fitted model at tau.
 double model_adev(const std::array<FittedTerm, kTermCount>& terms, double tau_s);

@@ -218,7 +218,7 @@ const std::vector<Preset>& presets() {
         {T::gyro, "range_dps", {400.0}},
         {T::accel, "vrw_m_s_rt_h", {0.06}},
         {T::accel, "bias_instability_mg", {0.05}},
-        {T::accel, "bias_instability_tau_min_s", {10.0}},
+        {T::accel, "bias_instability_tau_min_s", {1.0}},
         {T::accel, "bias_instability_tau_max_s", {10000.0}},
         {T::accel, "scale_factor_ppm", {300.0}},
         {T::accel, "misalignment_mrad", {1.0}},
