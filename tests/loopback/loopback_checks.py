@@ -84,7 +84,8 @@ def compare_with_reference(label, protocol, rate, rows, ref, summary):
     allowed = ALLOWED_RELATIVE[protocol]
     if worst_rel > allowed:
         failures.append(f"{label}: worst relative difference {worst_rel:.3e} > {allowed:.3e}")
-    figures = {"received": len(rows), "first_tick": matched[0], "worst_relative_difference": worst_rel,
+    figures = {"received": len(rows), "first_tick": matched[0], "last_tick": matched[-1],
+               "worst_relative_difference": worst_rel,
                "worst_absolute_difference": worst_abs, "allowed_relative": allowed,
                "checksum_errors": summary["checksum_errors"], "sequence_gaps": summary["sequence_gaps"],
                "rate_sample_time_hz": summary["rate_from_sample_time_hz"],
