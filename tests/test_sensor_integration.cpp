@@ -62,6 +62,7 @@ std::vector<drivers::DecodedSample> decode_native(const std::vector<std::uint8_t
 struct Row {
   TimeNs t_ns;
   Vec3 gyro, accel;
+  std::string status;  // stream's flag column ("exact", ...); empty for generate
 };
 // time_ns, 3 gyro, 3 accel[, status]: the CSVs of generate and stream.
 std::vector<Row> read_rows(const std::string& path) {
@@ -77,7 +78,7 @@ std::vector<Row> read_rows(const std::string& path) {
     std::vector<std::string> cells;
     while (std::getline(ss, cell, ',')) cells.push_back(cell);
     if (cells.size() < 7) continue;
-    Row r{std::stoll(cells[0]), {}, {}};
+    Row r{std::stoll(cells[0]), {}, {}, cells.size() > 7 ? cells[7] : std::string()};
     for (int i = 0; i < 3; ++i) {
       r.gyro[i] = std::strtod(cells[1 + i].c_str(), nullptr);
       r.accel[i] = std::strtod(cells[4 + i].c_str(), nullptr);
@@ -231,11 +232,23 @@ TEST_F(SensorIntegration, StreamReplayEqualsGenerateWithTheSameSensorAndSeed) {
         << out;
     const auto rows = read_rows(path("s.csv"));
     ASSERT_EQ(rows.size(), reference.size()) << speed << "\n" << out;
-    std::size_t differing = 0;
-    for (std::size_t i = 0; i < rows.size(); ++i)
+    // A paced replay on a slow or loaded host gets flagged (extrapolated)
+    // samples where the emitter ran ahead of the knots: the live path doing
+    // its job. Every sample flagged exact must be generate's to the bit, noise
+    // included; only the unpaced replay (--speed max) must be exact throughout.
+    const bool paced = std::string(speed) != "max";
+    std::size_t exact_differing = 0, flagged = 0;
+    for (std::size_t i = 0; i < rows.size(); ++i) {
+      if (rows[i].status != "exact") {
+        ++flagged;
+        continue;
+      }
       if (rows[i].gyro != reference[i].gyro || rows[i].accel != reference[i].accel || rows[i].t_ns != reference[i].t_ns)
-        ++differing;
-    EXPECT_EQ(differing, 0u) << speed;
+        ++exact_differing;
+    }
+    EXPECT_EQ(exact_differing, 0u) << speed;
+    if (paced) EXPECT_LT(flagged, rows.size()) << speed << "\n" << out;
+    else EXPECT_EQ(flagged, 0u) << speed << "\n" << out;
   }
   // A sensor file of its own, with an override and a seed, is the same model.
   {
