@@ -14,7 +14,7 @@ set -euo pipefail
 cd "$(dirname "$0")/.."
 start=$SECONDS
 bash scripts/setup.sh build
-echo "build: imuemu and imuemud only (about 10 minutes of CPU from nothing, ~6 minutes on 2 idle cores; the compiler's output is in build/app/build.log)"
+echo "build: imuemu and imuemud only (5-10 minutes of CPU from nothing, 3-6 minutes on 2 idle cores; the compiler's output is in build/app/build.log)"
 IMUEMU_BUILD_QUIET=1 bash scripts/build.sh app
 bin=build/app/daemon
 seconds=${DEMO_SECONDS:-5}
