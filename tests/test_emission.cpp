@@ -465,7 +465,10 @@ TEST(Emission, StarvedProducerCountsLateTicksAndSendsNothingNonFinite) {
   engine.stop();
   const DeviceStats st = engine.stats().devices[0];
   EXPECT_EQ(st.ticks, 400u);
-  EXPECT_GT(st.producer_late, 50u);  // >= 260 ms of 2.5 ms ticks starved
+  // >= 260 ms of 2.5 ms ticks starved. On a loaded host the emitter thread
+  // itself can wake more than a period late for some of them, which counts
+  // them as dropped_late instead: either way they are counted, never sent.
+  EXPECT_GT(st.producer_late + st.dropped_late, 50u);
   EXPECT_EQ(st.emitted + st.producer_late + st.dropped_late, 400u);
   const auto samples = decode_native(rec->frames());
   ASSERT_EQ(samples.size(), st.emitted);
