@@ -19,7 +19,7 @@
 #include <boost/asio/streambuf.hpp>
 #include <boost/asio/write.hpp>
 
-#include "daemon/log.hpp"
+#include "log/log.hpp"
 
 namespace imuemu::service {
 

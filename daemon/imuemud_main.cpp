@@ -58,7 +58,7 @@
 #include "daemon/control_socket.hpp"
 #include "daemon/default_scene.hpp"
 #include "daemon/emission.hpp"
-#include "daemon/log.hpp"
+#include "log/log.hpp"
 #include "daemon/scene_check.hpp"
 #include "daemon/scene_config.hpp"
 #include "daemon/scene_runner.hpp"

@@ -9,7 +9,7 @@
 #include <cstring>
 #include <string>
 
-#include "daemon/log.hpp"
+#include "log/log.hpp"
 
 namespace imuemu::service {
 namespace {

@@ -3,7 +3,7 @@
 #include <csignal>
 #include <string>
 
-#include "daemon/log.hpp"
+#include "log/log.hpp"
 
 namespace imuemu::service {
 

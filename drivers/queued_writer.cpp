@@ -10,7 +10,7 @@
 #include <cstdio>
 #include <cstring>
 
-#include "daemon/log.hpp"
+#include "log/log.hpp"
 
 namespace imuemu::drivers {
 namespace {

@@ -206,7 +206,7 @@ class QueuedWriter {
 std::string errno_message(int error);
 
 // Writes a log line through `sink`, or to stderr (the project's log line,
-// daemon/log.hpp, warning) when it is empty.
+// log/log.hpp, warning) when it is empty.
 void emit_log(const std::function<void(std::string_view)>& sink, std::string_view line);
 
 // A thread's body: an exception that would leave it (std::terminate) goes to

@@ -5,7 +5,7 @@
 
 #include "core/so3.hpp"
 #include "core/time_arith.hpp"
-#include "daemon/log.hpp"
+#include "log/log.hpp"
 #include "io/decimal_time.hpp"
 
 namespace imuemu::io {

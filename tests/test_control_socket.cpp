@@ -33,7 +33,7 @@
 
 #include "daemon/control_socket.hpp"
 #include "daemon/emission.hpp"
-#include "daemon/log.hpp"
+#include "log/log.hpp"
 #include "tests/support/io_thread.hpp"
 #include "daemon/status_command.hpp"
 

@@ -1,4 +1,4 @@
-// daemon/service_notify, daemon/log, daemon/service_signals: the sd_notify
+// daemon/service_notify, log/log, daemon/service_signals: the sd_notify
 // messages as a service manager receives them (a fake NOTIFY_SOCKET bound
 // here, the protocol of sd_notify(3)), the watchdog petted only while the
 // emitter beats, journald priority prefixes (sd-daemon(3)), rate limiting.
@@ -24,7 +24,7 @@
 #include <boost/asio/io_context.hpp>
 #include <boost/asio/post.hpp>
 
-#include "daemon/log.hpp"
+#include "log/log.hpp"
 #include "drivers/queued_writer.hpp"
 #include "io/pose_admission.hpp"
 #include "tests/support/io_thread.hpp"

@@ -1,4 +1,4 @@
-#include "daemon/log.hpp"
+#include "log/log.hpp"
 
 #include <systemd/sd-daemon.h>
 #include <unistd.h>
