@@ -18,6 +18,7 @@
 #include <stdexcept>
 #include <vector>
 
+#include "core/time_arith.hpp"
 #include "daemon/arrival_jitter.hpp"
 #include "daemon/cli_options.hpp"
 #include "daemon/commands.hpp"
@@ -109,6 +110,7 @@ class Session {
     check_sequence(s, messages_so_far);
     if (s.has_time) {
       if (!first_t_ns_) first_t_ns_ = s.t_ns;
+      if (last_t_ns_ && s.t_ns > *last_t_ns_) count_grid_steps(ns_between(*last_t_ns_, s.t_ns));
       last_t_ns_ = s.t_ns;
       ++timed_samples_;
     }
@@ -157,13 +159,34 @@ class Session {
     }
     if (args_.expect_rate_hz > 0.0) {
       summary.expected_rate_hz = args_.expect_rate_hz;
+      // The device's rate is the rate of its sample-time grid: a sample it
+      // skipped (a time step of k periods) is a missing sample, counted
+      // apart, not a slower device. Without sample times, the arrival rate.
+      if (grid_steps_ > 0 && *last_t_ns_ > *first_t_ns_) {
+        summary.rate_of_sample_time_grid_hz =
+            static_cast<double>(grid_steps_) / seconds_between(*first_t_ns_, *last_t_ns_);
+        summary.missing_samples = missing_samples_;
+      }
       const std::optional<double> measured =
-          summary.rate_from_sample_time_hz ? summary.rate_from_sample_time_hz : summary.rate_from_arrival_hz;
+          summary.rate_of_sample_time_grid_hz ? summary.rate_of_sample_time_grid_hz : summary.rate_from_arrival_hz;
       summary.rate_ok = measured && std::abs(*measured - args_.expect_rate_hz) <= args_.rate_tolerance * args_.expect_rate_hz;
     }
   }
 
  private:
+  // A forward time step of about k expected periods (k >= 2 when rounded)
+  // is k grid steps, k - 1 of them missing samples. Needs --expect-rate;
+  // steps of zero or backwards are the sequence check's business.
+  void count_grid_steps(std::uint64_t step_ns) {
+    if (args_.expect_rate_hz <= 0.0) return;
+    const double periods = static_cast<double>(step_ns) * args_.expect_rate_hz / 1e9;
+    const double k = std::max(1.0, std::round(periods));
+    if (k > 1e12) return;  // a time jump, not a run of missing samples
+    const auto steps = static_cast<std::uint64_t>(k);
+    grid_steps_ += steps;
+    missing_samples_ += steps - 1;
+  }
+
   void check_sequence(const drivers::DecodedSample& s, std::uint64_t messages_so_far) {
     if (kind_ == SequenceKind::none || !s.has_sequence) return;
     if (have_sequence_) {
@@ -229,6 +252,7 @@ class Session {
   SequenceKind kind_;
   std::ofstream csv_;
   std::uint64_t samples_ = 0, timed_samples_ = 0;
+  std::uint64_t grid_steps_ = 0, missing_samples_ = 0;
   bool have_sequence_ = false;
   std::uint64_t last_sequence_ = 0, last_messages_ = 0, own_gaps_ = 0, backward_steps_ = 0;
   std::optional<TimeNs> first_t_ns_, last_t_ns_;
@@ -383,6 +407,8 @@ nlohmann::json summary_json(const ListenSummary& s) {
                    {"arrival_jitter_us",
                     {{"p50", opt(s.jitter_p50_us)}, {"p99", opt(s.jitter_p99_us)}, {"max", opt(s.jitter_max_us)}}},
                    {"expected_rate_hz", opt(s.expected_rate_hz)},
+                   {"rate_of_sample_time_grid_hz", opt(s.rate_of_sample_time_grid_hz)},
+                   {"missing_samples", opt(s.missing_samples)},
                    {"rate_ok", opt(s.rate_ok)}};
   if (is_can_protocol(s.protocol)) {
     j["can_frames_received"] = s.can_frames_received;
@@ -429,8 +455,18 @@ std::string summary_text(const ListenSummary& s) {
   o << "  arrival jitter p50 " << us(s.jitter_p50_us) << ", p99 " << us(s.jitter_p99_us) << ", max "
     << us(s.jitter_max_us) << "\n";
   if (s.expected_rate_hz) {
-    o << "  expected " << hz(s.expected_rate_hz) << ": " << (s.rate_ok.value_or(false) ? "matches" : "DOES NOT MATCH")
-      << "\n";
+    o << "  expected " << hz(s.expected_rate_hz) << ": " << (s.rate_ok.value_or(false) ? "matches" : "DOES NOT MATCH");
+    if (s.rate_of_sample_time_grid_hz) o << " (sample-time grid " << hz(s.rate_of_sample_time_grid_hz) << ")";
+    o << "\n";
+    if (s.missing_samples && *s.missing_samples > 0) {
+      const double share = 100.0 * static_cast<double>(*s.missing_samples) /
+                           static_cast<double>(*s.missing_samples + s.samples);
+      char b[64];
+      std::snprintf(b, sizeof b, "%llu (%.2f %%)", static_cast<unsigned long long>(*s.missing_samples), share);
+      o << "  missing samples " << b
+        << ": sample time stepped by two or more periods (the sender skipped them; imuemud counts these as "
+           "dropped_late or not_sent)\n";
+    }
   }
   return o.str();
 }
@@ -495,7 +531,7 @@ void add_listen_command(CLI::App& app, int& exit_code) {
   c->add_flag("--quiet", a.quiet, "Print the summary only");
   c->add_option("--every", a.every, "Print every Nth sample")->capture_default_str()->check(CLI::PositiveNumber);
   c->add_option("--out", a.out_path, "CSV of every decoded sample (sequence, t_ns, gyro, accel, dtheta, dv, status)");
-  c->add_option("--expect-rate", a.expect_rate_hz, "Expected sample rate (Hz): the summary says whether it matches")->check(finite_in(0.0, 1e6));
+  c->add_option("--expect-rate", a.expect_rate_hz, "Expected sample rate (Hz): the summary says whether the rate of the sample-time grid matches, and counts samples missing from that grid apart")->check(finite_in(0.0, 1e6));
   c->add_option("--rate-tolerance", a.rate_tolerance, "Relative tolerance of --expect-rate")->capture_default_str()->check(finite_in(0.0, 1.0, true));
   c->add_option("--mavlink-sample-message", options->mavlink_message, "mavlink2: samples from hil_sensor (#107) or highres_imu (#105)")
       ->capture_default_str()->check(CLI::IsMember({"hil_sensor", "highres_imu"}));

@@ -76,7 +76,14 @@ struct ListenSummary {
   // of |interval - reference| above it (daemon/arrival_jitter.hpp).
   std::optional<double> jitter_p50_us, jitter_p99_us, jitter_max_us;
   std::optional<double> expected_rate_hz;
-  std::optional<bool> rate_ok;  // with expect_rate_hz: the sample-time rate (else the arrival rate) within tolerance
+  // With expect_rate_hz and sample times: the rate of the sample-time grid,
+  // (t_last - t_first) over the number of periods it spans, each time step
+  // rounded to whole periods; and the samples skipped on that grid (a step of
+  // k periods skips k - 1). A device that skips samples keeps its rate; one
+  // whose period is off by more than half a period per step does not.
+  std::optional<double> rate_of_sample_time_grid_hz;
+  std::optional<std::uint64_t> missing_samples;
+  std::optional<bool> rate_ok;  // with expect_rate_hz: the grid rate (else the arrival rate) within tolerance
 };
 
 // A decoded sample and when it arrived (CLOCK_MONOTONIC ns).

@@ -318,6 +318,50 @@ TEST_P(ListenLoopback, DecodesEverySampleOfALiveStreamExactlyAndMeasuresItsRate)
   std::printf("%s", imuemu::cli::summary_text(s).c_str());
 }
 
+// A device that skips samples (a late tick dropped, as imuemud does with
+// late_ticks = "drop") keeps its rate: the sample times stay on the 400 Hz
+// grid, and the skipped ones are counted as missing. A device whose period
+// is wrong (380 Hz) does not match, even with no sample missing.
+TEST(ListenRate, SkippedSamplesKeepTheGridRateAndAreCountedWhileAWrongPeriodDoesNotMatch) {
+  const std::vector<drv::ImuFrameInput> all = flight_samples(401);
+  std::vector<drv::ImuFrameInput> skipped;
+  for (std::size_t k = 0; k < all.size(); ++k) {
+    if (k % 50 == 25 || k == 200 || k == 201) continue;  // 8 single skips and one double (k = 200, 201)
+    skipped.push_back(all[k]);
+  }
+  ASSERT_EQ(skipped.size(), 401u - 10u);
+  imuemu::cli::ListenArgs args;
+  args.count = skipped.size();
+  args.quiet = true;
+  const LoopbackRun run = run_loopback("native", skipped, {}, args);
+  const auto& s = run.summary;
+  ASSERT_EQ(s.samples, skipped.size());
+  // Delivered: 390 intervals over one second, 1.0 % under the tolerance edge.
+  ASSERT_TRUE(s.rate_from_sample_time_hz.has_value());
+  EXPECT_NEAR(*s.rate_from_sample_time_hz, 390.0, 1e-9);
+  ASSERT_TRUE(s.rate_of_sample_time_grid_hz.has_value());
+  EXPECT_NEAR(*s.rate_of_sample_time_grid_hz, kRateHz, 1e-9);
+  ASSERT_TRUE(s.missing_samples.has_value());
+  EXPECT_EQ(*s.missing_samples, 10u);
+  ASSERT_TRUE(s.rate_ok.has_value());
+  EXPECT_TRUE(*s.rate_ok);
+  const std::string text = imuemu::cli::summary_text(s);
+  EXPECT_NE(text.find("matches (sample-time grid 400.000000 Hz)"), std::string::npos) << text;
+  EXPECT_NE(text.find("missing samples 10 (2.49 %)"), std::string::npos) << text;
+
+  // 380 Hz: every step is 0.95 period, rounded to one: nothing missing, the
+  // grid rate is 380 Hz, which is not 400 Hz within 1 %.
+  std::vector<drv::ImuFrameInput> slow = flight_samples(381);
+  for (std::size_t k = 0; k < slow.size(); ++k) slow[k].t_ns = slow.front().t_ns + static_cast<TimeNs>(k) * 1'000'000'000 / 380;
+  args.count = slow.size();
+  const LoopbackRun slow_run = run_loopback("native", slow, {}, args);
+  ASSERT_TRUE(slow_run.summary.rate_of_sample_time_grid_hz.has_value());
+  EXPECT_NEAR(*slow_run.summary.rate_of_sample_time_grid_hz, 380.0, 0.01);
+  EXPECT_EQ(slow_run.summary.missing_samples.value_or(99), 0u);
+  EXPECT_FALSE(slow_run.summary.rate_ok.value_or(true));
+  EXPECT_NE(imuemu::cli::summary_text(slow_run.summary).find("DOES NOT MATCH"), std::string::npos);
+}
+
 TEST_P(ListenLoopback, CorruptedBytesAndFlippedChecksumsAreCountedAndEveryIntactFrameDecodes) {
   const std::string protocol = GetParam();
   constexpr std::size_t kSamples = 310;
