@@ -19,7 +19,7 @@ set(IMUEMU_HEAVY_TESTS
   AllanPresets.Icm42688pOneHourAt1kHz
   AllanPresets.Adis16470OneDayAt25Hz
   AllanPresets.Stim300EightDaysAt20Hz
-  AllanPresets.Hg9900EightHundredHoursAt1Hz
+  AllanPresets.Hg9900SevenHundredHoursAt1Hz
 )
 if(NOT IMUEMU_HEAVY_LIST_ONLY)
   set_tests_properties(${IMUEMU_HEAVY_TESTS} PROPERTIES LABELS heavy)
