@@ -266,6 +266,11 @@ void SensorModel::init_triad(Triad& tr, const TriadSpec& s, unsigned sensor, std
       // variance does not see the difference: it is blind to offsets.
       ax.flicker_state[j] = 0.0;
     }
+    // hold_period grows with tau and the processes are in increasing tau.
+    ax.flicker_every = 0;
+    while (ax.flicker_every < ax.flicker_count && ax.flicker_period[ax.flicker_every] == 1) ++ax.flicker_every;
+    ax.flicker_span = ax.flicker_every < ax.flicker_count ? ax.flicker_period[ax.flicker_every] : 0;
+    ax.flicker_wait = ax.flicker_span;
     ax.walk = s.random_walk[a] > 0.0;
     ax.walk_step = s.random_walk[a] * std::sqrt(dt_s_);
     ax.walk_stream.state = stream_key(seed, dev, sensor, a, kTermWalk, 0);
@@ -308,12 +313,26 @@ void SensorModel::init_triad(Triad& tr, const TriadSpec& s, unsigned sensor, std
 
 void SensorModel::advance(Triad& tr) noexcept {
   for (Axis& ax : tr.axis) {
-    if (ax.flicker)
-      for (int j = 0; j < ax.flicker_count; ++j)
-        if (--ax.flicker_countdown[j] == 0) {  // exact step over flicker_period samples, held between
-          ax.flicker_countdown[j] = ax.flicker_period[j];
-          ax.flicker_state[j] = ax.flicker_phi[j] * ax.flicker_state[j] + ax.flicker_drive[j] * ax.flicker_stream[j].gaussian();
+    if (ax.flicker) {
+      for (int j = 0; j < ax.flicker_every; ++j)
+        ax.flicker_state[j] = ax.flicker_phi[j] * ax.flicker_state[j] + ax.flicker_drive[j] * ax.flicker_stream[j].gaussian();
+      if (ax.flicker_span > 0 && --ax.flicker_wait == 0) {
+        // flicker_span samples since the last visit: every held countdown
+        // moves by that much; those at 0 take their exact step over
+        // flicker_period samples (held between), and the nearest next step
+        // sets the next visit.
+        std::uint32_t next = ~std::uint32_t{0};
+        for (int j = ax.flicker_every; j < ax.flicker_count; ++j) {
+          ax.flicker_countdown[j] -= ax.flicker_span;
+          if (ax.flicker_countdown[j] == 0) {
+            ax.flicker_countdown[j] = ax.flicker_period[j];
+            ax.flicker_state[j] = ax.flicker_phi[j] * ax.flicker_state[j] + ax.flicker_drive[j] * ax.flicker_stream[j].gaussian();
+          }
+          next = std::min(next, ax.flicker_countdown[j]);
         }
+        ax.flicker_span = ax.flicker_wait = next;
+      }
+    }
     if (ax.walk) ax.walk_state += ax.walk_step * ax.walk_stream.gaussian();
     if (ax.gm && --ax.gm_countdown == 0) {
       ax.gm_countdown = ax.gm_period;

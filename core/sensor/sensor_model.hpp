@@ -173,6 +173,11 @@ class SensorModel {
     double white_sigma = 0.0;
     Stream white_stream;
     int flicker_count = 0;
+    // Processes [0, flicker_every) step every sample; the held ones are
+    // visited only when the nearest of their steps is due: flicker_wait
+    // samples from now, flicker_span after the last visit.
+    int flicker_every = 0;
+    std::uint32_t flicker_wait = 0, flicker_span = 0;
     std::array<double, kMaxFlickerProcesses> flicker_phi{}, flicker_drive{}, flicker_state{};
     std::array<std::uint32_t, kMaxFlickerProcesses> flicker_period{}, flicker_countdown{};
     std::array<Stream, kMaxFlickerProcesses> flicker_stream{};
