@@ -23,7 +23,7 @@ sensor::SensorModelSpec every_term() {
     const bool g = t == Triad::gyro;
     auto set = [&](const std::string& key, std::vector<double> v) { sensor::apply_key(s, t, key, v); };
     set(g ? "arw_deg_rt_h" : "vrw_m_s_rt_h", {0.15});
-    set(g ? "bias_instability_deg_h" : "bias_instability_ug", {0.5});  // 1..1000 s: 6 processes per axis
+    set(g ? "bias_instability_deg_h" : "bias_instability_ug", {0.5});  // 1..1000 s: 12 processes per axis
     set(g ? "rrw_deg_h_rt_h" : "acceleration_random_walk_ug_rt_h", {0.1});
     set(g ? "rate_ramp_deg_h2" : "acceleration_ramp_ug_h", {0.01});
     set(g ? "gauss_markov_sigma_deg_h" : "gauss_markov_sigma_ug", {1.0});

@@ -5,7 +5,8 @@
 # `imuemu allan --png`. Same rates, durations and seed as
 # tests/test_allan_presets.cpp; docs/allan.md shows the results.
 #   scripts/plot_presets_allan.sh [BUILD_DIR] [OUT_DIR]
-# Needs about 1 GB of free space in $TMPDIR (the CSVs, deleted afterwards).
+# Needs about 3 GB of free space in $TMPDIR (the STIM300's 13.8 M-row CSV,
+# deleted afterwards).
 set -euo pipefail
 here="$(cd "$(dirname "$0")/.." && pwd)"
 build="${1:-$here/build/release}"
@@ -32,8 +33,8 @@ run() {
 }
 
 run icm42688p 1000 1
-run adis16470 100 6
-run stim300 20 48
+run adis16470 25 24
+run stim300 20 192
 # HG9900's accelerometer has bias instability only (no VRW in the brochure):
 # fit above the flicker's configured tau_min (docs/allan.md "The presets").
-run hg9900 5 200 "--fit-min-tau-s 100"
+run hg9900 1 700 "--fit-min-tau-s 100"

@@ -17,9 +17,9 @@ set(IMUEMU_HEAVY_TESTS
   AllanCovariance.MatchesMonteCarloForEachNoise
   # hours of emulated time per preset (issue 15 acceptance 1)
   AllanPresets.Icm42688pOneHourAt1kHz
-  AllanPresets.Adis16470SixHoursAt100Hz
-  AllanPresets.Stim300TwoDaysAt20Hz
-  AllanPresets.Hg9900TwoHundredHoursAt5Hz
+  AllanPresets.Adis16470OneDayAt25Hz
+  AllanPresets.Stim300EightDaysAt20Hz
+  AllanPresets.Hg9900SevenHundredHoursAt1Hz
 )
 if(NOT IMUEMU_HEAVY_LIST_ONLY)
   set_tests_properties(${IMUEMU_HEAVY_TESTS} PROPERTIES LABELS heavy)

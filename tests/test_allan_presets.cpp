@@ -21,8 +21,8 @@
 #include "core/allan/allan.hpp"
 #include "core/pipeline.hpp"
 #include "core/reference_motion.hpp"
-#include "core/time_arith.hpp"
 #include "core/sensor/datasheet.hpp"
+#include "core/sensor/sensor_model.hpp"
 #include "daemon/allan_command.hpp"
 #include "daemon/error_model_config.hpp"
 
@@ -41,9 +41,13 @@ struct StaticRun {
 // `imuemu generate --in static.csv --sensor PRESET --seed SEED --rate RATE`
 // without the CSV: the static body of `imuemu sample-trajectory --kind
 // static` (reference::Static near Barcelona, ECEF physics: Earth rate and
-// normal gravity, both constant in the body frame), its ideal IMU sample
-// repeated on the output grid t_k = floor(k 1e9 / rate), then the sensor
-// stage of generate.
+// normal gravity, both constant in the body frame), its ideal IMU sample on
+// the output grid t_k = floor(k 1e9 / rate), then the sensor stage of
+// generate. That stage (scene::apply_error_model) is one SensorModel built
+// from the device's spec at the rate, measuring sample k = grid_index(t0,
+// t_k) = k; it is called here the same way, one sample at a time, so that a
+// record of 14 M samples keeps 6 doubles per sample, not a whole ImuSample
+// (generate's bits equal this stage's: tests/test_sensor_integration.cpp).
 StaticRun static_run(const std::string& preset, std::int64_t rate_hz, double hours, std::int64_t seed) {
   const auto count = static_cast<std::size_t>(std::llround(hours * 3600.0 * static_cast<double>(rate_hz)));
   const imuemu::reference::Static body(imuemu::reference::AircraftFlight::default_origin(),
@@ -51,25 +55,26 @@ StaticRun static_run(const std::string& preset, std::int64_t rate_hz, double hou
                                        static_cast<TimeNs>(hours * 3600e9) + 1'000'000'000);
   const imuemu::SceneModel scene{imuemu::Physics::ecef};
   const ImuSample ideal = imuemu::reference::truth_imu(body, scene, 0);
-  const std::vector<TimeNs> grid = imuemu::output_grid(
-      0, imuemu::saturating_mul_ns(static_cast<TimeNs>(count - 1), 1'000'000'000) / rate_hz, rate_hz);
-  std::vector<ImuSample> samples(grid.size(), ideal);
-  for (std::size_t k = 0; k < grid.size(); ++k) samples[k].t_ns = grid[k];
   const imuemu::scene::ErrorModelConfig model = imuemu::scene::error_model_from_option(preset, seed);
+  imuemu::sensor::SensorModel stage(model.spec, static_cast<double>(rate_hz), "imu0");
   StaticRun run;
-  run.saturated = imuemu::scene::apply_error_model(model, "imu0", rate_hz, 0, samples);
   run.input.format = "imu";
-  run.input.rows = samples.size();
+  run.input.rows = count;
   run.input.tau0_s = 1.0 / static_cast<double>(rate_hz);
   static constexpr const char* kNames[] = {"gyro_x", "gyro_y", "gyro_z", "accel_x", "accel_y", "accel_z"};
+  run.input.series.resize(6);
   for (int a = 0; a < 6; ++a) {
-    cli::AllanSeries s;
-    s.name = kNames[a];
-    s.kind = a < 3 ? allan::SensorKind::gyro : allan::SensorKind::accel;
-    s.values.resize(samples.size());
-    for (std::size_t k = 0; k < samples.size(); ++k)
-      s.values[k] = a < 3 ? samples[k].gyro_rad_s[a] : samples[k].accel_m_s2[a - 3];
-    run.input.series.push_back(std::move(s));
+    run.input.series[a].name = kNames[a];
+    run.input.series[a].kind = a < 3 ? allan::SensorKind::gyro : allan::SensorKind::accel;
+    run.input.series[a].values.resize(count);
+  }
+  for (std::size_t k = 0; k < count; ++k) {
+    const imuemu::sensor::Measurement m = stage.measure(k, ideal.gyro_rad_s, ideal.accel_m_s2);
+    if (m.saturated_axes != 0) ++run.saturated;
+    for (int a = 0; a < 3; ++a) {
+      run.input.series[a].values[k] = m.gyro_rad_s[a];
+      run.input.series[3 + a].values[k] = m.accel_m_s2[a];
+    }
   }
   return run;
 }
@@ -153,7 +158,11 @@ void check_triad(const std::string& preset, const cli::AllanInput& in, const std
         std::printf("  %-20s %-16s configured %.5g fitted %.5g (%+.2f %%) 90 %% interval [%.5g, %.5g]%s\n", axis.c_str(),
                     allan::term_name(k).c_str(), configured, f.value, 100.0 * (f.value / configured - 1.0), f.low,
                     f.high, inside ? "" : "  truth outside");
-      } else if (f.value > 0.0 && f.sigma > 0.0 && f.value / (2.0 * f.sigma) > 3.0) {
+      } else if (f.value > 0.0) {
+        std::printf("  %-20s %-16s not configured, fitted %.5g (sigma %.3g)\n", axis.c_str(), allan::term_name(k).c_str(),
+                    f.value, f.sigma);
+      }
+      if (configured <= 0.0 && f.value > 0.0 && f.sigma > 0.0 && f.value / (2.0 * f.sigma) > 3.0) {
         // A term the preset does not have, fitted significantly: its squared
         // coefficient c = value^2 more than 3 sigma_c = 3 x 2 value sigma
         // above 0 (a null term gets there by chance 0.13 % of the time; the
@@ -182,7 +191,13 @@ struct PresetCase {
   std::int64_t seed;
   double accel_fit_min_tau_s = 0.0;  // --fit-min-tau-s of the accelerometer analysis
   bool assert_coverage = true;
+  std::string terms = "q,n,b,k,r";  // EXPERIMENT
 };
+
+const PresetCase kIcm42688p{"icm42688p", 1000, 1.0, 1};
+const PresetCase kAdis16470{"adis16470", 25, 24.0, 1};
+const PresetCase kStim300{"stim300", 20, 192.0, 1};
+const PresetCase kHg9900{"hg9900", 1, 700.0, 1, 100.0};
 
 // Honest 90 % intervals miss their truth once in 10 checks, independently
 // across axes (separate noise streams): the misses among n checks are
@@ -205,13 +220,18 @@ Tally run_preset(const PresetCase& c) {
   EXPECT_EQ(run.saturated, 0u);  // at rest nothing reaches a range
   const imuemu::sensor::SensorModelSpec spec = imuemu::sensor::preset_spec(c.preset);
   // `imuemu allan FILE --axes gyro` and `--axes accel [--fit-min-tau-s T]`.
-  cli::AllanInput gyro = run.input, accel;
-  accel = gyro;
-  gyro.series.resize(3);
-  accel.series.erase(accel.series.begin(), accel.series.begin() + 3);
+  // The axes are moved, not copied (a 14 M-sample record is 110 MB per axis).
+  cli::AllanInput gyro, accel;
+  for (cli::AllanInput* in : {&gyro, &accel}) {
+    in->format = run.input.format;
+    in->rows = run.input.rows;
+    in->tau0_s = run.input.tau0_s;
+  }
+  for (int a = 0; a < 6; ++a) (a < 3 ? gyro : accel).series.push_back(std::move(run.input.series[static_cast<std::size_t>(a)]));
   run.input.series.clear();
   cli::AllanArgs gyro_args, accel_args;
   accel_args.fit_min_tau_s = c.accel_fit_min_tau_s;
+  gyro_args.terms = accel_args.terms = c.terms;
   std::printf("%s: %.0f h at %lld Hz, seed %lld\n", c.preset.c_str(), c.hours, static_cast<long long>(c.rate_hz),
               static_cast<long long>(c.seed));
   Tally tally;
@@ -229,47 +249,61 @@ Tally run_preset(const PresetCase& c) {
 }
 
 // Durations: each preset's slowest configured term must be dominant over a
-// decade or more of tau below T/4 (docs/allan.md "The presets"). Rates are
-// chosen for cost: the density convention makes the Allan white noise
+// decade or more of tau below T/4 (docs/allan.md "The presets"), and the
+// record long enough that the bias instability's own scatter is well inside
+// the 10 % the test asserts: its 1-sigma scatter goes as sqrt(crossover / T)
+// (the flicker's degrees of freedom at tau are about T / tau), 3-4 % at the
+// durations below, 5-6 % at a quarter of them (STIM300 and HG9900 gyros,
+// 90 % interval +-9-10 %: one B in 13 came out beyond 10 % over 8 seeds). Rates
+// are chosen for cost: the density convention makes the Allan white noise
 // independent of the rate (tests/test_sensor_model.cpp), so a long record at
-// a low rate holds the same information about the slow terms.
+// a low rate holds the same information about the slow terms, as long as the
+// flicker's fastest processes stay a few samples long (docs/sensor-models.md).
 
 // White noise only (plus the 16-bit LSB): 1 h at 1 kHz, where the rate's
 // rounding adds 2 % to the gyro's white deviation (N_eff above).
-TEST(AllanPresets, Icm42688pOneHourAt1kHz) { run_preset({"icm42688p", 1000, 1.0, 1}); }
+TEST(AllanPresets, Icm42688pOneHourAt1kHz) { run_preset(kIcm42688p); }
 
 // Gyro white/flicker crossover (0.008 deg/s/sqrt(Hz) / (0.664 x 8 deg/h))^2 = 29 s,
 // accel 53 s; flicker configured over 1..1000 s.
-TEST(AllanPresets, Adis16470SixHoursAt100Hz) { run_preset({"adis16470", 100, 6.0, 1}); }
+TEST(AllanPresets, Adis16470OneDayAt25Hz) { run_preset(kAdis16470); }
 
-// Gyro crossover (0.15 deg/sqrt(h) / (0.664 x 0.5 deg/h))^2 = 735 s: two days
-// put T/4 = 12 h, a decade and a half above it.
-TEST(AllanPresets, Stim300TwoDaysAt20Hz) { run_preset({"stim300", 20, 48.0, 1}); }
+// Gyro crossover (0.15 deg/sqrt(h) / (0.664 x 0.5 deg/h))^2 = 735 s: eight
+// days put T/4 = 48 h, 2.4 decades above it. 20 Hz: the accelerometer's
+// flicker starts at 1 s, 20 samples (at 5 Hz its fastest processes, a few
+// samples long, would read the accelerometer's N 0.4 % high).
+TEST(AllanPresets, Stim300EightDaysAt20Hz) { run_preset(kStim300); }
 
 // Gyro crossover (0.002 deg/sqrt(h) / (0.664 x 0.0035 deg/h))^2 = 2670 s:
-// 200 h put T/4 = 50 h = 1.8e5 s, 1.8 decades above it. The accelerometer has
+// 700 h (scripts/plot_presets_allan.sh makes the same record, and
+// sample-trajectory stops at 720 h) put T/4 = 175 h = 6.3e5 s, 2.4 decades
+// above it. The accelerometer has
 // only bias instability (the brochure gives no VRW): below the flicker's
-// configured tau_min = 100 s the sum of Gauss-Markov processes rises as a
-// random walk (it is flicker only over its range), which the five-term model
-// reads as rate random walk; the analysis is therefore `--fit-min-tau-s 100`.
-TEST(AllanPresets, Hg9900TwoHundredHoursAt5Hz) { run_preset({"hg9900", 5, 200.0, 1, 100.0}); }
+// configured tau_min = 100 s the sum of Gauss-Markov processes falls (it is
+// flicker only over its range), which the five-term model would read as a
+// rate random walk; the analysis is therefore `--fit-min-tau-s 100`.
+TEST(AllanPresets, Hg9900SevenHundredHoursAt1Hz) { run_preset(kHg9900); }
 
 // Not run by ctest (DISABLED_): the calibration of the fitted terms' 90 %
-// intervals over seeds, for docs/allan.md. Prints, per preset and in all,
+// intervals over seeds, for docs/allan.md. For experiments, COV_PRESET,
+// COV_SEED, COV_HOURS, COV_RATE and COV_TERMS (imuemu allan --terms) narrow
+// or change the cases. Prints, per preset and in all,
 // how often the truth is inside the interval and the RMS of
 // (fitted - truth) / reported sigma (1 when the sigma is honest):
 //   build/release/tests/test_allan_presets --gtest_also_run_disabled_tests
 //     --gtest_filter='*Coverage*' | grep coverage
 TEST(AllanPresets, DISABLED_CoverageOverSeeds) {
-  const std::vector<PresetCase> cases = {{"icm42688p", 1000, 1.0, 0},
-                                         {"adis16470", 100, 6.0, 0},
-                                         {"stim300", 20, 48.0, 0},
-                                         {"hg9900", 5, 200.0, 0, 100.0}};
+  const std::vector<PresetCase> cases = {kIcm42688p, kAdis16470, kStim300, kHg9900};
   constexpr int kSeeds = 8;
   Tally all;
-  for (const PresetCase& base : cases) {
+  for (PresetCase base : cases) {
+    if (const char* e = std::getenv("COV_PRESET"); e && base.preset != e) continue;
+    if (const char* e = std::getenv("COV_HOURS")) base.hours = std::atof(e);
+    if (const char* e = std::getenv("COV_RATE")) base.rate_hz = std::atoll(e);
+    if (const char* e = std::getenv("COV_TERMS")) base.terms = e;
     Tally preset;
     for (int seed = 1; seed <= kSeeds; ++seed) {
+      if (const char* e = std::getenv("COV_SEED"); e && std::atoi(e) != seed) continue;
       PresetCase c = base;
       c.seed = seed;
       c.assert_coverage = false;  // measured here, not asserted
@@ -285,6 +319,10 @@ TEST(AllanPresets, DISABLED_CoverageOverSeeds) {
   std::printf("coverage all: %d of %d inside (%.1f %%), RMS of normalised error %.3f over %d\n", all.inside, all.checks,
               100.0 * all.inside / std::max(1, all.checks), std::sqrt(all.sum_z2 / std::max(1, all.normalised)),
               all.normalised);
+  // Pooled over every (term, axis, seed), honest 90 % intervals miss as
+  // Binomial(n, 0.1): no more misses than that exceeds in 1 % of studies
+  // (44 of 312; main before the two-per-decade flicker had 58, now 33).
+  EXPECT_LE(all.checks - all.inside, binomial_misses_bound(all.checks, 0.10, 0.01));
 }
 
 }  // namespace

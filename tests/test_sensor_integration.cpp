@@ -11,6 +11,8 @@
 #include <filesystem>
 #include <fstream>
 #include <mutex>
+#include <numbers>
+#include <set>
 #include <sstream>
 
 #include <nlohmann/json.hpp>
@@ -364,6 +366,44 @@ TEST(SensorSaturation, TrajectoryBeyondTheRangeSetsTheStatusOnTheWireOfEveryProt
       EXPECT_EQ(health, beyond ? 1u : 0u) << "NodeStatus " << n;
     }
   }
+}
+
+// Issue 15 acceptance 4, the decoding side: the ICM-42688-P preset's
+// quantised output, sent in the native frame (f64, lossless:
+// docs/native-protocol.md) and decoded by `imuemu listen`'s decoder, is an
+// exact multiple n x LSB of the datasheet's 16-bit code (2000/32768 deg/s,
+// 16000/32768 mg) on every axis, for a motion that moves through many codes.
+TEST(SensorQuantisation, DecodedNativeValuesAreExactMultiplesOfTheLsb) {
+  const sensor::SensorModelSpec spec = sensor::preset_spec("icm42688p");
+  sensor::SensorModel model(spec, 1000.0, "imu0");
+  const double gyro_lsb = (2000.0 / 32768.0) * (std::numbers::pi / 180.0);
+  const double accel_lsb = (16000.0 / 32768.0) * 1e-3 * 9.80665;
+  auto native = drivers::make_stream_encoder("native");
+  std::vector<std::uint8_t> bytes;
+  for (std::uint64_t k = 0; k < 500; ++k) {
+    const double s = std::sin(0.013 * static_cast<double>(k));
+    const sensor::Measurement m = model.measure(k, Vec3(0.7 * s, -0.3 * s, 0.05), Vec3(2.0 * s, 0.1, -9.8));
+    drivers::ImuFrameInput f;
+    f.sample_counter = k;
+    f.t_ns = static_cast<TimeNs>(k) * 1'000'000;
+    f.period_ns = 1'000'000;
+    f.gyro_rad_s = m.gyro_rad_s;
+    f.accel_m_s2 = m.accel_m_s2;
+    native->encode(f, bytes);
+  }
+  std::size_t decoded = 0;
+  std::set<long long> gyro_codes;
+  drivers::make_stream_decoder("native")->feed(bytes, [&](const drivers::DecodedSample& d) {
+    ++decoded;
+    for (int a = 0; a < 3; ++a) {
+      const double n_g = std::nearbyint(d.gyro_rad_s[a] / gyro_lsb), n_a = std::nearbyint(d.accel_m_s2[a] / accel_lsb);
+      EXPECT_EQ(d.gyro_rad_s[a], n_g * gyro_lsb) << decoded << " gyro " << a;
+      EXPECT_EQ(d.accel_m_s2[a], n_a * accel_lsb) << decoded << " accel " << a;
+      if (a == 0) gyro_codes.insert(static_cast<long long>(n_g));
+    }
+  });
+  EXPECT_EQ(decoded, 500u);
+  EXPECT_GT(gyro_codes.size(), 500u / 4);  // many distinct codes, not one constant
 }
 
 struct BadCase {

@@ -242,12 +242,45 @@ TEST(SensorModel, FlickerAllanDeviationIsFlatAt0664BOverTheTauRange) {
     EXPECT_NEAR(std::sqrt(avar_sum[i] / count) / floor_dev, 1.0, 0.10) << "tau " << taus[i] << " s";
 }
 
-TEST(SensorModel, FlickerDecompositionOneProcessPerDecadeBeyondBothEnds) {
-  const FlickerProcesses p = flicker_processes(2.0, 1.0, 1000.0);
-  ASSERT_EQ(p.count, 6);
-  EXPECT_DOUBLE_EQ(p.tau_s[0], 0.1);
-  EXPECT_NEAR(p.tau_s[5], 1e4, 1e-9);
-  EXPECT_NEAR(p.sigma, 2.0 * std::sqrt(std::log(10.0) / std::numbers::pi), 1e-15);
+TEST(SensorModel, FlickerDecompositionTwoProcessesPerDecadeWithFoldedEnds) {
+  // 1..1000 s: T_j = 10^(j/2 - 1.5), j = 0..11 (1.5 decades below, one above).
+  // Far from dt (1 ms) every process has variance B^2 ln(sqrt 10) / pi, the
+  // two end ones rho / (rho - 1) times that (the geometric tails beyond them).
+  const FlickerProcesses p = flicker_processes(2.0, 1.0, 1000.0, 1e-3);
+  ASSERT_EQ(p.count, 12);
+  EXPECT_NEAR(p.tau_s[0], std::pow(10.0, -1.5), 1e-15);
+  EXPECT_NEAR(p.tau_s[3], 1.0, 1e-12);
+  EXPECT_NEAR(p.tau_s[11], 1e4, 1e-8);
+  const double rho = std::sqrt(10.0), base = 2.0 * std::sqrt(std::log(rho) / std::numbers::pi);
+  EXPECT_NEAR(p.sigma[5] / base, 1.0, 1e-6);   // T = 10 s: discrete correction (dt/T)^2/12 ~ 1e-9
+  EXPECT_NEAR(p.sigma[11] / base, std::sqrt(rho / (rho - 1.0)), 1e-6);
+  // The fastest (T = 31.6 dt): its discrete white-noise equivalent s^2 (1 + phi) / (1 - phi) dt
+  // equals the continuous 2 T s_c^2.
+  const double phi = std::exp(-1e-3 / p.tau_s[0]);
+  const double s_c2 = base * base * rho / (rho - 1.0);
+  EXPECT_NEAR(p.sigma[0] * p.sigma[0] * (1.0 + phi) / (1.0 - phi) * 1e-3 / (2.0 * p.tau_s[0] * s_c2), 1.0, 1e-12);
+}
+
+// The analytic Allan variance of the decomposition (the sum of each process'
+// s^2 g(tau/T), g(x) = (2/x^2)(x - 3/2 + 2e^-x - e^-2x/2), the Allan
+// variance of a first-order Gauss-Markov process) is flat at (0.664 B)^2
+// within 0.1 % in deviation over [tau_min, tau_max], on 100 tau per decade.
+TEST(SensorModel, FlickerAnalyticAllanDeviationIsFlatWithinAPerMilleOverTheRange) {
+  const auto g = [](double x) {
+    return x < 1e-4 ? 2.0 * x / 3.0 - x * x / 2.0 : 2.0 / (x * x) * (x - 1.5 + 2.0 * std::exp(-x) - 0.5 * std::exp(-2.0 * x));
+  };
+  const double floor2 = 2.0 * std::numbers::ln2 / std::numbers::pi;
+  for (const auto& [lo, hi] : {std::pair{1.0, 1000.0}, std::pair{10.0, 1e4}, std::pair{100.0, 1e5}, std::pair{0.3, 2.0}}) {
+    const FlickerProcesses p = flicker_processes(1.0, lo, hi, 1e-6);
+    double worst = 0.0;
+    for (double e = std::log10(lo); e <= std::log10(hi) + 1e-9; e += 0.01) {
+      const double tau = std::pow(10.0, e);
+      double avar = 0.0;
+      for (int j = 0; j < p.count; ++j) avar += p.sigma[j] * p.sigma[j] * g(tau / p.tau_s[j]);
+      worst = std::max(worst, std::abs(std::sqrt(avar / floor2) - 1.0));
+    }
+    EXPECT_LT(worst, 1e-3) << "[" << lo << ", " << hi << "] s";
+  }
 }
 
 TEST(SensorModel, ScaleFactorAsymmetryMisalignmentGSensitivityExactWithNoiseOff) {

@@ -96,9 +96,8 @@ void validate_triad(const TriadSpec& s, const std::string& who) {
     need(std::isfinite(s.flicker_tau_min_s) && std::isfinite(s.flicker_tau_max_s) && s.flicker_tau_min_s > 0.0 &&
              s.flicker_tau_min_s < s.flicker_tau_max_s,
          "bias instability tau range", "expected 0 < tau_min < tau_max");
-    const int n = static_cast<int>(std::ceil(std::log10(s.flicker_tau_max_s / s.flicker_tau_min_s) - 1e-9)) + 3;
-    need(n <= kMaxFlickerProcesses, "bias instability tau range",
-         "spans more than " + std::to_string(kMaxFlickerProcesses - 3) + " decades");
+    need(std::log10(s.flicker_tau_max_s / s.flicker_tau_min_s) <= kMaxFlickerDecades + 1e-9, "bias instability tau range",
+         "spans more than " + std::to_string(kMaxFlickerDecades) + " decades");
   }
 }
 
@@ -180,18 +179,39 @@ std::uint64_t device_hash(const std::string& name) noexcept {
   return h;
 }
 
-FlickerProcesses flicker_processes(double bias_instability, double tau_min_s, double tau_max_s) {
+FlickerProcesses flicker_processes(double bias_instability, double tau_min_s, double tau_max_s, double dt_s) {
   FlickerProcesses p;
   if (!(bias_instability > 0.0)) return p;
-  // One process per decade from tau_min/10 to (at least) tau_max*10: the sum
-  // of Allan variances sigma^2 g(tau/T_j), g(x) = (2/x^2)(x - 3/2 + 2e^-x -
-  // e^-2x/2), over T_j = T_0 10^j is flat to first order with mean
-  // sigma^2 (1/ln 10) Int g(x) dx/x = sigma^2 2 ln 2 / ln 10; equal to the
-  // flicker floor (2 ln 2 / pi) B^2 for sigma^2 = B^2 ln 10 / pi.
-  const int decades = static_cast<int>(std::ceil(std::log10(tau_max_s / tau_min_s) - 1e-9));
-  p.count = std::min(decades + 3, kMaxFlickerProcesses);
-  for (int j = 0; j < p.count; ++j) p.tau_s[j] = tau_min_s * std::pow(10.0, j - 1);
-  p.sigma = bias_instability * std::sqrt(std::numbers::ln10 / std::numbers::pi);
+  // The Allan variance of one Gauss-Markov process of variance s^2 and
+  // correlation time T is s^2 g(tau/T), g(x) = (2/x^2)(x - 3/2 + 2e^-x -
+  // e^-2x/2). Over T_j = T_0 rho^j (every j) with equal variances the sum is
+  // periodic in log tau with mean s^2 (1/ln rho) Int_0^inf g(x) dx/x =
+  // s^2 2 ln 2 / ln rho, the flicker floor (2 ln 2 / pi) B^2 for s^2 =
+  // B^2 ln rho / pi; at rho = sqrt(10) its ripple is below 0.003 %
+  // (docs/sensor-models.md). The sum is cut kFlickerBelow processes below
+  // tau_min and kFlickerAbove above tau_max. The processes beyond the cut
+  // would add, where tau is far from them, 2 T_j s^2 / tau each below
+  // (white) and 2 tau s^2 / (3 T_j) each above (random walk): geometric
+  // series in T_j, whose sums are 1/(rho - 1) times the end process' own
+  // share, so the end processes carry rho / (rho - 1) times the variance.
+  constexpr double kRho = 3.1622776601683795;  // 10^(1/kFlickerPerDecade)
+  static_assert(kFlickerPerDecade == 2);
+  const int steps = static_cast<int>(std::ceil(kFlickerPerDecade * std::log10(tau_max_s / tau_min_s) - 1e-9));
+  p.count = std::min(steps + kFlickerBelow + kFlickerAbove + 1, kMaxFlickerProcesses);
+  const double variance = bias_instability * bias_instability * std::log(kRho) / std::numbers::pi;
+  for (int j = 0; j < p.count; ++j) {
+    const double tau = tau_min_s * std::pow(kRho, j - kFlickerBelow);
+    double v = variance;
+    if (j == 0 || j == p.count - 1) v *= kRho / (kRho - 1.0);
+    // In discrete time a process whose T is a few dt or less is white noise
+    // of density^2 s^2 (1 + phi)/(1 - phi) dt (phi = e^(-dt/T)), against the
+    // 2 T s^2 of the continuous process the floor is derived from: scale its
+    // variance by the ratio (1 - O((dt/T)^2) for T >> dt).
+    const double phi = std::exp(-dt_s / tau);
+    v *= 2.0 * tau * -std::expm1(-dt_s / tau) / (dt_s * (1.0 + phi));
+    p.tau_s[static_cast<std::size_t>(j)] = tau;
+    p.sigma[static_cast<std::size_t>(j)] = std::sqrt(v);
+  }
   return p;
 }
 
@@ -223,9 +243,9 @@ SensorModel::SensorModel(const SensorModelSpec& spec, double sample_rate_hz, con
 void SensorModel::init_triad(Triad& tr, const TriadSpec& s, unsigned sensor, std::uint64_t dev) {
   tr.spec = s;
   const std::uint64_t seed = spec_.seed;
-  const FlickerProcesses fp[3] = {flicker_processes(s.bias_instability.x(), s.flicker_tau_min_s, s.flicker_tau_max_s),
-                                  flicker_processes(s.bias_instability.y(), s.flicker_tau_min_s, s.flicker_tau_max_s),
-                                  flicker_processes(s.bias_instability.z(), s.flicker_tau_min_s, s.flicker_tau_max_s)};
+  const FlickerProcesses fp[3] = {flicker_processes(s.bias_instability.x(), s.flicker_tau_min_s, s.flicker_tau_max_s, dt_s_),
+                                  flicker_processes(s.bias_instability.y(), s.flicker_tau_min_s, s.flicker_tau_max_s, dt_s_),
+                                  flicker_processes(s.bias_instability.z(), s.flicker_tau_min_s, s.flicker_tau_max_s, dt_s_)};
   for (unsigned a = 0; a < 3; ++a) {
     Axis& ax = tr.axis[a];
     ax.white = s.white_density[a] > 0.0;
@@ -238,7 +258,7 @@ void SensorModel::init_triad(Triad& tr, const TriadSpec& s, unsigned sensor, std
       const double step_s = period * dt_s_;
       ax.flicker_period[j] = ax.flicker_countdown[j] = period;
       ax.flicker_phi[j] = std::exp(-step_s / fp[a].tau_s[j]);
-      ax.flicker_drive[j] = fp[a].sigma * std::sqrt(-std::expm1(-2.0 * step_s / fp[a].tau_s[j]));  // sigma sqrt(1 - phi^2)
+      ax.flicker_drive[j] = fp[a].sigma[static_cast<std::size_t>(j)] * std::sqrt(-std::expm1(-2.0 * step_s / fp[a].tau_s[j]));  // sigma sqrt(1 - phi^2)
       ax.flicker_stream[j].state = stream_key(seed, dev, sensor, a, kTermFlicker, static_cast<unsigned>(j));
       // Starts at 0: the bias at switch-on is the turn-on bias; the flicker
       // is the in-run change from it (a stationary start would add a random
@@ -246,6 +266,11 @@ void SensorModel::init_triad(Triad& tr, const TriadSpec& s, unsigned sensor, std
       // variance does not see the difference: it is blind to offsets.
       ax.flicker_state[j] = 0.0;
     }
+    // hold_period grows with tau and the processes are in increasing tau.
+    ax.flicker_every = 0;
+    while (ax.flicker_every < ax.flicker_count && ax.flicker_period[ax.flicker_every] == 1) ++ax.flicker_every;
+    ax.flicker_span = ax.flicker_every < ax.flicker_count ? ax.flicker_period[ax.flicker_every] : 0;
+    ax.flicker_wait = ax.flicker_span;
     ax.walk = s.random_walk[a] > 0.0;
     ax.walk_step = s.random_walk[a] * std::sqrt(dt_s_);
     ax.walk_stream.state = stream_key(seed, dev, sensor, a, kTermWalk, 0);
@@ -288,12 +313,26 @@ void SensorModel::init_triad(Triad& tr, const TriadSpec& s, unsigned sensor, std
 
 void SensorModel::advance(Triad& tr) noexcept {
   for (Axis& ax : tr.axis) {
-    if (ax.flicker)
-      for (int j = 0; j < ax.flicker_count; ++j)
-        if (--ax.flicker_countdown[j] == 0) {  // exact step over flicker_period samples, held between
-          ax.flicker_countdown[j] = ax.flicker_period[j];
-          ax.flicker_state[j] = ax.flicker_phi[j] * ax.flicker_state[j] + ax.flicker_drive[j] * ax.flicker_stream[j].gaussian();
+    if (ax.flicker) {
+      for (int j = 0; j < ax.flicker_every; ++j)
+        ax.flicker_state[j] = ax.flicker_phi[j] * ax.flicker_state[j] + ax.flicker_drive[j] * ax.flicker_stream[j].gaussian();
+      if (ax.flicker_span > 0 && --ax.flicker_wait == 0) {
+        // flicker_span samples since the last visit: every held countdown
+        // moves by that much; those at 0 take their exact step over
+        // flicker_period samples (held between), and the nearest next step
+        // sets the next visit.
+        std::uint32_t next = ~std::uint32_t{0};
+        for (int j = ax.flicker_every; j < ax.flicker_count; ++j) {
+          ax.flicker_countdown[j] -= ax.flicker_span;
+          if (ax.flicker_countdown[j] == 0) {
+            ax.flicker_countdown[j] = ax.flicker_period[j];
+            ax.flicker_state[j] = ax.flicker_phi[j] * ax.flicker_state[j] + ax.flicker_drive[j] * ax.flicker_stream[j].gaussian();
+          }
+          next = std::min(next, ax.flicker_countdown[j]);
         }
+        ax.flicker_span = ax.flicker_wait = next;
+      }
+    }
     if (ax.walk) ax.walk_state += ax.walk_step * ax.walk_stream.gaussian();
     if (ax.gm && --ax.gm_countdown == 0) {
       ax.gm_countdown = ax.gm_period;
@@ -397,16 +436,17 @@ std::vector<TermReport> describe(const SensorModelSpec& spec, double fs) {
       add("white noise", "N = " + fmt3(s.white_density) + " " + u + "/sqrt(Hz) (IEEE 952 N)",
           "sigma = N sqrt(fs) = " + fmt3(s.white_density * std::sqrt(fs)) + " " + u + " per sample");
     if (!s.bias_instability.isZero()) {
-      const FlickerProcesses p = flicker_processes(s.bias_instability.maxCoeff(), s.flicker_tau_min_s, s.flicker_tau_max_s);
-      std::string taus;
+      const FlickerProcesses p = flicker_processes(1.0, s.flicker_tau_min_s, s.flicker_tau_max_s, dt);
+      std::string taus, sigmas;
       for (int j = 0; j < p.count; ++j) {
-        if (j > 0) taus += ", ";
-        taus += fmt(p.tau_s[j]);
+        if (j > 0) taus += ", ", sigmas += ", ";
+        taus += fmt(p.tau_s[static_cast<std::size_t>(j)]);
+        sigmas += fmt(p.sigma[static_cast<std::size_t>(j)]);
       }
       add("bias instability", "B = " + fmt3(s.bias_instability) + " " + u + ", Allan floor 0.664 B over [" +
                                   fmt(s.flicker_tau_min_s) + ", " + fmt(s.flicker_tau_max_s) + "] s",
-          std::to_string(p.count) + " Gauss-Markov processes, tau = {" + taus + "} s, each sigma = B sqrt(ln10/pi) = " +
-              fmt3(s.bias_instability * std::sqrt(std::numbers::ln10 / std::numbers::pi)) + " " + u);
+          std::to_string(p.count) + " Gauss-Markov processes (two per decade), tau = {" + taus +
+              "} s, sigma = B x {" + sigmas + "}");
     }
     if (!s.random_walk.isZero())
       add("random walk", "K = " + fmt3(s.random_walk) + " " + u + "/sqrt(s)",

@@ -14,11 +14,17 @@
 //  * Rate / acceleration random walk K: the bias steps by K * sqrt(dt) each
 //    sample (variance grows as K^2 t; Allan deviation K * sqrt(tau / 3)).
 //  * Bias instability B (flicker, 1/f): a sum of first-order Gauss-Markov
-//    processes with correlation times one decade apart, from tau_min/10 to
-//    tau_max*10, each of variance B^2 ln(10) / pi, started at 0 (the in-run
-//    change from the turn-on bias). Its Allan deviation is
-//    0.664 B (= B sqrt(2 ln 2 / pi)) within -2.3 % / +0.9 % over
-//    [tau_min, tau_max]; derivation in docs/sensor-models.md.
+//    processes, two per decade (ratio rho = sqrt(10)), correlation times
+//    from tau_min / 10^1.5 to tau_max * 10, each of variance
+//    B^2 ln(rho) / pi, the two end ones times rho / (rho - 1) (the sum of
+//    the geometric tail of processes beyond each end, whose Allan variance
+//    has that end's shape), each scaled by 2T(1 - phi)/(dt(1 + phi)),
+//    phi = e^(-dt/T), so that its white-noise equivalent in discrete time is
+//    the continuous 2 T sigma^2 (matters only for T of a few dt), started at
+//    0 (the in-run change from the turn-on bias). Its Allan deviation is
+//    0.664 B (= B sqrt(2 ln 2 / pi)) within -0.07 % / +0.01 % over
+//    [tau_min, tau_max] (-0.3 % at tau_max over a record of 20 tau_max, from
+//    the zero start); derivation in docs/sensor-models.md.
 //  * Gauss-Markov bias: exact discretisation phi = exp(-dt/tau),
 //    x[k+1] = phi x[k] + sigma sqrt(1 - phi^2) w[k], started stationary.
 //    A slow process (tau >= kHoldRatio * dt, the flicker's and most bias
@@ -92,11 +98,16 @@ struct SensorModelSpec {
 };
 
 // Throws std::invalid_argument naming the field for a spec the model refuses
-// (negative sigma, tau <= 0, tau_min >= tau_max, more than kMaxFlickerProcesses
-// decades, nonlinearity without a range, non-finite values, lsb > range).
+// (negative sigma, tau <= 0, tau_min >= tau_max, a flicker range of more than
+// kMaxFlickerDecades decades, nonlinearity without a range, non-finite
+// values, lsb > range).
 void validate(const SensorModelSpec& spec);
 
-inline constexpr int kMaxFlickerProcesses = 12;
+// Flicker: kFlickerPerDecade processes per decade over the range plus
+// kFlickerBelow below tau_min and kFlickerAbove above tau_max.
+inline constexpr int kFlickerPerDecade = 2, kFlickerBelow = 3, kFlickerAbove = 2;
+inline constexpr int kMaxFlickerDecades = 9;
+inline constexpr int kMaxFlickerProcesses = kFlickerPerDecade * kMaxFlickerDecades + kFlickerBelow + kFlickerAbove + 1;
 // A Gauss-Markov process is stepped at most every tau / kHoldRatio.
 inline constexpr double kHoldRatio = 64.0;
 // Samples between steps of a process of correlation time tau at interval dt.
@@ -129,13 +140,14 @@ std::uint64_t stream_key(std::uint64_t seed, std::uint64_t device_hash, unsigned
 // FNV-1a of a device name (the [[imu]] name), for stream_key.
 std::uint64_t device_hash(const std::string& name) noexcept;
 
-// Flicker decomposition for one axis: correlation times and the common sigma.
+// Flicker decomposition for one axis at the sample interval dt_s:
+// correlation times and each process' stationary sigma (docs/sensor-models.md).
 struct FlickerProcesses {
   int count = 0;
   std::array<double, kMaxFlickerProcesses> tau_s{};
-  double sigma = 0.0;  // each process' stationary sigma: B sqrt(ln 10 / pi)
+  std::array<double, kMaxFlickerProcesses> sigma{};
 };
-FlickerProcesses flicker_processes(double bias_instability, double tau_min_s, double tau_max_s);
+FlickerProcesses flicker_processes(double bias_instability, double tau_min_s, double tau_max_s, double dt_s);
 
 class SensorModel {
  public:
@@ -161,6 +173,11 @@ class SensorModel {
     double white_sigma = 0.0;
     Stream white_stream;
     int flicker_count = 0;
+    // Processes [0, flicker_every) step every sample; the held ones are
+    // visited only when the nearest of their steps is due: flicker_wait
+    // samples from now, flicker_span after the last visit.
+    int flicker_every = 0;
+    std::uint32_t flicker_wait = 0, flicker_span = 0;
     std::array<double, kMaxFlickerProcesses> flicker_phi{}, flicker_drive{}, flicker_state{};
     std::array<std::uint32_t, kMaxFlickerProcesses> flicker_period{}, flicker_countdown{};
     std::array<Stream, kMaxFlickerProcesses> flicker_stream{};
