@@ -90,6 +90,19 @@ std::vector<Vec3> spline_slopes(std::span<const Pose> w, bool natural_first, boo
   return slope;
 }
 
+// The rotation vector of R (angle up to 2 pi) nearest to `prediction`: log(R)
+// itself or its other representation, the same axis with angle theta - 2 pi.
+// For a relative rotation spanning more than one knot interval, whose angle
+// may exceed pi; `prediction` (e.g. the sum of the intervals' logs) only picks
+// the branch.
+Vec3 lifted_log(const Mat3& R, const Vec3& prediction) {
+  const Vec3 f = so3::log(R);
+  const double theta = f.norm();
+  if (!(theta > 0.0)) return f;
+  const Vec3 other = f * (1.0 - 2.0 * std::numbers::pi / theta);
+  return (other - prediction).norm() < (f - prediction).norm() ? other : f;
+}
+
 // Body rate at every knot for Method::hermite. The ends are clamped to the
 // second-order one-sided difference of the neighbours' exponential
 // coordinates in the end knot's own chart (where rho = 0 and W(0) = I, so
@@ -111,16 +124,22 @@ std::vector<Vec3> hermite_knot_rates(std::span<const Pose> knots) {
     w[0] = w[1] = seg_log[0] / h(0);
     return w;
   }
+  // f2 spans two knot intervals: beyond 90 deg per interval its rotation
+  // passes pi and log() returns the other branch, so it is lifted to the one
+  // continuous with the path (before issue 14 it was not: at 90 deg/s with
+  // 1 Hz knots every window end's rate was wrong by ~pi rad/s and, damped by
+  // 0.27^4, left 4e-3 rad/s of gyro error at the knots).
   {
     const double b1 = h(0), b2 = h(0) + h(1);
     const Vec3 f1 = seg_log[0];
-    const Vec3 f2 = so3::log(knots[0].attitude.transpose() * knots[2].attitude);
+    const Vec3 f2 = lifted_log(knots[0].attitude.transpose() * knots[2].attitude, seg_log[0] + seg_log[1]);
     w[0] = b2 / (b1 * (b2 - b1)) * f1 - b1 / (b2 * (b2 - b1)) * f2;
   }
   {
     const double a1 = h(n - 2), a2 = h(n - 2) + h(n - 3);
-    const Vec3 f1 = so3::log(knots[n - 1].attitude.transpose() * knots[n - 2].attitude);
-    const Vec3 f2 = so3::log(knots[n - 1].attitude.transpose() * knots[n - 3].attitude);
+    const Vec3 f1 = -seg_log[n - 2];  // log(R_{n-1}^T R_{n-2}) = -log(R_{n-2}^T R_{n-1})
+    const Vec3 f2 =
+        lifted_log(knots[n - 1].attitude.transpose() * knots[n - 3].attitude, -(seg_log[n - 2] + seg_log[n - 3]));
     w[n - 1] = -a2 / (a1 * (a2 - a1)) * f1 + a1 / (a2 * (a2 - a1)) * f2;
   }
   if (n == 3) {
