@@ -28,6 +28,20 @@ Kinematics rotate_into(const Kinematics& k, const Mat3& R_a_b, const Vec3& origi
   return out;
 }
 
+// R_b^n = R_z(psi) R_y(theta) R_x(gamma) (Eq. 1.2) and its body rate from
+// the Euler-angle rates:
+//   w_b = [gamma' - psi' sin th;  th' cos ga + psi' sin ga cos th;
+//          -th' sin ga + psi' cos ga cos th].
+void set_attitude_from_euler(Kinematics& k, double psi, double theta, double gamma, double psi_dot,
+                             double theta_dot, double gamma_dot) {
+  k.attitude = attitude::rotation_from_hpr({psi, theta, gamma});
+  const double sth = std::sin(theta), cth = std::cos(theta);
+  const double sga = std::sin(gamma), cga = std::cos(gamma);
+  k.angular_rate_rad_s = Vec3(gamma_dot - psi_dot * sth,              //
+                              theta_dot * cga + psi_dot * sga * cth,  //
+                              -theta_dot * sga + psi_dot * cga * cth);
+}
+
 }  // namespace
 
 // ---------------------------------------------------------------- Static
@@ -109,12 +123,7 @@ Kinematics FastYaw::at(TimeNs t_ns) const {
   const double gamma = a_ga * std::sin(n3 * tau + 1.0), gamma_dot = a_ga * n3 * std::cos(n3 * tau + 1.0);
   Kinematics k;
   k.t_ns = t_ns;
-  k.attitude = attitude::rotation_from_hpr({psi, theta, gamma});
-  const double sth = std::sin(theta), cth = std::cos(theta);
-  const double sga = std::sin(gamma), cga = std::cos(gamma);
-  k.angular_rate_rad_s = Vec3(gamma_dot - psi_dot * sth,                //
-                              theta_dot * cga + psi_dot * sga * cth,    //
-                              -theta_dot * sga + psi_dot * cga * cth);
+  set_attitude_from_euler(k, psi, theta, gamma, psi_dot, theta_dot, gamma_dot);
   return k;
 }
 
@@ -226,12 +235,7 @@ Kinematics AircraftFlight::ned_at(TimeNs t_ns) const {
   const double gamma = std::atan(q);
   const double gamma_dot = q_dot / (1.0 + q * q);
 
-  k.attitude = attitude::rotation_from_hpr({psi, theta, gamma});
-  const double sth = std::sin(theta), cth = std::cos(theta);
-  const double sga = std::sin(gamma), cga = std::cos(gamma);
-  k.angular_rate_rad_s = Vec3(gamma_dot - psi_dot * sth,                   //
-                              theta_dot * cga + psi_dot * sga * cth,       //
-                              -theta_dot * sga + psi_dot * cga * cth);
+  set_attitude_from_euler(k, psi, theta, gamma, psi_dot, theta_dot, gamma_dot);
   return k;
 }
 

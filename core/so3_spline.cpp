@@ -3,6 +3,7 @@
 #include <algorithm>
 #include <stdexcept>
 
+#include "core/grid_sampling.hpp"
 #include "core/imu_model.hpp"
 #include "core/interpolation.hpp"
 #include "core/so3.hpp"
@@ -136,20 +137,9 @@ Vec3 Spline::angular_acceleration(std::size_t k, TimeNs t_ns) const {
 
 BatchResult run(const std::vector<Pose>& knots, const SceneModel& scene, std::int64_t rate_hz) {
   const Spline spline(knots);
-  const std::vector<TimeNs> times = output_grid(spline.start_ns(), spline.end_ns(), rate_hz);
-  if (times.size() < 2) throw std::invalid_argument("SO(3) spline output shorter than two samples");
-  BatchResult result;
-  result.trajectory.resize(times.size());
-  result.imu.resize(times.size());
-  std::size_t segment = 0;
-  const std::size_t last = spline.segment_count() - 1;
-  for (std::size_t i = 0; i < times.size(); ++i) {
-    while (segment < last && knots[segment + 1].t_ns <= times[i]) ++segment;
-    Kinematics& kin = result.trajectory[i];
-    spline.evaluate_in_segment(segment, times[i], kin);
-    result.imu[i] = imu_from_kinematics(scene, kin);
-  }
-  return result;
+  // Segment k ends at knot k + 1.
+  return sample_on_output_grid(spline, std::vector<TimeNs>(spline.knot_times_ns().begin() + 1, spline.knot_times_ns().end()), scene,
+                               rate_hz, "SO(3) spline");
 }
 
 }  // namespace imuemu::so3spline

@@ -55,6 +55,7 @@ class Spline {
   TimeNs start_ns() const { return times_.front(); }
   TimeNs end_ns() const { return times_.back(); }
   std::size_t segment_count() const { return times_.size() - 1; }
+  const std::vector<TimeNs>& knot_times_ns() const { return times_; }
   const std::vector<Vec3>& knot_rates_rad_s() const { return rates_; }
 
   // Kinematics in the knots' frame on knot interval k (t_k <= t_ns <= t_{k+1}).
