@@ -239,10 +239,10 @@ int main(int argc, char** argv) {
         "m/s, 120 s), `pi-turn` (the circle in ECEF, R_b^e passing rotation angle pi half way, 120 s). "
         "\"interior\" leaves out the first and last 5 s; \"all\" is the max over every sample, ends included. "
         "`so3-spline` is the C2 cubic spline on SO(3) (scipy RotationSpline's formulation, core/so3_spline) with "
-        "natural cubic positions; `imuemu` is the default. What the default's ends assume: the motion beyond the "
-        "first and last knot continues as the degree-6 polynomial in time through the seven knots at that end "
-        "(position in the scene frame, attitude as the rotation vector in the end knot's chart; "
-        "core/stream.cpp, docs/streaming.md).\n\n";
+        "natural cubic positions; `imuemu` is the default. What the default's ends assume: beyond the first "
+        "and last knot the position goes on as the degree-6 polynomial in time through the seven knots at that "
+        "end and the body rate as the degree-5 polynomial through their six intervals' mean body rates "
+        "(core/stream.cpp, README).\n\n";
   md << "| method | motion | scene | rate Hz | gyro RMS rad/s (interior) | gyro max (interior) | accel RMS m/s² "
         "(interior) | accel max (interior) | gyro max (all) | accel max (all) | self-consistency gyro | "
         "self-consistency accel | look-ahead s | samples/s (1 core) |\n"

@@ -70,12 +70,12 @@ enum class Ends {
   // Biased: a constant-rate motion shows a rate error of up to ~50% there.
   clip,
   // Virtual knots continue the trajectory beyond its ends, so every output
-  // sample sees a full window: the degree-6 polynomials in time through the
-  // seven end knots (position; attitude as rotation vectors in the end knot's
-  // chart, knots within 2 rad of it), over the padding plus the spline's
-  // window (core/stream.cpp, extend()). Exact for constant-rate motion about
-  // a fixed axis and for polynomial positions up to degree 6; amplifies knot
-  // noise at the ends (README, docs/accuracy.md).
+  // sample sees a full window: the position as the degree-6 polynomial in
+  // time through the seven end knots, the body rate as the degree-5
+  // polynomial through their intervals' mean body rates, over the padding
+  // plus the spline's window (core/stream.cpp, extend()). Exact for a
+  // constant body rate and for polynomial positions up to degree 6; amplifies
+  // knot noise at the ends (README, docs/accuracy.md).
   extrapolate,
 };
 Ends ends_from_string(const std::string& name);  // clip|extrapolate
