@@ -8,6 +8,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "core/grid_sampling.hpp"
 #include "core/imu_model.hpp"
 #include "core/interpolation.hpp"
 #include "core/so3.hpp"
@@ -306,23 +307,11 @@ void Spline::evaluate_in_segment(std::size_t i, TimeNs t_ns, Kinematics& out, Ve
 
 BatchResult run(const std::vector<Pose>& knots, const SceneModel& scene, std::int64_t rate_hz) {
   const Spline spline(knots);
-  const std::vector<TimeNs> times = output_grid(spline.start_ns(), spline.end_ns(), rate_hz);
-  if (times.size() < 2) throw std::invalid_argument("B-spline output shorter than two samples");
-  BatchResult result;
-  result.trajectory.resize(times.size());
-  result.imu.resize(times.size());
-  // Output times ascend, so the segment only ever moves forward: segment s
-  // covers [t_{s+1}, t_{s+2}]; a time on a knot goes to the later segment
-  // (u = 0) except the very last (u = 1 of the last segment).
-  std::size_t segment = 0;
-  const std::size_t last = spline.segment_count() - 1;
-  for (std::size_t k = 0; k < times.size(); ++k) {
-    while (segment < last && knots[segment + 2].t_ns <= times[k]) ++segment;
-    Kinematics& kin = result.trajectory[k];
-    spline.evaluate_in_segment(segment, times[k], kin);
-    result.imu[k] = imu_from_kinematics(scene, kin);
-  }
-  return result;
+  // Segment s covers [t_{s+1}, t_{s+2}]; a time on a knot goes to the later
+  // segment (u = 0) except the very last (u = 1 of the last segment).
+  std::vector<TimeNs> segment_end_ns;
+  for (std::size_t s = 0; s < spline.segment_count(); ++s) segment_end_ns.push_back(knots[s + 2].t_ns);
+  return sample_on_output_grid(spline, segment_end_ns, scene, rate_hz, "B-spline");
 }
 
 }  // namespace imuemu::bspline

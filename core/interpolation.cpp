@@ -29,6 +29,29 @@ std::string knot_name(std::size_t index, TimeNs t_ns) {
   return std::to_string(index) + " (t=" + format_time(t_ns) + " s)";
 }
 
+// Slope (m/s) at knot `at` of the polynomial through the `count` knots
+// starting there and going in `direction` (+1 forwards, -1 backwards): the
+// derivative of the Lagrange form at its first node, on offsets y_i - y_at
+// (nothing cancels at ECEF magnitudes).
+Vec3 one_sided_slope(std::span<const Pose> w, std::size_t at, std::size_t count, int direction) {
+  std::array<double, 4> x{};
+  std::array<Vec3, 4> y{};
+  for (std::size_t i = 0; i < count; ++i) {
+    const std::size_t j = direction > 0 ? at + i : at - i;
+    x[i] = seconds_between(w[at].t_ns, w[j].t_ns);
+    y[i] = w[j].position_m - w[at].position_m;
+  }
+  Vec3 slope = Vec3::Zero();
+  for (std::size_t i = 1; i < count; ++i) {
+    // L_i'(x_0) = 1/(x_i - x_0) prod_{j != 0, i} (x_0 - x_j)/(x_i - x_j), x_0 = 0.
+    double d = 1.0 / x[i];
+    for (std::size_t j = 1; j < count; ++j)
+      if (j != i) d *= -x[j] / (x[i] - x[j]);
+    slope += d * y[i];
+  }
+  return slope;
+}
+
 // Slopes (m/s) at every knot of the cubic spline (C2) through the positions
 // of `w` (thesis §3.5: d^(4) = 0 gives cubic position segments; §3.6.1
 // suggests a C2 cubic spline). Each end is either natural (zero second
@@ -55,8 +78,7 @@ std::vector<Vec3> spline_slopes(std::span<const Pose> w, bool natural_first, boo
     diag[0] = 1.0;
     rhs[0] = Vec3::Zero();
   } else {
-    const double b1 = h[0], b2 = h[0] + h[1];
-    const Vec3 s0 = b2 / (b1 * (b2 - b1)) * (y(1) - y(0)) - b1 / (b2 * (b2 - b1)) * (y(2) - y(0));
+    const Vec3 s0 = one_sided_slope(w, 0, 3, +1);
     diag[0] = 2.0 * h[0];
     sup[0] = h[0];
     rhs[0] = 6.0 * ((y(1) - y(0)) / h[0] - s0);
@@ -71,8 +93,7 @@ std::vector<Vec3> spline_slopes(std::span<const Pose> w, bool natural_first, boo
     diag[n - 1] = 1.0;
     rhs[n - 1] = Vec3::Zero();
   } else {
-    const double a1 = h[n - 2], a2 = h[n - 2] + h[n - 3];
-    const Vec3 sn = -a2 / (a1 * (a2 - a1)) * (y(n - 2) - y(n - 1)) + a1 / (a2 * (a2 - a1)) * (y(n - 3) - y(n - 1));
+    const Vec3 sn = one_sided_slope(w, n - 1, 3, -1);
     sub[n - 1] = h[n - 2];
     diag[n - 1] = 2.0 * h[n - 2];
     rhs[n - 1] = 6.0 * (sn - (y(n - 1) - y(n - 2)) / h[n - 2]);
@@ -88,6 +109,19 @@ std::vector<Vec3> spline_slopes(std::span<const Pose> w, bool natural_first, boo
   for (std::size_t j = 0; j + 1 < n; ++j) slope[j] = (y(j + 1) - y(j)) / h[j] - h[j] * (2.0 * M[j] + M[j + 1]) / 6.0;
   slope[n - 1] = (y(n - 1) - y(n - 2)) / h[n - 2] + h[n - 2] * (M[n - 2] + 2.0 * M[n - 1]) / 6.0;
   return slope;
+}
+
+// The rotation vector of R (angle up to 2 pi) nearest to `prediction`: log(R)
+// itself or its other representation, the same axis with angle theta - 2 pi.
+// For a relative rotation spanning more than one knot interval, whose angle
+// may exceed pi; `prediction` (e.g. the sum of the intervals' logs) only picks
+// the branch.
+Vec3 lifted_log(const Mat3& R, const Vec3& prediction) {
+  const Vec3 f = so3::log(R);
+  const double theta = f.norm();
+  if (!(theta > 0.0)) return f;
+  const Vec3 other = f * (1.0 - 2.0 * std::numbers::pi / theta);
+  return (other - prediction).norm() < (f - prediction).norm() ? other : f;
 }
 
 // Body rate at every knot for Method::hermite. The ends are clamped to the
@@ -111,16 +145,22 @@ std::vector<Vec3> hermite_knot_rates(std::span<const Pose> knots) {
     w[0] = w[1] = seg_log[0] / h(0);
     return w;
   }
+  // f2 spans two knot intervals: beyond 90 deg per interval its rotation
+  // passes pi and log() returns the other branch, so it is lifted to the one
+  // continuous with the path (before issue 14 it was not: at 90 deg/s with
+  // 1 Hz knots every window end's rate was wrong by ~pi rad/s and, damped by
+  // 0.27^4, left 4e-3 rad/s of gyro error at the knots).
   {
     const double b1 = h(0), b2 = h(0) + h(1);
     const Vec3 f1 = seg_log[0];
-    const Vec3 f2 = so3::log(knots[0].attitude.transpose() * knots[2].attitude);
+    const Vec3 f2 = lifted_log(knots[0].attitude.transpose() * knots[2].attitude, seg_log[0] + seg_log[1]);
     w[0] = b2 / (b1 * (b2 - b1)) * f1 - b1 / (b2 * (b2 - b1)) * f2;
   }
   {
     const double a1 = h(n - 2), a2 = h(n - 2) + h(n - 3);
-    const Vec3 f1 = so3::log(knots[n - 1].attitude.transpose() * knots[n - 2].attitude);
-    const Vec3 f2 = so3::log(knots[n - 1].attitude.transpose() * knots[n - 3].attitude);
+    const Vec3 f1 = -seg_log[n - 2];  // log(R_{n-1}^T R_{n-2}) = -log(R_{n-2}^T R_{n-1})
+    const Vec3 f2 =
+        lifted_log(knots[n - 1].attitude.transpose() * knots[n - 3].attitude, -(seg_log[n - 2] + seg_log[n - 3]));
     w[n - 1] = -a2 / (a1 * (a2 - a1)) * f1 + a1 / (a2 * (a2 - a1)) * f2;
   }
   if (n == 3) {

@@ -11,6 +11,7 @@
 
 #include "core/attitude.hpp"
 #include "core/earth.hpp"
+#include "core/grid_sampling.hpp"
 #include "core/imu_model.hpp"
 #include "core/interpolation.hpp"
 
@@ -165,20 +166,9 @@ void Spline::evaluate_in_segment(std::size_t k, TimeNs t_ns, Kinematics& out) co
 
 BatchResult run(const std::vector<Pose>& knots, const SceneModel& scene, std::int64_t rate_hz) {
   const Spline spline(knots, scene.physics);
-  const std::vector<TimeNs> times = output_grid(spline.start_ns(), spline.end_ns(), rate_hz);
-  if (times.size() < 2) throw std::invalid_argument("naive spline output shorter than two samples");
-  BatchResult result;
-  result.trajectory.resize(times.size());
-  result.imu.resize(times.size());
-  std::size_t segment = 0;
-  const std::size_t last = spline.segment_count() - 1;
-  for (std::size_t i = 0; i < times.size(); ++i) {
-    while (segment < last && knots[segment + 1].t_ns <= times[i]) ++segment;
-    Kinematics& kin = result.trajectory[i];
-    spline.evaluate_in_segment(segment, times[i], kin);
-    result.imu[i] = imu_from_kinematics(scene, kin);
-  }
-  return result;
+  std::vector<TimeNs> segment_end_ns;  // segment k ends at knot k + 1
+  for (std::size_t k = 1; k < knots.size(); ++k) segment_end_ns.push_back(knots[k].t_ns);
+  return sample_on_output_grid(spline, segment_end_ns, scene, rate_hz, "naive spline");
 }
 
 }  // namespace imuemu::naive

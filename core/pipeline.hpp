@@ -69,9 +69,13 @@ enum class Ends {
   // The thesis: the window is clipped and renormalised (one-sided windows).
   // Biased: a constant-rate motion shows a rate error of up to ~50% there.
   clip,
-  // The first and last knot segments are continued along their geodesic
-  // (constant body rate and velocity) by virtual knots, so every output sample
-  // sees a full window. Exact for constant-rate motion.
+  // Virtual knots continue the trajectory beyond its ends, so every output
+  // sample sees a full window: the position as the degree-6 polynomial in
+  // time through the seven end knots, the body rate as the degree-5
+  // polynomial through their intervals' mean body rates, over the padding
+  // plus the spline's window (core/stream.cpp, extend()). Exact for a
+  // constant body rate and for polynomial positions up to degree 6; amplifies
+  // knot noise at the ends (README, docs/accuracy.md).
   extrapolate,
 };
 Ends ends_from_string(const std::string& name);  // clip|extrapolate

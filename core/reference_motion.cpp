@@ -28,6 +28,20 @@ Kinematics rotate_into(const Kinematics& k, const Mat3& R_a_b, const Vec3& origi
   return out;
 }
 
+// R_b^n = R_z(psi) R_y(theta) R_x(gamma) (Eq. 1.2) and its body rate from
+// the Euler-angle rates:
+//   w_b = [gamma' - psi' sin th;  th' cos ga + psi' sin ga cos th;
+//          -th' sin ga + psi' cos ga cos th].
+void set_attitude_from_euler(Kinematics& k, double psi, double theta, double gamma, double psi_dot,
+                             double theta_dot, double gamma_dot) {
+  k.attitude = attitude::rotation_from_hpr({psi, theta, gamma});
+  const double sth = std::sin(theta), cth = std::cos(theta);
+  const double sga = std::sin(gamma), cga = std::cos(gamma);
+  k.angular_rate_rad_s = Vec3(gamma_dot - psi_dot * sth,              //
+                              theta_dot * cga + psi_dot * sga * cth,  //
+                              -theta_dot * sga + psi_dot * cga * cth);
+}
+
 }  // namespace
 
 // ---------------------------------------------------------------- Static
@@ -70,18 +84,21 @@ Kinematics ConstantRate::at(TimeNs t_ns) const {
 
 // ---------------------------------------------------------------- Circle
 
-Circle::Circle(double radius_m, double speed_m_s, TimeNs start_ns, TimeNs duration_ns)
-    : Motion(Physics::flat, start_ns, duration_ns), radius_m_(radius_m), speed_m_s_(speed_m_s) {
+Circle::Circle(double radius_m, double speed_m_s, TimeNs start_ns, TimeNs duration_ns, double heading_at_start_rad)
+    : Motion(Physics::flat, start_ns, duration_ns),
+      radius_m_(radius_m),
+      speed_m_s_(speed_m_s),
+      heading0_rad_(heading_at_start_rad) {
   if (!(radius_m > 0.0)) throw std::invalid_argument("Circle: radius must be positive");
 }
 
 Kinematics Circle::at(TimeNs t_ns) const {
   const double w = speed_m_s_ / radius_m_;  // heading rate, rad/s
-  const double psi = w * tau_s(t_ns);
+  const double psi = heading0_rad_ + w * tau_s(t_ns);
   const double c = std::cos(psi), s = std::sin(psi);
   Kinematics k;
   k.t_ns = t_ns;
-  k.position_m = Vec3(radius_m_ * s, radius_m_ * (1.0 - c), 0.0);
+  k.position_m = Vec3(radius_m_ * (s - std::sin(heading0_rad_)), radius_m_ * (std::cos(heading0_rad_) - c), 0.0);
   k.velocity_m_s = Vec3(speed_m_s_ * c, speed_m_s_ * s, 0.0);
   k.acceleration_m_s2 = Vec3(-speed_m_s_ * w * s, speed_m_s_ * w * c, 0.0);
   k.attitude << c, -s, 0.0,  //
@@ -90,6 +107,43 @@ Kinematics Circle::at(TimeNs t_ns) const {
   k.angular_rate_rad_s = Vec3(0.0, 0.0, w);
   return k;
 }
+
+// ---------------------------------------------------------------- FastYaw
+
+FastYaw::FastYaw(TimeNs start_ns, TimeNs duration_ns) : Motion(Physics::flat, start_ns, duration_ns) {}
+
+Kinematics FastYaw::at(TimeNs t_ns) const {
+  constexpr double kPi = std::numbers::pi, kDeg = kPi / 180.0;
+  constexpr double w0 = kPi / 2.0, a_psi = 0.3, a_th = 5.0 * kDeg, a_ga = 10.0 * kDeg;
+  constexpr double n1 = 2.0 * kPi / 10.0, n2 = 2.0 * kPi / 20.0, n3 = 2.0 * kPi / 30.0;
+  const double tau = tau_s(t_ns);
+  const double psi = w0 * tau + a_psi * std::sin(n1 * tau);
+  const double psi_dot = w0 + a_psi * n1 * std::cos(n1 * tau);
+  const double theta = a_th * std::sin(n2 * tau + 0.5), theta_dot = a_th * n2 * std::cos(n2 * tau + 0.5);
+  const double gamma = a_ga * std::sin(n3 * tau + 1.0), gamma_dot = a_ga * n3 * std::cos(n3 * tau + 1.0);
+  Kinematics k;
+  k.t_ns = t_ns;
+  set_attitude_from_euler(k, psi, theta, gamma, psi_dot, theta_dot, gamma_dot);
+  return k;
+}
+
+// ---------------------------------------------------------------- TurnThroughPi
+
+double TurnThroughPi::heading_at_pi(const Mat3& A) {
+  // tr(A R_z(psi)) = A22 + (A00 + A11) cos psi + (A01 - A10) sin psi; its
+  // minimum, -1 for any rotation A, is at this psi.
+  return std::atan2(-(A(0, 1) - A(1, 0)), -(A(0, 0) + A(1, 1)));
+}
+
+TurnThroughPi::TurnThroughPi(const earth::Geodetic& where, double radius_m, double speed_m_s, TimeNs crossing_ns,
+                             TimeNs start_ns, TimeNs duration_ns)
+    : Motion(Physics::ecef, start_ns, duration_ns),
+      origin_e_m_(earth::ecef_from_geodetic(where)),
+      R_l_e_(attitude::ned_to_ecef(where.latitude_rad, where.longitude_rad)),
+      circle_(radius_m, speed_m_s, start_ns, duration_ns,
+              heading_at_pi(R_l_e_) - speed_m_s / radius_m * seconds_between(start_ns, crossing_ns)) {}
+
+Kinematics TurnThroughPi::at(TimeNs t_ns) const { return rotate_into(circle_.at(t_ns), R_l_e_, origin_e_m_); }
 
 // ---------------------------------------------------------------- AircraftFlight
 
@@ -181,12 +235,7 @@ Kinematics AircraftFlight::ned_at(TimeNs t_ns) const {
   const double gamma = std::atan(q);
   const double gamma_dot = q_dot / (1.0 + q * q);
 
-  k.attitude = attitude::rotation_from_hpr({psi, theta, gamma});
-  const double sth = std::sin(theta), cth = std::cos(theta);
-  const double sga = std::sin(gamma), cga = std::cos(gamma);
-  k.angular_rate_rad_s = Vec3(gamma_dot - psi_dot * sth,                   //
-                              theta_dot * cga + psi_dot * sga * cth,       //
-                              -theta_dot * sga + psi_dot * cga * cth);
+  set_attitude_from_euler(k, psi, theta, gamma, psi_dot, theta_dot, gamma_dot);
   return k;
 }
 

@@ -78,15 +78,54 @@ class ConstantRate final : public Motion {
 // heading north and turning right (clockwise seen from above), body x along the
 // velocity and z down. Heading psi = (v/r) tau, attitude R_z(psi), body rate
 // (0, 0, v/r), centripetal acceleration v^2/r towards the centre (0, r, 0).
+// heading_at_start_rad turns the whole circle about the start point's vertical:
+// heading psi0 + (v/r) tau, position r (sin psi - sin psi0, cos psi0 - cos psi, 0).
 class Circle final : public Motion {
  public:
   Circle(double radius_m, double speed_m_s, TimeNs start_ns = 0,
-         TimeNs duration_ns = kOneHour_ns);
+         TimeNs duration_ns = kOneHour_ns, double heading_at_start_rad = 0.0);
   Kinematics at(TimeNs t_ns) const override;
 
  private:
   double radius_m_;
   double speed_m_s_;
+  double heading0_rad_;
+};
+
+// Flat scene: fast rotation between sparse knots (issue 14). A body at the
+// NED origin yawing at 90 deg/s on average while its yaw rate, pitch and roll
+// wobble, so the rotation axis moves (a constant-rate rotation about a fixed
+// axis is reproduced exactly by every chart-based method):
+//   psi = w0 tau + A_psi sin(n1 tau),  theta = A_th sin(n2 tau + 0.5),
+//   gamma = A_ga sin(n3 tau + 1),  R = R_z(psi) R_y(theta) R_x(gamma) (Eq. 1.2),
+// w0 = pi/2 rad/s, A_psi = 0.3 rad, A_th = 5 deg, A_ga = 10 deg, periods 10,
+// 20 and 30 s; the yaw rate stays within 79-101 deg/s. Body rate from the
+// analytic Euler-angle rates (as AircraftFlight).
+class FastYaw final : public Motion {
+ public:
+  explicit FastYaw(TimeNs start_ns = 0, TimeNs duration_ns = 120 * kNsPerSecond);
+  Kinematics at(TimeNs t_ns) const override;
+};
+
+// ECEF: a level circle (radius, speed) in the tangent plane of `where`, whose
+// attitude R_b^e = R_l^e R_z(psi) passes rotation angle pi at crossing_ns (the
+// heading psi_pi where tr(R_l^e R_z(psi)) = -1 exists for any R_l^e, see
+// tests/test_hard_cases.cpp case 1): log R_b^e flips branch there. Position,
+// velocity and acceleration are the circle's rotated into ECEF (a fixed
+// tangent frame, as AircraftFlight's ecef version), the body rate relative to
+// e is (0, 0, v/r).
+class TurnThroughPi final : public Motion {
+ public:
+  TurnThroughPi(const earth::Geodetic& where, double radius_m, double speed_m_s, TimeNs crossing_ns,
+                TimeNs start_ns, TimeNs duration_ns);
+  Kinematics at(TimeNs t_ns) const override;
+  // Heading (rad) at which R_l^e R_z(psi) has rotation angle pi.
+  static double heading_at_pi(const Mat3& R_l_e);
+
+ private:
+  Vec3 origin_e_m_;
+  Mat3 R_l_e_;
+  Circle circle_;
 };
 
 // A smooth aircraft-like flight (default one hour) in a local NED frame about a

@@ -44,7 +44,7 @@ int main(int argc, char** argv) {
       ->check(CLI::IsMember({"local", "global"}));
   g->add_option("--derivatives", gen.derivatives, "kernel (exact, through the bump kernel) or finite-difference (thesis Eq. 3.71-3.74)")
       ->capture_default_str()->check(CLI::IsMember({"kernel", "finite-difference"}));
-  g->add_option("--ends", gen.ends, "Beyond the first/last knot: extrapolate (continue the end segments' geodesics) or clip (the thesis' one-sided windows)")
+  g->add_option("--ends", gen.ends, "Beyond the first/last knot: extrapolate (continue the degree-6 polynomial through the seven end knots) or clip (the thesis' one-sided windows)")
       ->capture_default_str()->check(CLI::IsMember({"extrapolate", "clip"}));
   g->add_option("--gap-policy", gen.gap_policy, "Knot intervals longer than --max-gap-s: error, or split into independent segments")
       ->capture_default_str()->check(CLI::IsMember({"error", "split"}));

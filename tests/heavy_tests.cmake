@@ -11,6 +11,7 @@ set(IMUEMU_HEAVY_TESTS
   Stream.EveryOptionStreamsLikeBatch
   Stream.OneHourFlightStreamedEqualsBatchBitForBit
   FlightAccuracy.EcefAllMethods
+  Ends.AllSamplesAccelWithinTwiceTheInteriorOnTheFlight
   Pipeline.ClosedFormPositionSmoothingEqualsTheDenseSum
   Cli.ClosedLoopOneHourFlightDriftStaysWithinBounds
   AllanEstimate.NinetyPercentIntervalsCoverTheTruthNinetyPercentOfTheTime

@@ -365,10 +365,15 @@ TEST(HardCases, JitteredKnotTimes) {
   // rms x1.22, max x0.54; accel rms x4.95, max x3.03 (uniform accel rms
   // 3.2e-4, jittered 1.6e-3 m/s^2: the spline's error grows with the longest
   // knot interval, here 1.6 s, as h^4 -> x6.5 at most).
+  // Since issue 14's end extrapolation (degree-6 virtual knots) the ends no
+  // longer reach past the 3 s skipped here: the uniform accel max fell from
+  // 4.7e-3 to 5.2e-4 and the jittered one from 1.3e-2 to 5.6e-3, so the max
+  // ratio, no longer diluted by the end effect both runs shared, is x10.7
+  // (the rms ratio x5.0 and every absolute bound below are unchanged).
   EXPECT_LT(e[1].gyro_rms, 3.0 * e[0].gyro_rms);
   EXPECT_LT(e[1].gyro_max, 3.0 * e[0].gyro_max);
   EXPECT_LT(e[1].accel_rms, 8.0 * e[0].accel_rms);
-  EXPECT_LT(e[1].accel_max, 8.0 * e[0].accel_max);
+  EXPECT_LT(e[1].accel_max, 16.0 * e[0].accel_max);
   EXPECT_LT(e[1].gyro_rms, 2e-5);
   EXPECT_LT(e[1].gyro_max, 8e-5);
   EXPECT_LT(e[1].accel_rms, 8e-3);
@@ -543,7 +548,10 @@ TEST(HardCases, FourHoursNearTwoToThe31Seconds) {
   const Errors e = measure(out, Physics::ecef, truth, all());
   print("[7] " + std::to_string(seconds) + " s from 2^31 s, 100 Hz", e);
   EXPECT_TRUE(e.finite);
-  EXPECT_LT(e.gyro_max, 3e-13);
+  // Rounding only: 7.8e-14 before issue 14, 3.1e-13 since (the degree-6 end
+  // extrapolation's Lagrange weights amplify the knots' attitude rounding at
+  // the first and last samples).
+  EXPECT_LT(e.gyro_max, 1e-12);
   EXPECT_LT(e.accel_max, 1e-13);
 
   // The CSV reader: 2^31 s with a nanosecond is exact; 2^40 s (1.1e21 ns >
@@ -629,7 +637,11 @@ TEST(HardCases, PolarAndDateLineCrossings) {
     EXPECT_LT(e_ends.gyro_max, 1e-16);
     EXPECT_LT(e_ends.accel_max, 0.03);
     EXPECT_LT(d_gyro, 1e-16);
-    EXPECT_LT(d_accel, 5e-8);
+    // 5.8e-9 before issue 14, 5.1e-8 since: the degree-6 end extrapolation
+    // amplifies the CSV's 17-digit rounding of the knots at the first and
+    // last samples (both paths' errors against truth there fell, 3.6e-7 to
+    // 4.2e-8).
+    EXPECT_LT(d_accel, 1.5e-7);
   }
 }
 
@@ -754,12 +766,15 @@ TEST(HardCases, OutputRatesFrom50HzTo10kHz) {
   EXPECT_LT(flight_err[hi].accel_max, 2.0 * flight_err[1].accel_max);
   EXPECT_LT(flight_err[hi].gyro_max, 7e-6);
   EXPECT_LT(flight_err[hi].accel_max, 0.02);
+  // The line's accel error is rounding of the ECEF knot positions (ulp 9e-10
+  // m): 1.0e-8 m/s^2 before issue 14, 9.5e-8 at every rate since, where the
+  // degree-6 end extrapolation's Lagrange weights amplify it at the ends.
   for (std::size_t r = 1; r <= hi; ++r) {  // 100 Hz and up: Delta >= 50
     EXPECT_LT(line_kernel[r].gyro_max, 5e-8) << rates[r] << " Hz";
-    EXPECT_LT(line_kernel[r].accel_max, 6e-8) << rates[r] << " Hz";
+    EXPECT_LT(line_kernel[r].accel_max, 3e-7) << rates[r] << " Hz";
   }
   EXPECT_LT(line_kernel[hi].gyro_max, 1e-13);
-  EXPECT_LT(line_kernel[hi].accel_max, 3e-8);
+  EXPECT_LT(line_kernel[hi].accel_max, 3e-7);
   if (!kSanitized) {
     // Finite differences at 10 kHz: rounding / h^2, hundreds of times the
     // kernel derivatives' error (informational; the bound only says "larger").
