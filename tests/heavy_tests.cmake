@@ -20,6 +20,9 @@ set(IMUEMU_HEAVY_TESTS
   AllanPresets.Adis16470SixHoursAt100Hz
   AllanPresets.Stim300TwoDaysAt20Hz
   AllanPresets.Hg9900TwoHundredHoursAt5Hz
+  # an hour at 200 Hz of coning and of sculling (issue 16 acceptance 1)
+  SignalChain.ConingCompensatedIncrementsReproduceTheAttitudeAfterOneHour
+  SignalChain.ScullingCompensatedIncrementsReproduceTheVelocityAfterOneHour
 )
 if(NOT IMUEMU_HEAVY_LIST_ONLY)
   set_tests_properties(${IMUEMU_HEAVY_TESTS} PROPERTIES LABELS heavy)
