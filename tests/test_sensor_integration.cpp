@@ -18,8 +18,10 @@
 #include "core/pipeline.hpp"
 #include "core/sensor/datasheet.hpp"
 #include "core/sensor/sensor_model.hpp"
+#include "core/signal_chain/signal_chain.hpp"
 #include "daemon/emission.hpp"
 #include "daemon/error_model_config.hpp"
+#include "daemon/scene_check.hpp"
 #include "daemon/scene_config.hpp"
 #include "daemon/scene_runner.hpp"
 #include "core/reference_motion.hpp"
@@ -212,6 +214,78 @@ TEST_F(SensorIntegration, GenerateSceneFileAndTheEmissionEngineGiveTheSameBitsAn
   ASSERT_EQ(run_cli("generate --scene-file " + path("s.toml") + " --max-seconds 4 --sensor ideal --quiet --out " + path("gi.csv")), 0);
   const auto ideal_rows = read_rows(path("gi.csv"));
   for (std::size_t k = 0; k < 800; ++k) ASSERT_EQ(ideal_rows[k].gyro, ideal.imu[k].gyro_rad_s) << k;
+}
+
+// Issue 16: the device's signal chain in every path. The stim300 sensor
+// model runs at the icm42688p chain's internal rate (8 kHz = 40 x 200 Hz)
+// before the anti-alias and UI filters and the decimation; generate and the
+// emission engine (what imuemud runs) give the same bits, which are the
+// chain's own on the batch trajectory; check-config prints the group delay
+// (analytic: 1/(2 tan(pi fc/fs) sin(pi/4)) samples for each 2nd-order
+// Butterworth, fc = 258 Hz and 100 Hz at 8 kHz: 24.9524 samples = 3.11905 ms).
+TEST_F(SensorIntegration, SignalChainGivesTheSameBitsInGenerateAndTheEmissionEngineAndCheckConfigPrintsItsDelay) {
+  std::string text = kScene;
+  text.replace(text.find("[imu.error_model.gyro]\nrange_dps = 5.7\n"), 39, "");
+  text += "[imu.error_model.signal_chain]\npreset = \"icm42688p\"\n";
+  {
+    std::ofstream f(path("c.toml"));
+    f << text;
+  }
+  const scene::SceneConfig sc = scene::parse_scene_file(path("c.toml"));
+  const scene::ImuConfig& imu = sc.imus.at(0);
+  ASSERT_EQ(imu.error_model.chain.preset, "icm42688p");
+  const std::string check = scene::to_text(scene::check_scene(sc));
+  EXPECT_NE(check.find("internal rate 8000 Hz (40 x 200 Hz)"), std::string::npos) << check;
+  EXPECT_NE(check.find("group delay: 3.11905 ms at DC"), std::string::npos) << check;
+
+  std::string out;
+  ASSERT_EQ(run_cli("generate --scene-file " + path("c.toml") + " --max-seconds 4 --out " + path("g.csv"), &out), 0) << out;
+  EXPECT_NE(out.find("group delay: 3.11905 ms at DC"), std::string::npos) << out;
+  EXPECT_NE(out.find("terms at 8000 Hz"), std::string::npos) << out;  // the model runs at the internal rate
+  const std::vector<Row> batch = read_rows(path("g.csv"));
+  ASSERT_EQ(batch.size(), 800u);
+
+  emission::DeviceOptions dev;
+  dev.name = imu.name;
+  dev.rate_hz = imu.rate_hz;
+  dev.pipeline = scene::pipeline_options(sc, imu);
+  dev.mounting = imu.mounting;
+  dev.sensor_model = imu.error_model.sensor();
+  dev.chain = imu.error_model.chain;
+  dev.stream_encoder = drivers::make_stream_encoder("native");
+  auto rec = std::make_unique<Recording>();
+  Recording* recording = rec.get();
+  dev.transport = std::move(rec);
+  emission::EngineOptions eo;
+  eo.trajectory = scene::scene_trajectory(sc);
+  eo.drop_late_ticks = false;
+  eo.max_ticks_per_device = 800;
+  eo.ring_capacity = 1024;
+  std::vector<emission::DeviceOptions> devices;
+  devices.push_back(std::move(dev));
+  emission::EmissionEngine engine(std::move(eo), std::move(devices));
+  engine.start();
+  ASSERT_TRUE(engine.wait(20s));
+  engine.stop();
+  const auto wire = decode_native(recording->bytes());
+  ASSERT_EQ(wire.size(), 800u);
+
+  const BatchResult ideal = run_batch(scene::scene_trajectory(sc), scene::pipeline_options(sc, imu));
+  signal_chain::DeviceChain chain(sc.physics, imu.error_model.sensor(), imu.error_model.chain, 200, "imuA");
+  double filtered_vs_ideal = 0.0;
+  for (std::size_t k = 0; k < wire.size(); ++k) {
+    ASSERT_EQ(wire[k].gyro_rad_s, batch[k].gyro) << k;
+    ASSERT_EQ(wire[k].accel_m_s2, batch[k].accel) << k;
+    const signal_chain::ChainOutput o =
+        chain.step(k, ideal.trajectory[k], ideal.imu[k], k > 0 ? &ideal.trajectory[k - 1] : nullptr, std::nullopt);
+    ASSERT_EQ(o.gyro_rad_s, batch[k].gyro) << k;
+    if (k >= 200) filtered_vs_ideal = std::max(filtered_vs_ideal, (o.gyro_rad_s - ideal.imu[k].gyro_rad_s).norm());
+  }
+  // The 100 Hz UI filter leaves the slow circle's rate (0.1 rad/s) and
+  // takes most of the noise: STIM300 ARW 0.15 deg/sqrt(h) is 4.4e-5 rad/s/sqrt(Hz),
+  // ~3e-3 rad/s per sample at 8 kHz, ~7e-4 rad/s within 100 Hz (x sqrt(1.1 x 100)).
+  EXPECT_LT(filtered_vs_ideal, 5e-3);
+  EXPECT_GT(filtered_vs_ideal, 1e-4);
 }
 
 TEST_F(SensorIntegration, StreamReplayEqualsGenerateWithTheSameSensorAndSeed) {
@@ -407,6 +481,47 @@ TEST(ErrorModelConfig, RefusesUnknownUnitlessAndAmbiguousKeysNamingFileLineAndKe
   EXPECT_NEAR(s.gyro.white_density.x(), 0.3 * std::numbers::pi / 180.0 / 60.0, 1e-18);
   EXPECT_EQ(s.gyro.bias_instability, sensor::preset_spec("adis16470").gyro.bias_instability);
   EXPECT_TRUE(scene::parse_scene_text(head, "ideal.toml", ".").imus[0].error_model.ideal());
+}
+
+// [imu.error_model.signal_chain] is parsed strictly, and checked against the
+// device's rate at parse time (check-config refuses what a start would).
+TEST(SignalChainConfig, RefusesUnknownKeysAndChainsTheRateCannotRunNamingFileLineAndKey) {
+  const std::string head =
+      "[scene]\nname = \"x\"\nphysics = \"flat\"\n[trajectory]\nsource = \"sample:static\"\n"
+      "[[imu]]\nname = \"a\"\nrate_hz = 300\nprotocol = \"native\"\n[imu.transport]\ntype = \"null\"\n"
+      "[imu.error_model.signal_chain]\n";  // line 12
+  const std::vector<BadCase> cases = {
+      {"unknown key", "preset = \"mip\"\ncutoff = 3\n", "imu[0].error_model.signal_chain.cutoff", "unknown key", 14},
+      {"unknown preset", "preset = \"bmi088\"\n", "imu[0].error_model.signal_chain.preset", "unknown signal chain preset", 13},
+      {"oversampling", "oversampling = 0\n", "imu[0].error_model.signal_chain.oversampling", "1..1024", 13},
+      {"adis at 300 Hz", "preset = \"adis16470\"\n", "imu[0].error_model.signal_chain",
+       "does not divide 2000 (at rate_hz 300)", 12},
+      {"beyond half the internal rate", "oversampling = 2\n[[imu.error_model.signal_chain.stage]]\nkind = \"butterworth\"\nfrequency_hz = 400\n",
+       "imu[0].error_model.signal_chain", "stage 1 (butterworth): frequency_hz 400", 12},
+      {"stage kind", "[[imu.error_model.signal_chain.stage]]\nkind = \"kalman\"\n",
+       "imu[0].error_model.signal_chain.stage[0].kind", "unknown filter kind 'kalman'", 14},
+  };
+  for (const BadCase& c : cases) {
+    try {
+      (void)scene::parse_scene_text(head + c.table, "bad.toml", ".");
+      ADD_FAILURE() << c.name << ": accepted";
+    } catch (const scene::SceneError& e) {
+      EXPECT_EQ(e.key(), c.key) << c.name << ": " << e.what();
+      EXPECT_EQ(e.line(), c.line) << c.name << ": " << e.what();
+      EXPECT_NE(std::string(e.what()).find(c.what), std::string::npos) << c.name << ": " << e.what();
+    }
+  }
+  const scene::SceneConfig ok = scene::parse_scene_text(
+      head + "oversampling = 4\ncompensate_delay = true\n[[imu.error_model.signal_chain.stage]]\nkind = \"notch\"\n"
+             "frequency_hz = 250\nq = 4\n",
+      "ok.toml", ".");
+  const signal_chain::ChainSpec& c = ok.imus[0].error_model.chain;
+  EXPECT_FALSE(ok.imus[0].error_model.ideal());
+  EXPECT_FALSE(ok.imus[0].error_model.sensor().has_value());
+  ASSERT_TRUE(c.stages && c.stages->size() == 1);
+  EXPECT_EQ((*c.stages)[0].kind, signal_chain::StageKind::notch);
+  EXPECT_EQ(c.oversampling, 4);
+  EXPECT_TRUE(c.compensate_delay);
 }
 
 }  // namespace

@@ -66,7 +66,7 @@ Kinematics HermiteInterval::at(double s) const {
   const double t = s * h_s_;
   Kinematics k;
   k.t_ns = a_.t_ns + static_cast<TimeNs>(std::llround(t * 1e9));
-  k.position_m = a_.position_m + t * (a_.velocity_m_s + t * (0.5 * a_.acceleration_m_s2 + t * (c3_ + t * (c4_ + t * c5_))));
+  k.position_m = position_at(s);
   k.velocity_m_s = a_.velocity_m_s + t * (a_.acceleration_m_s2 + t * (3.0 * c3_ + t * (4.0 * c4_ + t * 5.0 * c5_)));
   k.acceleration_m_s2 = a_.acceleration_m_s2 + t * (6.0 * c3_ + t * (12.0 * c4_ + t * 20.0 * c5_));
   const Vec3 rho = t * (rho1_ + t * (rho2_ + t * rho3_));
@@ -74,6 +74,11 @@ Kinematics HermiteInterval::at(double s) const {
   k.attitude = a_.attitude * so3::exp(rho);
   k.angular_rate_rad_s = so3::W(rho) * rho_dot;
   return k;
+}
+
+Vec3 HermiteInterval::position_at(double s) const {
+  const double t = s * h_s_;
+  return a_.position_m + t * (a_.velocity_m_s + t * (0.5 * a_.acceleration_m_s2 + t * (c3_ + t * (c4_ + t * c5_))));
 }
 
 Increment compensated_increment(const SceneModel& scene, const Kinematics& start, const Kinematics& end, double h_s,
@@ -100,7 +105,7 @@ Increment compensated_increment(const SceneModel& scene, const Kinematics& start
                   (end.velocity_m_s - start.velocity_m_s) + w_ie.cross(end.position_m - start.position_m);
   Vec3 gravitation = Vec3::Zero();
   for (std::size_t i = 0; i < kGl3Node.size(); ++i) {
-    const Vec3 x = motion->at(kGl3Node[i]).position_m;
+    const Vec3 x = motion->position_at(kGl3Node[i]);
     const Vec3 G = earth::normal_gravity_ecef(x) + w_ie.cross(w_ie.cross(x));
     gravitation += kGl3Weight[i] * (earth_turn(w * kGl3Node[i] * h_s) * G);
   }

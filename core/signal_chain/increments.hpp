@@ -40,6 +40,8 @@ class IntervalMotion {
  public:
   virtual ~IntervalMotion() = default;
   virtual Kinematics at(double s) const = 0;
+  // The position alone (what the ecef gravitation integral reads).
+  virtual Vec3 position_at(double s) const { return at(s).position_m; }
 };
 
 // The interpolant the daemon uses between two output samples of the smoothed
@@ -53,6 +55,7 @@ class HermiteInterval final : public IntervalMotion {
  public:
   HermiteInterval(const Kinematics& a, const Kinematics& b, double h_s);
   Kinematics at(double s) const override;
+  Vec3 position_at(double s) const override;
 
  private:
   Kinematics a_;
