@@ -19,6 +19,7 @@
 #include "core/sensor/datasheet.hpp"
 #include "core/sensor/sensor_model.hpp"
 #include "core/signal_chain/signal_chain.hpp"
+#include "core/so3.hpp"
 #include "daemon/emission.hpp"
 #include "daemon/error_model_config.hpp"
 #include "daemon/scene_check.hpp"
@@ -481,6 +482,57 @@ TEST(ErrorModelConfig, RefusesUnknownUnitlessAndAmbiguousKeysNamingFileLineAndKe
   EXPECT_NEAR(s.gyro.white_density.x(), 0.3 * std::numbers::pi / 180.0 / 60.0, 1e-18);
   EXPECT_EQ(s.gyro.bias_instability, sensor::preset_spec("adis16470").gyro.bias_instability);
   EXPECT_TRUE(scene::parse_scene_text(head, "ideal.toml", ".").imus[0].error_model.ideal());
+}
+
+// Issue 16 B: the increments on the wire are the exact ones in the
+// protocol's convention. MIP (compensated: the rotation vector of the attitude
+// change and the velocity change in the body frame at the period's start)
+// against the closed form on the batch trajectory, written here: for the flat
+// scene dtheta = log(R_{k-1}^T R_k), dv = R_{k-1}^T (v_k - v_{k-1} - g h);
+// with delay compensation the time stamps move back by the group delay.
+TEST_F(SensorIntegration, MipCarriesCompensatedIncrementsAndDelayCompensationMovesTheStamps) {
+  const scene::SceneConfig sc = scene::parse_scene_text(kScene, "s.toml", ".");
+  const scene::ImuConfig& imu = sc.imus.at(0);
+  emission::DeviceOptions dev;
+  dev.name = imu.name;
+  dev.rate_hz = imu.rate_hz;
+  dev.pipeline = scene::pipeline_options(sc, imu);
+  dev.chain.preset = "mip";        // single pole at 100 Hz, 8 kHz internal
+  dev.chain.compensate_delay = true;
+  drivers::StreamEncoderOptions mo;
+  dev.stream_encoder = drivers::make_stream_encoder("mip", mo);
+  auto rec = std::make_unique<Recording>();
+  Recording* recording = rec.get();
+  dev.transport = std::move(rec);
+  emission::EngineOptions eo;
+  eo.trajectory = scene::scene_trajectory(sc);
+  eo.drop_late_ticks = false;
+  eo.max_ticks_per_device = 400;
+  eo.ring_capacity = 1024;
+  std::vector<emission::DeviceOptions> devices;
+  devices.push_back(std::move(dev));
+  emission::EmissionEngine engine(std::move(eo), std::move(devices));
+  engine.start();
+  ASSERT_TRUE(engine.wait(20s));
+  engine.stop();
+  auto decoder = drivers::make_stream_decoder("mip");
+  std::vector<drivers::DecodedSample> wire;
+  decoder->feed(recording->bytes(), [&](const drivers::DecodedSample& s) { wire.push_back(s); });
+  ASSERT_EQ(wire.size(), 400u);
+  const BatchResult b = run_batch(scene::scene_trajectory(sc), scene::pipeline_options(sc, imu));
+  const double h = 1.0 / 200.0;
+  // Single pole at fc = 100 Hz, fs = 8000 Hz: DC delay 1/(2 tan(pi fc/fs)) samples.
+  const TimeNs delay_ns = std::llround(1.0 / (2.0 * std::tan(std::numbers::pi * 100.0 / 8000.0)) / 8000.0 * 1e9);
+  for (std::size_t k = 1; k < wire.size(); ++k) {
+    const Mat3& R0 = b.trajectory[k - 1].attitude;
+    const Vec3 dtheta = so3::log(R0.transpose() * b.trajectory[k].attitude);
+    const Vec3 dv = R0.transpose() * (b.trajectory[k].velocity_m_s - b.trajectory[k - 1].velocity_m_s -
+                                      sc.physics.flat_gravity_m_s2 * h);
+    // float32 on the wire: 2^-24 relative.
+    EXPECT_LT((wire[k].delta_theta_rad - dtheta).norm(), 1e-7 * dtheta.norm() + 1e-12) << k;
+    EXPECT_LT((wire[k].delta_velocity_m_s - dv).norm(), 1e-7 * dv.norm() + 1e-12) << k;
+    EXPECT_NEAR(static_cast<double>(b.imu[k].t_ns - wire[k].t_ns), static_cast<double>(delay_ns), 1000.0) << k;
+  }
 }
 
 // [imu.error_model.signal_chain] is parsed strictly, and checked against the
