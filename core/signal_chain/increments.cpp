@@ -81,6 +81,14 @@ Vec3 HermiteInterval::position_at(double s) const {
   return a_.position_m + t * (a_.velocity_m_s + t * (0.5 * a_.acceleration_m_s2 + t * (c3_ + t * (c4_ + t * c5_))));
 }
 
+Vec3 HermiteInterval::angular_acceleration_at(double s) const {
+  const double t = s * h_s_;
+  const Vec3 rho = t * (rho1_ + t * (rho2_ + t * rho3_));
+  const Vec3 rho_dot = rho1_ + t * (2.0 * rho2_ + t * 3.0 * rho3_);
+  const Vec3 rho_ddot = 2.0 * rho2_ + 6.0 * t * rho3_;
+  return so3::angular_acceleration(rho, rho_dot, rho_ddot);
+}
+
 Increment compensated_increment(const SceneModel& scene, const Kinematics& start, const Kinematics& end, double h_s,
                                 const IntervalMotion* motion) {
   Increment out;

@@ -42,6 +42,12 @@ class IntervalMotion {
   virtual Kinematics at(double s) const = 0;
   // The position alone (what the ecef gravitation integral reads).
   virtual Vec3 position_at(double s) const { return at(s).position_m; }
+  // d/dt of the body rate, body axes (what vibration on a lever arm reads);
+  // a motion that does not know it says zero.
+  virtual Vec3 angular_acceleration_at(double s) const {
+    (void)s;
+    return Vec3::Zero();
+  }
 };
 
 // The interpolant the daemon uses between two output samples of the smoothed
@@ -56,6 +62,7 @@ class HermiteInterval final : public IntervalMotion {
   HermiteInterval(const Kinematics& a, const Kinematics& b, double h_s);
   Kinematics at(double s) const override;
   Vec3 position_at(double s) const override;
+  Vec3 angular_acceleration_at(double s) const override;  // Eq. 3.61 on rho
 
  private:
   Kinematics a_;

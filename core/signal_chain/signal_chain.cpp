@@ -102,6 +102,7 @@ ResolvedChain resolve(const ChainSpec& spec, std::int64_t output_rate_hz) {
   c.stages = spec.stages.value_or(p.stages);
   c.design = design(c.stages, static_cast<double>(c.internal_rate_hz));
   c.compensate_delay = spec.compensate_delay;
+  c.has_vibration = !spec.vibration.empty();
   c.group_delay_s = group_delay_samples(c.design, 0.0) / static_cast<double>(c.internal_rate_hz);
   return c;
 }
@@ -137,6 +138,7 @@ std::vector<std::string> describe(const ResolvedChain& c, std::int64_t output_ra
   out.push_back(b);
   std::snprintf(b, sizeof b, "  gain at %s: %.4g dB", hz(quarter).c_str(), 20.0 * std::log10(std::abs(response(c.design, quarter))));
   out.push_back(b);
+  if (c.has_vibration) out.push_back("  vibration as rigid-body motion on the smoothed trajectory (docs/signal-chain.md)");
   out.push_back(c.compensate_delay ? "  time stamps compensated: each sample stamped t_k - group delay"
                                    : "  time stamps not compensated (the output lags the motion by the group delay)");
   return out;
@@ -149,6 +151,7 @@ DeviceChain::DeviceChain(const SceneModel& scene, const std::optional<sensor::Se
       period_s_(1.0 / static_cast<double>(output_rate_hz)),
       filter_(chain_.design) {
   if (sensor && !sensor->is_ideal()) sensor_.emplace(*sensor, static_cast<double>(chain_.internal_rate_hz), device);
+  if (!chain.vibration.empty()) vibration_.emplace(chain.vibration, device);
   if (chain_.compensate_delay) stamp_shift_ns_ = static_cast<TimeNs>(std::llround(chain_.group_delay_s * 1e9));
 }
 
@@ -166,11 +169,36 @@ ChainOutput DeviceChain::step(std::uint64_t k, const Kinematics& now, const ImuS
   const int M = chain_.oversampling;
   // The motion over the interval, when something reads inside it.
   std::optional<HermiteInterval> hermite;
-  const bool needs_motion = M > 1 || (increments && (*increments == IncrementConvention::raw || scene_.physics == Physics::ecef));
+  const bool needs_motion = M > 1 || vibration_ ||
+                            (increments && (*increments == IncrementConvention::raw || scene_.physics == Physics::ecef));
   if (previous && !motion && needs_motion) {
     hermite.emplace(*previous, now, period_s_);
     motion = &*hermite;
   }
+  // Vibration: the interval's motion, its ends and the ideal sample at t_k
+  // become the vibrating sensor's (the ends from the given kinematics, so
+  // consecutive intervals share their attitude and velocity exactly).
+  std::optional<VibratingInterval> vibrating;
+  Kinematics previous_v, now_v;
+  ImuSample ideal_v;
+  if (vibration_) {
+    const double t_k_s = static_cast<double>(k) * period_s_;
+    if (previous) {
+      vibrating.emplace(*motion, *vibration_, t_k_s - period_s_, period_s_);
+      previous_v = vibration_->apply(*previous, motion->angular_acceleration_at(0.0), t_k_s - period_s_);
+      now_v = vibration_->apply(now, motion->angular_acceleration_at(1.0), t_k_s);
+      previous = &previous_v;
+      motion = &*vibrating;
+    } else {
+      now_v = vibration_->apply(now, Vec3::Zero(), t_k_s);
+    }
+    ideal_v = imu_from_kinematics(scene_, now_v);
+    ideal_v.t_ns = ideal_now.t_ns;
+    out.gyro_rad_s = ideal_v.gyro_rad_s;
+    out.accel_m_s2 = ideal_v.accel_m_s2;
+  }
+  const Kinematics& now_k = vibration_ ? now_v : now;
+  const ImuSample& ideal_k = vibration_ ? ideal_v : ideal_now;
   Vec3 error_theta = Vec3::Zero(), error_v = Vec3::Zero();
   if (!ideal()) {
     // Internal samples j = M (k - 1) + 1 .. M k over the interval (only j = 0
@@ -180,7 +208,7 @@ ChainOutput DeviceChain::step(std::uint64_t k, const Kinematics& now, const ImuS
     const double dt_s = period_s_ / M;
     Filter::Channels y{};
     for (std::uint64_t i = first_i; i <= static_cast<std::uint64_t>(M); ++i) {
-      ImuSample u = ideal_now;
+      ImuSample u = ideal_k;
       if (i < static_cast<std::uint64_t>(M) && motion)
         u = imu_from_kinematics(scene_, motion->at(static_cast<double>(i) / M));
       Vec3 g = u.gyro_rad_s, f = u.accel_m_s2;
@@ -210,11 +238,11 @@ ChainOutput DeviceChain::step(std::uint64_t k, const Kinematics& now, const ImuS
     Increment inc;
     if (previous) {
       // motion is set whenever this convention and scene read it (needs_motion).
-      inc = increment(*increments, scene_, *previous, now, period_s_, motion);
+      inc = increment(*increments, scene_, *previous, now_k, period_s_, motion);
     } else {
       // Nothing to integrate over: the rectangle of the sample at t_k.
-      inc.delta_theta_rad = ideal_now.gyro_rad_s * period_s_;
-      inc.delta_velocity_m_s = ideal_now.accel_m_s2 * period_s_;
+      inc.delta_theta_rad = ideal_k.gyro_rad_s * period_s_;
+      inc.delta_velocity_m_s = ideal_k.accel_m_s2 * period_s_;
     }
     out.delta_theta_rad = inc.delta_theta_rad + error_theta;
     out.delta_velocity_m_s = inc.delta_velocity_m_s + error_v;

@@ -32,6 +32,7 @@
 #include "core/sensor/sensor_model.hpp"
 #include "core/signal_chain/filters.hpp"
 #include "core/signal_chain/increments.hpp"
+#include "core/signal_chain/vibration.hpp"
 
 namespace imuemu::signal_chain {
 
@@ -42,9 +43,12 @@ struct ChainSpec {
   std::optional<int> oversampling;  // internal rate = oversampling x output rate; empty: the preset's (ideal: 1)
   std::optional<std::vector<Stage>> stages;  // replaces the preset's stages
   bool compensate_delay = false;    // stamp outputs t_k - group delay at DC
+  // Vibration as rigid-body motion on top of the smoothed trajectory
+  // (vibration.hpp); its lever_arm_m / sensor_to_body are the device's mounting.
+  VibrationSpec vibration;
   bool is_ideal() const {
     return preset == "ideal" && (!oversampling || *oversampling == 1) && (!stages || stages->empty()) &&
-           !compensate_delay;
+           !compensate_delay && vibration.empty();
   }
 };
 
@@ -59,7 +63,8 @@ struct ResolvedChain {
   Design design;
   bool compensate_delay = false;
   double group_delay_s = 0.0;  // at DC, analytic (filters.hpp group_delay_samples)
-  bool is_ideal() const { return oversampling == 1 && design.empty() && !compensate_delay; }
+  bool has_vibration = false;
+  bool is_ideal() const { return oversampling == 1 && design.empty() && !compensate_delay && !has_vibration; }
 };
 
 // Names of the presets: ideal, icm42688p, adis16470, stim300, mip.
@@ -109,6 +114,7 @@ class DeviceChain {
   ResolvedChain chain_;
   double period_s_ = 0.0;
   std::optional<sensor::SensorModel> sensor_;
+  std::optional<Vibration> vibration_;
   Filter filter_;
   bool have_last_ = false;
   std::uint64_t last_k_ = 0;
