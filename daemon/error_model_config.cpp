@@ -5,6 +5,7 @@
 #include <cmath>
 #include <fstream>
 #include <map>
+#include <numbers>
 #include <sstream>
 #include <stdexcept>
 
@@ -76,13 +77,93 @@ void parse_triad(const Where& w, const toml::table& t, const std::string& path, 
 //   order = 4                     # low-pass 1..3, butterworth 1..16
 //   q = 5                         # anti-alias (default 0.7071), notch
 //   length = 8                    # average, bartlett
+Vec3 vec3_of(const Where& w, const toml::node& n, const std::string& key, double scale) {
+  const std::vector<double> v = numbers_of(w, n, key);
+  if (v.size() != 3) w.fail(n.source(), key, "expected three numbers [x, y, z] (body axes)");
+  return Vec3(v[0], v[1], v[2]) * scale;
+}
+
+void only_keys(const Where& w, const toml::table& t, const std::string& path, const std::vector<std::string>& allowed) {
+  for (auto&& [key, value] : t) {
+    (void)value;
+    if (std::find(allowed.begin(), allowed.end(), key.str()) != allowed.end()) continue;
+    std::string list;
+    for (const std::string& a : allowed) list += (list.empty() ? "" : ", ") + a;
+    w.fail(key.source(), dotted(path, key.str()), "unknown key '" + std::string(key.str()) + "'; allowed: " + list);
+  }
+}
+
+// [signal_chain.vibration] (core/signal_chain/vibration.hpp), body axes:
+//   [[...vibration.sinusoid]]  frequency_hz, linear_m_s2 = [x, y, z],
+//                              angular_deg_s = [x, y, z], phase_deg = [x, y, z]
+//   [...vibration.random]      psd_g2_per_hz = [[f_hz, g2_per_hz], ...],
+//                              axis_scale = [x, y, z], resolution_hz, seed
+// The lever arm and axes are the device's [imu.mounting].
+signal_chain::VibrationSpec parse_vibration_table(const Where& w, const toml::table& t, const std::string& path) {
+  signal_chain::VibrationSpec v;
+  only_keys(w, t, path, {"sinusoid", "random"});
+  constexpr double kDeg = std::numbers::pi / 180.0;
+  if (const toml::node* n = t.get("sinusoid")) {
+    const toml::array* a = n->as_array();
+    if (a == nullptr) w.fail(n->source(), dotted(path, "sinusoid"), "expected an array of tables ([[...sinusoid]])");
+    for (std::size_t i = 0; i < a->size(); ++i) {
+      const std::string sp = dotted(path, "sinusoid[" + std::to_string(i) + "]");
+      const toml::table* st = (*a)[i].as_table();
+      if (st == nullptr) w.fail((*a)[i].source(), sp, "expected a table");
+      only_keys(w, *st, sp, {"frequency_hz", "linear_m_s2", "angular_deg_s", "phase_deg"});
+      signal_chain::Sinusoid s;
+      const toml::node* f = st->get("frequency_hz");
+      if (f == nullptr) w.fail(st->source(), sp, "missing 'frequency_hz'");
+      const std::vector<double> fv = numbers_of(w, *f, dotted(sp, "frequency_hz"));
+      if (fv.size() != 1 || !(fv[0] > 0.0)) w.fail(f->source(), dotted(sp, "frequency_hz"), "expected one number > 0");
+      s.frequency_hz = fv[0];
+      if (const toml::node* x = st->get("linear_m_s2")) s.linear_m_s2 = vec3_of(w, *x, dotted(sp, "linear_m_s2"), 1.0);
+      if (const toml::node* x = st->get("angular_deg_s")) s.angular_rad_s = vec3_of(w, *x, dotted(sp, "angular_deg_s"), kDeg);
+      if (const toml::node* x = st->get("phase_deg")) s.phase_rad = vec3_of(w, *x, dotted(sp, "phase_deg"), kDeg);
+      v.sinusoids.push_back(s);
+    }
+  }
+  if (const toml::node* n = t.get("random")) {
+    const std::string rp = dotted(path, "random");
+    const toml::table* rt = n->as_table();
+    if (rt == nullptr) w.fail(n->source(), rp, "expected a table");
+    only_keys(w, *rt, rp, {"psd_g2_per_hz", "axis_scale", "resolution_hz", "seed"});
+    signal_chain::RandomVibration r;
+    const toml::node* psd = rt->get("psd_g2_per_hz");
+    const toml::array* pa = psd != nullptr ? psd->as_array() : nullptr;
+    if (pa == nullptr) w.fail(rt->source(), dotted(rp, "psd_g2_per_hz"), "expected [[frequency_hz, g2_per_hz], ...]");
+    for (const toml::node& e : *pa) {
+      const std::vector<double> pt = numbers_of(w, e, dotted(rp, "psd_g2_per_hz"));
+      if (pt.size() != 2) w.fail(e.source(), dotted(rp, "psd_g2_per_hz"), "expected a pair [frequency_hz, g2_per_hz]");
+      r.psd.push_back({pt[0], pt[1]});
+    }
+    if (const toml::node* x = rt->get("axis_scale")) r.axis_scale = vec3_of(w, *x, dotted(rp, "axis_scale"), 1.0);
+    if (const toml::node* x = rt->get("resolution_hz")) {
+      const std::vector<double> rv = numbers_of(w, *x, dotted(rp, "resolution_hz"));
+      if (rv.size() != 1) w.fail(x->source(), dotted(rp, "resolution_hz"), "expected one number");
+      r.resolution_hz = rv[0];
+    }
+    if (const toml::node* x = rt->get("seed")) {
+      if (!x->is_integer() || x->as_integer()->get() < 0) w.fail(x->source(), dotted(rp, "seed"), "expected an integer >= 0");
+      r.seed = static_cast<std::uint64_t>(x->as_integer()->get());
+    }
+    v.random_linear = r;
+  }
+  try {
+    (void)signal_chain::Vibration(v, "check");
+  } catch (const std::invalid_argument& e) {
+    w.fail(t.source(), path, e.what());
+  }
+  return v;
+}
+
 signal_chain::ChainSpec parse_chain_table(const Where& w, const toml::table& t, const std::string& path) {
   signal_chain::ChainSpec c;
-  static const std::vector<std::string> allowed = {"preset", "oversampling", "compensate_delay", "stage"};
-  for (auto&& [key, value] : t)
-    if (std::find(allowed.begin(), allowed.end(), key.str()) == allowed.end())
-      w.fail(key.source(), dotted(path, key.str()),
-             "unknown key '" + std::string(key.str()) + "'; allowed: preset, oversampling, compensate_delay, stage");
+  only_keys(w, t, path, {"preset", "oversampling", "compensate_delay", "stage", "vibration"});
+  if (const toml::node* n = t.get("vibration")) {
+    if (!n->is_table()) w.fail(n->source(), dotted(path, "vibration"), "expected a table");
+    c.vibration = parse_vibration_table(w, *n->as_table(), dotted(path, "vibration"));
+  }
   if (const toml::node* n = t.get("preset")) {
     if (!n->is_string()) w.fail(n->source(), dotted(path, "preset"), "expected a string (a chain preset or \"ideal\")");
     c.preset = n->as_string()->get();

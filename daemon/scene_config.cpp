@@ -622,6 +622,9 @@ ImuConfig parse_imu(const Table& t) {
   if (const auto e = t.subtable("error_model")) {  // daemon/error_model_config.cpp
     const toml::table& em = *t.node("error_model")->as_table();
     imu.error_model = parse_error_model_table(em, t.ctx().file, e->path());
+    // Vibration reaches the sensor through its mounting (lever arm, axes).
+    imu.error_model.chain.vibration.lever_arm_m = imu.mounting.lever_arm_b_m;
+    imu.error_model.chain.vibration.sensor_to_body = imu.mounting.sensor_to_body;
     // The chain against this device's rate (a preset may not run at it, a
     // filter frequency may lie beyond half the internal rate).
     try {

@@ -552,6 +552,10 @@ TEST(SignalChainConfig, RefusesUnknownKeysAndChainsTheRateCannotRunNamingFileLin
        "imu[0].error_model.signal_chain", "stage 1 (butterworth): frequency_hz 400", 12},
       {"stage kind", "[[imu.error_model.signal_chain.stage]]\nkind = \"kalman\"\n",
        "imu[0].error_model.signal_chain.stage[0].kind", "unknown filter kind 'kalman'", 14},
+      {"vibration key", "[imu.error_model.signal_chain.vibration]\nshock = 1\n",
+       "imu[0].error_model.signal_chain.vibration.shock", "unknown key 'shock'; allowed: sinusoid, random", 14},
+      {"psd order", "[imu.error_model.signal_chain.vibration.random]\npsd_g2_per_hz = [[100, 0.01], [50, 0.02]]\n",
+       "imu[0].error_model.signal_chain.vibration", "PSD point 2 must have a frequency above the previous one", 13},
   };
   for (const BadCase& c : cases) {
     try {
@@ -574,6 +578,23 @@ TEST(SignalChainConfig, RefusesUnknownKeysAndChainsTheRateCannotRunNamingFileLin
   EXPECT_EQ((*c.stages)[0].kind, signal_chain::StageKind::notch);
   EXPECT_EQ(c.oversampling, 4);
   EXPECT_TRUE(c.compensate_delay);
+  // Vibration in body axes, reaching the sensor through its mounting.
+  const std::string shaken =
+      "[scene]\nname = \"x\"\nphysics = \"flat\"\n[trajectory]\nsource = \"sample:static\"\n"
+      "[[imu]]\nname = \"a\"\nrate_hz = 400\nprotocol = \"native\"\n[imu.transport]\ntype = \"null\"\n"
+      "[imu.mounting]\nlever_arm_m = [0.3, 0.0, -0.1]\n"
+      "[[imu.error_model.signal_chain.vibration.sinusoid]]\nfrequency_hz = 120\nlinear_m_s2 = [0, 0, 3]\n"
+      "angular_deg_s = [0, 2, 0]\n"
+      "[imu.error_model.signal_chain.vibration.random]\npsd_g2_per_hz = [[20, 0.01], [500, 0.01]]\nseed = 4\n";
+  const scene::SceneConfig v = scene::parse_scene_text(shaken, "v.toml", ".");
+  const signal_chain::VibrationSpec& vib = v.imus[0].error_model.chain.vibration;
+  ASSERT_EQ(vib.sinusoids.size(), 1u);
+  EXPECT_EQ(vib.sinusoids[0].linear_m_s2, Vec3(0.0, 0.0, 3.0));
+  EXPECT_DOUBLE_EQ(vib.sinusoids[0].angular_rad_s.y(), 2.0 * std::numbers::pi / 180.0);
+  ASSERT_TRUE(vib.random_linear.has_value());
+  EXPECT_EQ(vib.random_linear->seed, 4u);
+  EXPECT_EQ(vib.lever_arm_m, Vec3(0.3, 0.0, -0.1));
+  EXPECT_FALSE(v.imus[0].error_model.ideal());
 }
 
 }  // namespace
