@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <mutex>
 #include <sstream>
 
@@ -104,6 +105,46 @@ int run_cli(const std::string& args, std::string* output = nullptr) {
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
+// The scene's first device in the emission engine, as imuemud runs it, with
+// its transport in memory: `ticks` ticks, all computed before the clock
+// starts (counts exact on a loaded host). `adjust` changes the device first.
+struct EngineRun {
+  bool finished = false;
+  std::vector<std::uint8_t> bytes;
+  emission::EngineStats stats;
+};
+EngineRun run_scene_device(const scene::SceneConfig& sc, std::uint64_t ticks, const std::string& protocol,
+                           const std::function<void(emission::DeviceOptions&)>& adjust = {}) {
+  const scene::ImuConfig& imu = sc.imus.at(0);
+  emission::DeviceOptions dev;
+  dev.name = imu.name;
+  dev.rate_hz = imu.rate_hz;
+  dev.pipeline = scene::pipeline_options(sc, imu);
+  dev.mounting = imu.mounting;
+  dev.sensor_model = imu.error_model.sensor();
+  dev.chain = imu.error_model.chain;
+  dev.stream_encoder = drivers::make_stream_encoder(protocol);
+  if (adjust) adjust(dev);
+  auto rec = std::make_unique<Recording>();
+  Recording* recording = rec.get();
+  dev.transport = std::move(rec);
+  emission::EngineOptions eo;
+  eo.trajectory = scene::scene_trajectory(sc);
+  eo.drop_late_ticks = false;
+  eo.max_ticks_per_device = ticks;
+  eo.ring_capacity = 1024;
+  std::vector<emission::DeviceOptions> devices;
+  devices.push_back(std::move(dev));
+  emission::EmissionEngine engine(std::move(eo), std::move(devices));
+  engine.start();
+  EngineRun run;
+  run.finished = engine.wait(std::chrono::seconds(20));
+  engine.stop();
+  run.bytes = recording->bytes();
+  run.stats = engine.stats();
+  return run;
+}
+
 class SensorIntegration : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -163,28 +204,9 @@ TEST_F(SensorIntegration, GenerateSceneFileAndTheEmissionEngineGiveTheSameBitsAn
   ASSERT_EQ(batch.size(), 800u);
 
   // What imuemud runs: the scene's device in the emission engine.
-  emission::DeviceOptions dev;
-  dev.name = imu.name;
-  dev.rate_hz = imu.rate_hz;
-  dev.pipeline = scene::pipeline_options(sc, imu);
-  dev.mounting = imu.mounting;
-  dev.sensor_model = imu.error_model.spec;
-  dev.stream_encoder = drivers::make_stream_encoder("native");
-  auto rec = std::make_unique<Recording>();
-  Recording* recording = rec.get();
-  dev.transport = std::move(rec);
-  emission::EngineOptions eo;
-  eo.trajectory = scene::scene_trajectory(sc);
-  eo.drop_late_ticks = false;
-  eo.max_ticks_per_device = 800;
-  eo.ring_capacity = 1024;
-  std::vector<emission::DeviceOptions> devices;
-  devices.push_back(std::move(dev));
-  emission::EmissionEngine engine(std::move(eo), std::move(devices));
-  engine.start();
-  ASSERT_TRUE(engine.wait(20s));
-  engine.stop();
-  const auto wire = decode_native(recording->bytes());
+  const EngineRun run = run_scene_device(sc, 800, "native");
+  ASSERT_TRUE(run.finished);
+  const auto wire = decode_native(run.bytes);
   ASSERT_EQ(wire.size(), 800u);
 
   // Independent saturation truth from the sensor model itself on the ideal batch.
@@ -207,8 +229,8 @@ TEST_F(SensorIntegration, GenerateSceneFileAndTheEmissionEngineGiveTheSameBitsAn
   }
   EXPECT_GT(saturated, 100u);
   EXPECT_LT(saturated, 800u);
-  EXPECT_EQ(engine.stats().devices.front().saturated, saturated);
-  EXPECT_EQ(emission::to_json(engine.stats())["devices"][0]["saturated"], saturated);
+  EXPECT_EQ(run.stats.devices.front().saturated, saturated);
+  EXPECT_EQ(emission::to_json(run.stats)["devices"][0]["saturated"], saturated);
   // The seed matters; the ideal path does not change.
   ASSERT_EQ(run_cli("generate --scene-file " + path("s.toml") + " --max-seconds 4 --seed 10 --quiet --out " + path("g10.csv")), 0);
   EXPECT_NE(read_rows(path("g10.csv"))[5].gyro, batch[5].gyro);
@@ -246,29 +268,9 @@ TEST_F(SensorIntegration, SignalChainGivesTheSameBitsInGenerateAndTheEmissionEng
   const std::vector<Row> batch = read_rows(path("g.csv"));
   ASSERT_EQ(batch.size(), 800u);
 
-  emission::DeviceOptions dev;
-  dev.name = imu.name;
-  dev.rate_hz = imu.rate_hz;
-  dev.pipeline = scene::pipeline_options(sc, imu);
-  dev.mounting = imu.mounting;
-  dev.sensor_model = imu.error_model.sensor();
-  dev.chain = imu.error_model.chain;
-  dev.stream_encoder = drivers::make_stream_encoder("native");
-  auto rec = std::make_unique<Recording>();
-  Recording* recording = rec.get();
-  dev.transport = std::move(rec);
-  emission::EngineOptions eo;
-  eo.trajectory = scene::scene_trajectory(sc);
-  eo.drop_late_ticks = false;
-  eo.max_ticks_per_device = 800;
-  eo.ring_capacity = 1024;
-  std::vector<emission::DeviceOptions> devices;
-  devices.push_back(std::move(dev));
-  emission::EmissionEngine engine(std::move(eo), std::move(devices));
-  engine.start();
-  ASSERT_TRUE(engine.wait(20s));
-  engine.stop();
-  const auto wire = decode_native(recording->bytes());
+  const EngineRun run = run_scene_device(sc, 800, "native");
+  ASSERT_TRUE(run.finished);
+  const auto wire = decode_native(run.bytes);
   ASSERT_EQ(wire.size(), 800u);
 
   const BatchResult ideal = run_batch(scene::scene_trajectory(sc), scene::pipeline_options(sc, imu));
@@ -493,31 +495,15 @@ TEST(ErrorModelConfig, RefusesUnknownUnitlessAndAmbiguousKeysNamingFileLineAndKe
 TEST_F(SensorIntegration, MipCarriesCompensatedIncrementsAndDelayCompensationMovesTheStamps) {
   const scene::SceneConfig sc = scene::parse_scene_text(kScene, "s.toml", ".");
   const scene::ImuConfig& imu = sc.imus.at(0);
-  emission::DeviceOptions dev;
-  dev.name = imu.name;
-  dev.rate_hz = imu.rate_hz;
-  dev.pipeline = scene::pipeline_options(sc, imu);
-  dev.chain.preset = "mip";        // single pole at 100 Hz, 8 kHz internal
-  dev.chain.compensate_delay = true;
-  drivers::StreamEncoderOptions mo;
-  dev.stream_encoder = drivers::make_stream_encoder("mip", mo);
-  auto rec = std::make_unique<Recording>();
-  Recording* recording = rec.get();
-  dev.transport = std::move(rec);
-  emission::EngineOptions eo;
-  eo.trajectory = scene::scene_trajectory(sc);
-  eo.drop_late_ticks = false;
-  eo.max_ticks_per_device = 400;
-  eo.ring_capacity = 1024;
-  std::vector<emission::DeviceOptions> devices;
-  devices.push_back(std::move(dev));
-  emission::EmissionEngine engine(std::move(eo), std::move(devices));
-  engine.start();
-  ASSERT_TRUE(engine.wait(20s));
-  engine.stop();
+  const EngineRun run = run_scene_device(sc, 400, "mip", [](emission::DeviceOptions& dev) {
+    dev.sensor_model.reset();  // the ideal sensor: the increments are the motion's alone
+    dev.chain.preset = "mip";  // single pole at 100 Hz, 8 kHz internal
+    dev.chain.compensate_delay = true;
+  });
+  ASSERT_TRUE(run.finished);
   auto decoder = drivers::make_stream_decoder("mip");
   std::vector<drivers::DecodedSample> wire;
-  decoder->feed(recording->bytes(), [&](const drivers::DecodedSample& s) { wire.push_back(s); });
+  decoder->feed(run.bytes, [&](const drivers::DecodedSample& s) { wire.push_back(s); });
   ASSERT_EQ(wire.size(), 400u);
   const BatchResult b = run_batch(scene::scene_trajectory(sc), scene::pipeline_options(sc, imu));
   const double h = 1.0 / 200.0;
