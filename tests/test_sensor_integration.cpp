@@ -154,6 +154,20 @@ class SensorIntegration : public ::testing::Test {
   }
   void TearDown() override { fs::remove_all(dir_); }
   std::string path(const std::string& name) const { return (dir_ / name).string(); }
+  // `imuemu generate --scene-file` over 4 s (its messages in out, its rows in
+  // batch) and the scene's device in the emission engine (native): 800
+  // samples each at 200 Hz.
+  void generate_and_emit(const std::string& scene_file, const scene::SceneConfig& sc, std::string& out,
+                         std::vector<Row>& batch, EngineRun& run, std::vector<drivers::DecodedSample>& wire) {
+    ASSERT_EQ(run_cli("generate --scene-file " + path(scene_file) + " --max-seconds 4 --out " + path("g.csv"), &out), 0)
+        << out;
+    batch = read_rows(path("g.csv"));
+    ASSERT_EQ(batch.size(), 800u);
+    run = run_scene_device(sc, 800, "native");
+    ASSERT_TRUE(run.finished);
+    wire = decode_native(run.bytes);
+    ASSERT_EQ(wire.size(), 800u);
+  }
   fs::path dir_;
 };
 
@@ -196,18 +210,14 @@ TEST_F(SensorIntegration, GenerateSceneFileAndTheEmissionEngineGiveTheSameBitsAn
   EXPECT_DOUBLE_EQ(imu.error_model.spec.gyro.range, 5.7 * std::numbers::pi / 180.0);
   EXPECT_GT(imu.error_model.spec.gyro.bias_instability.x(), 0.0);  // the preset's, kept
 
-  // The batch reference: the CLI, as a user runs it.
+  // The batch reference (the CLI, as a user runs it) and what imuemud runs.
   std::string out;
-  ASSERT_EQ(run_cli("generate --scene-file " + path("s.toml") + " --max-seconds 4 --out " + path("g.csv"), &out), 0) << out;
+  std::vector<Row> batch;
+  EngineRun run;
+  std::vector<drivers::DecodedSample> wire;
+  generate_and_emit("s.toml", sc, out, batch, run, wire);
+  if (HasFatalFailure()) return;
   EXPECT_NE(out.find("sigma = N sqrt(fs)"), std::string::npos) << out;  // the discrete sigma is printed
-  const std::vector<Row> batch = read_rows(path("g.csv"));
-  ASSERT_EQ(batch.size(), 800u);
-
-  // What imuemud runs: the scene's device in the emission engine.
-  const EngineRun run = run_scene_device(sc, 800, "native");
-  ASSERT_TRUE(run.finished);
-  const auto wire = decode_native(run.bytes);
-  ASSERT_EQ(wire.size(), 800u);
 
   // Independent saturation truth from the sensor model itself on the ideal batch.
   std::vector<Pose> knots = scene::scene_trajectory(sc);
@@ -262,16 +272,13 @@ TEST_F(SensorIntegration, SignalChainGivesTheSameBitsInGenerateAndTheEmissionEng
   EXPECT_NE(check.find("group delay: 3.11905 ms at DC"), std::string::npos) << check;
 
   std::string out;
-  ASSERT_EQ(run_cli("generate --scene-file " + path("c.toml") + " --max-seconds 4 --out " + path("g.csv"), &out), 0) << out;
+  std::vector<Row> batch;
+  EngineRun run;
+  std::vector<drivers::DecodedSample> wire;
+  generate_and_emit("c.toml", sc, out, batch, run, wire);
+  if (HasFatalFailure()) return;
   EXPECT_NE(out.find("group delay: 3.11905 ms at DC"), std::string::npos) << out;
   EXPECT_NE(out.find("terms at 8000 Hz"), std::string::npos) << out;  // the model runs at the internal rate
-  const std::vector<Row> batch = read_rows(path("g.csv"));
-  ASSERT_EQ(batch.size(), 800u);
-
-  const EngineRun run = run_scene_device(sc, 800, "native");
-  ASSERT_TRUE(run.finished);
-  const auto wire = decode_native(run.bytes);
-  ASSERT_EQ(wire.size(), 800u);
 
   const BatchResult ideal = run_batch(scene::scene_trajectory(sc), scene::pipeline_options(sc, imu));
   signal_chain::DeviceChain chain(sc.physics, imu.error_model.sensor(), imu.error_model.chain, 200, "imuA");
@@ -448,11 +455,31 @@ struct BadCase {
   std::uint32_t line;
 };
 
+// A static flat scene with one null-transport native device at rate_hz, 11
+// lines: a table appended starts on line 12.
+std::string scene_head(int rate_hz) {
+  return "[scene]\nname = \"x\"\nphysics = \"flat\"\n[trajectory]\nsource = \"sample:static\"\n"
+         "[[imu]]\nname = \"a\"\nrate_hz = " + std::to_string(rate_hz) +
+         "\nprotocol = \"native\"\n[imu.transport]\ntype = \"null\"\n";
+}
+
+// Each case appended to `head` is refused naming bad.toml, its line and key.
+void expect_refused(const std::string& head, const std::vector<BadCase>& cases) {
+  for (const BadCase& c : cases) {
+    try {
+      (void)scene::parse_scene_text(head + c.table, "bad.toml", ".");
+      ADD_FAILURE() << c.name << ": accepted";
+    } catch (const scene::SceneError& e) {
+      EXPECT_EQ(e.file(), "bad.toml") << c.name;
+      EXPECT_EQ(e.key(), c.key) << c.name << ": " << e.what();
+      EXPECT_EQ(e.line(), c.line) << c.name << ": " << e.what();
+      EXPECT_NE(std::string(e.what()).find(c.what), std::string::npos) << c.name << ": " << e.what();
+    }
+  }
+}
+
 TEST(ErrorModelConfig, RefusesUnknownUnitlessAndAmbiguousKeysNamingFileLineAndKey) {
-  const std::string head =
-      "[scene]\nname = \"x\"\nphysics = \"flat\"\n[trajectory]\nsource = \"sample:static\"\n"
-      "[[imu]]\nname = \"a\"\nrate_hz = 100\nprotocol = \"native\"\n[imu.transport]\ntype = \"null\"\n"
-      "[imu.error_model]\n";  // line 12
+  const std::string head = scene_head(100) + "[imu.error_model]\n";  // line 12
   const std::vector<BadCase> cases = {
       {"unknown", "preset = \"adis16470\"\nnoise = 3\n", "imu[0].error_model.noise", "unknown key", 14},
       {"triad key at the top", "arw_deg_rt_h = 0.1\n", "imu[0].error_model.arw_deg_rt_h", "[imu[0].error_model.gyro]", 13},
@@ -466,17 +493,7 @@ TEST(ErrorModelConfig, RefusesUnknownUnitlessAndAmbiguousKeysNamingFileLineAndKe
       {"string value", "[imu.error_model.accel]\nrange_g = \"16\"\n", "imu[0].error_model.accel.range_g", "expected a number", 14},
       {"seed", "seed = -3\n", "imu[0].error_model.seed", "integer >= 0", 13},
   };
-  for (const BadCase& c : cases) {
-    try {
-      (void)scene::parse_scene_text(head + c.table, "bad.toml", ".");
-      ADD_FAILURE() << c.name << ": accepted";
-    } catch (const scene::SceneError& e) {
-      EXPECT_EQ(e.file(), "bad.toml") << c.name;
-      EXPECT_EQ(e.key(), c.key) << c.name << ": " << e.what();
-      EXPECT_EQ(e.line(), c.line) << c.name << ": " << e.what();
-      EXPECT_NE(std::string(e.what()).find(c.what), std::string::npos) << c.name << ": " << e.what();
-    }
-  }
+  expect_refused(head, cases);
   // Overrides replace the preset's term (another key of the same term is not ambiguous across tables).
   const scene::SceneConfig ok = scene::parse_scene_text(
       head + "preset = \"adis16470\"\n[imu.error_model.gyro]\narw_deg_rt_h = 0.3\n", "ok.toml", ".");
@@ -524,10 +541,7 @@ TEST_F(SensorIntegration, MipCarriesCompensatedIncrementsAndDelayCompensationMov
 // [imu.error_model.signal_chain] is parsed strictly, and checked against the
 // device's rate at parse time (check-config refuses what a start would).
 TEST(SignalChainConfig, RefusesUnknownKeysAndChainsTheRateCannotRunNamingFileLineAndKey) {
-  const std::string head =
-      "[scene]\nname = \"x\"\nphysics = \"flat\"\n[trajectory]\nsource = \"sample:static\"\n"
-      "[[imu]]\nname = \"a\"\nrate_hz = 300\nprotocol = \"native\"\n[imu.transport]\ntype = \"null\"\n"
-      "[imu.error_model.signal_chain]\n";  // line 12
+  const std::string head = scene_head(300) + "[imu.error_model.signal_chain]\n";  // line 12
   const std::vector<BadCase> cases = {
       {"unknown key", "preset = \"mip\"\ncutoff = 3\n", "imu[0].error_model.signal_chain.cutoff", "unknown key", 14},
       {"unknown preset", "preset = \"bmi088\"\n", "imu[0].error_model.signal_chain.preset", "unknown signal chain preset", 13},
@@ -543,16 +557,7 @@ TEST(SignalChainConfig, RefusesUnknownKeysAndChainsTheRateCannotRunNamingFileLin
       {"psd order", "[imu.error_model.signal_chain.vibration.random]\npsd_g2_per_hz = [[100, 0.01], [50, 0.02]]\n",
        "imu[0].error_model.signal_chain.vibration", "PSD point 2 must have a frequency above the previous one", 13},
   };
-  for (const BadCase& c : cases) {
-    try {
-      (void)scene::parse_scene_text(head + c.table, "bad.toml", ".");
-      ADD_FAILURE() << c.name << ": accepted";
-    } catch (const scene::SceneError& e) {
-      EXPECT_EQ(e.key(), c.key) << c.name << ": " << e.what();
-      EXPECT_EQ(e.line(), c.line) << c.name << ": " << e.what();
-      EXPECT_NE(std::string(e.what()).find(c.what), std::string::npos) << c.name << ": " << e.what();
-    }
-  }
+  expect_refused(head, cases);
   const scene::SceneConfig ok = scene::parse_scene_text(
       head + "oversampling = 4\ncompensate_delay = true\n[[imu.error_model.signal_chain.stage]]\nkind = \"notch\"\n"
              "frequency_hz = 250\nq = 4\n",
@@ -566,9 +571,7 @@ TEST(SignalChainConfig, RefusesUnknownKeysAndChainsTheRateCannotRunNamingFileLin
   EXPECT_TRUE(c.compensate_delay);
   // Vibration in body axes, reaching the sensor through its mounting.
   const std::string shaken =
-      "[scene]\nname = \"x\"\nphysics = \"flat\"\n[trajectory]\nsource = \"sample:static\"\n"
-      "[[imu]]\nname = \"a\"\nrate_hz = 400\nprotocol = \"native\"\n[imu.transport]\ntype = \"null\"\n"
-      "[imu.mounting]\nlever_arm_m = [0.3, 0.0, -0.1]\n"
+      scene_head(400) + "[imu.mounting]\nlever_arm_m = [0.3, 0.0, -0.1]\n"
       "[[imu.error_model.signal_chain.vibration.sinusoid]]\nfrequency_hz = 120\nlinear_m_s2 = [0, 0, 3]\n"
       "angular_deg_s = [0, 2, 0]\n"
       "[imu.error_model.signal_chain.vibration.random]\npsd_g2_per_hz = [[20, 0.01], [500, 0.01]]\nseed = 4\n";
