@@ -2,7 +2,7 @@
 // issue 16): DeviceChain::step at 1 kHz on 2 s of the aircraft flight (ecef),
 // for the ideal chain (with and without the exact increments), the sensor
 // model alone, filter chains at 8x oversampling (8 kHz internal) and
-// everything together; then 16 devices at 1 kHz at 8x on one thread, each
+// everything together, sinusoidal and random vibration; then 16 devices at 1 kHz at 8x on one thread, each
 // with its own streaming pipeline (core/stream.hpp), over 20 s of the flight:
 // the share of one core that takes (real time if below 1).
 //   build/release/bench/bench_signal_chain --benchmark_repetitions=5 --benchmark_report_aggregates_only=true
@@ -53,7 +53,32 @@ struct Config {
   std::string preset = "ideal";
   std::optional<int> oversampling;
   std::optional<signal_chain::IncrementConvention> increments;
+  signal_chain::VibrationSpec vibration;
 };
+
+// Three sinusoids (linear and angular) on a lever arm.
+signal_chain::VibrationSpec sinusoids() {
+  signal_chain::VibrationSpec v;
+  signal_chain::Sinusoid a, b, c;
+  a.frequency_hz = 120.0;
+  a.linear_m_s2 = Vec3(2.0, 0.0, 1.0);
+  b.frequency_hz = 77.0;
+  b.linear_m_s2 = Vec3(0.0, 0.5, 0.0);
+  c.frequency_hz = 90.0;
+  c.angular_rad_s = Vec3(0.0, 0.3, 0.0);
+  v.sinusoids = {a, b, c};
+  v.lever_arm_m = Vec3(0.1, 0.05, -0.02);
+  return v;
+}
+
+// A random profile of 20-500 Hz on three axes at 0.5 Hz resolution (2883 components).
+signal_chain::VibrationSpec random_profile() {
+  signal_chain::VibrationSpec v;
+  signal_chain::RandomVibration r;
+  r.psd = {{20.0, 0.002}, {80.0, 0.04}, {350.0, 0.04}, {500.0, 0.01}};
+  v.random_linear = r;
+  return v;
+}
 
 Config make_config(bool sensor, const std::string& preset, std::optional<int> oversampling,
                    std::optional<signal_chain::IncrementConvention> increments) {
@@ -74,6 +99,16 @@ Config config(int i) {
     case 4: return make_config(false, "stim300", 8, std::nullopt);             // 4th-order Butterworth at 8 kHz
     case 5: return make_config(false, "icm42688p", 8, std::nullopt);           // AAF + UI filter at 8 kHz
     case 6: return make_config(true, "icm42688p", 8, C::compensated);          // all of it
+    case 7: {                                                                  // sinusoidal vibration, no chain
+      Config c = make_config(false, "ideal", std::nullopt, C::compensated);
+      c.vibration = sinusoids();
+      return c;
+    }
+    case 8: {                                                                  // random vibration at 8x
+      Config c = make_config(false, "ideal", 8, C::compensated);
+      c.vibration = random_profile();
+      return c;
+    }
     default: return Config{};                                                  // ideal, no increments (generate)
   }
 }
@@ -82,6 +117,7 @@ signal_chain::DeviceChain make_chain(const Config& c, const std::string& device)
   signal_chain::ChainSpec spec;
   spec.preset = c.preset;
   spec.oversampling = c.oversampling;
+  spec.vibration = c.vibration;
   std::optional<sensor::SensorModelSpec> s;
   if (c.sensor) {
     s = sensor::preset_spec("icm42688p");
@@ -165,7 +201,7 @@ void BM_sixteen_devices_1khz_8x_chain(benchmark::State& state) { sixteen_devices
 
 }  // namespace
 
-BENCHMARK(BM_chain_step)->DenseRange(0, 6)->Unit(benchmark::kNanosecond);
+BENCHMARK(BM_chain_step)->DenseRange(0, 8)->Unit(benchmark::kNanosecond);
 BENCHMARK(BM_sixteen_devices_1khz_ideal)->Unit(benchmark::kMillisecond)->Iterations(1);
 BENCHMARK(BM_sixteen_devices_1khz_8x_chain)->Unit(benchmark::kMillisecond)->Iterations(1);
 

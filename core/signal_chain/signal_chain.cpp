@@ -151,7 +151,10 @@ DeviceChain::DeviceChain(const SceneModel& scene, const std::optional<sensor::Se
       period_s_(1.0 / static_cast<double>(output_rate_hz)),
       filter_(chain_.design) {
   if (sensor && !sensor->is_ideal()) sensor_.emplace(*sensor, static_cast<double>(chain_.internal_rate_hz), device);
-  if (!chain.vibration.empty()) vibration_.emplace(chain.vibration, device);
+  if (!chain.vibration.empty()) {
+    vibration_.emplace(chain.vibration, device);
+    vibration_->set_grid_step(period_s_ / chain_.oversampling);
+  }
   if (chain_.compensate_delay) stamp_shift_ns_ = static_cast<TimeNs>(std::llround(chain_.group_delay_s * 1e9));
 }
 
@@ -177,26 +180,27 @@ ChainOutput DeviceChain::step(std::uint64_t k, const Kinematics& now, const ImuS
   }
   // Vibration: the interval's motion, its ends and the ideal sample at t_k
   // become the vibrating sensor's (the ends from the given kinematics, so
-  // consecutive intervals share their attitude and velocity exactly).
+  // consecutive intervals share their attitude and velocity exactly). The
+  // end at t_k is evaluated after the interval's internal samples, so the
+  // vibration is asked for its instants in grid order (Vibration::set_grid_step).
   std::optional<VibratingInterval> vibrating;
   Kinematics previous_v, now_v;
   ImuSample ideal_v;
-  if (vibration_) {
-    const double t_k_s = static_cast<double>(k) * period_s_;
-    if (previous) {
-      vibrating.emplace(*motion, *vibration_, t_k_s - period_s_, period_s_);
-      previous_v = vibration_->apply(*previous, motion->angular_acceleration_at(0.0), t_k_s - period_s_);
-      now_v = vibration_->apply(now, motion->angular_acceleration_at(1.0), t_k_s);
-      previous = &previous_v;
-      motion = &*vibrating;
-    } else {
-      now_v = vibration_->apply(now, Vec3::Zero(), t_k_s);
-    }
+  const double t_k_s = static_cast<double>(k) * period_s_;
+  const IntervalMotion* base_motion = motion;
+  if (vibration_ && previous) {
+    vibrating.emplace(*motion, *vibration_, t_k_s - period_s_, period_s_);
+    previous_v = vibration_->apply(*previous, motion->angular_acceleration_at(0.0), t_k_s - period_s_);
+    previous = &previous_v;
+    motion = &*vibrating;
+  }
+  auto vibrate_now = [&] {
+    now_v = vibration_->apply(now, base_motion ? base_motion->angular_acceleration_at(1.0) : Vec3::Zero(), t_k_s);
     ideal_v = imu_from_kinematics(scene_, now_v);
     ideal_v.t_ns = ideal_now.t_ns;
-    out.gyro_rad_s = ideal_v.gyro_rad_s;
-    out.accel_m_s2 = ideal_v.accel_m_s2;
-  }
+  };
+  // Without a previous tick the interval is held at the (vibrated) sample of t_k.
+  if (vibration_ && !previous) vibrate_now();
   const Kinematics& now_k = vibration_ ? now_v : now;
   const ImuSample& ideal_k = vibration_ ? ideal_v : ideal_now;
   Vec3 error_theta = Vec3::Zero(), error_v = Vec3::Zero();
@@ -208,6 +212,7 @@ ChainOutput DeviceChain::step(std::uint64_t k, const Kinematics& now, const ImuS
     const double dt_s = period_s_ / M;
     Filter::Channels y{};
     for (std::uint64_t i = first_i; i <= static_cast<std::uint64_t>(M); ++i) {
+      if (vibration_ && previous && i == static_cast<std::uint64_t>(M)) vibrate_now();
       ImuSample u = ideal_k;
       if (i < static_cast<std::uint64_t>(M) && motion)
         u = imu_from_kinematics(scene_, motion->at(static_cast<double>(i) / M));

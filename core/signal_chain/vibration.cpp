@@ -1,5 +1,6 @@
 #include "core/signal_chain/vibration.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <numbers>
 #include <stdexcept>
@@ -94,14 +95,45 @@ VibrationState Vibration::at(double t) const {
       v.theta_ddot[i] += s.angular_rad_s[i] * w * cs;
     }
   }
-  for (const Component& c : comps_) {
-    const double ph = c.w_rad_s * t + c.phase_rad;
-    const double sn = std::sin(ph), cs = std::cos(ph);
+  if (comps_.empty()) return v;
+  random_phasors(t);
+  for (std::size_t i = 0; i < comps_.size(); ++i) {
+    const Component& c = comps_[i];
+    const double cs = phasor_[i].real(), sn = phasor_[i].imag();
     v.d[c.axis] += -c.amplitude_m_s2 * cs / (c.w_rad_s * c.w_rad_s);
     v.d_dot[c.axis] += c.amplitude_m_s2 * sn / c.w_rad_s;
     v.d_ddot[c.axis] += c.amplitude_m_s2 * cs;
   }
   return v;
+}
+
+void Vibration::set_grid_step(double step_s) {
+  step_s_ = step_s;
+  rotation_.resize(comps_.size());
+  for (std::size_t i = 0; i < comps_.size(); ++i) rotation_[i] = std::polar(1.0, comps_[i].w_rad_s * step_s);
+  cached_ = false;
+}
+
+void Vibration::random_phasors(double t) const {
+  phasor_.resize(comps_.size());
+  if (cached_ && t == t_cached_s_) return;
+  // One grid step after the cached instant, to the rounding of the caller's
+  // t = t0 + s h (agreeing to ~1e-15 relative; 1e-12 is allowed).
+  const bool next_step = cached_ && step_s_ > 0.0 && std::abs(t - (t_cached_s_ + step_s_)) <= 1e-12 * std::max(1.0, t) &&
+                         steps_since_exact_ < kResyncSteps;
+  if (next_step) {
+    for (std::size_t i = 0; i < comps_.size(); ++i) phasor_[i] *= rotation_[i];
+    t_cached_s_ = t;
+    ++steps_since_exact_;
+    return;
+  }
+  for (std::size_t i = 0; i < comps_.size(); ++i) phasor_[i] = std::polar(1.0, comps_[i].w_rad_s * t + comps_[i].phase_rad);
+  // Only grid instants become the cache (the raw increments' Gauss-Legendre
+  // nodes between them are computed and forgotten).
+  const bool on_grid = step_s_ > 0.0 && std::abs(t / step_s_ - std::round(t / step_s_)) < 1e-6;
+  cached_ = on_grid;
+  t_cached_s_ = t;
+  steps_since_exact_ = 0;
 }
 
 Kinematics Vibration::apply(const Kinematics& base, const Vec3& alpha_s, double t) const {

@@ -27,6 +27,7 @@
 // (Eq. 3.59 and 3.61 for the turn's rate and acceleration).
 #pragma once
 
+#include <complex>
 #include <cstdint>
 #include <optional>
 #include <string>
@@ -79,8 +80,15 @@ class Vibration {
   // PSD table not increasing or not positive, resolution not positive, more
   // than kMaxComponents random components). device: the noise stream's name.
   Vibration(const VibrationSpec& spec, const std::string& device);
-  // t_s: seconds since the start of the run.
+  // t_s: seconds since the start of the run. Not thread-safe (the random
+  // part keeps its phasors between calls): one Vibration per device chain.
   VibrationState at(double t_s) const;
+  // The internal sample period: a call one period after the previous grid
+  // instant advances the random components' phasors by one rotation each
+  // (a complex product) instead of a sine and a cosine; re-synchronised
+  // exactly every kResyncSteps steps, and by any call off that sequence.
+  void set_grid_step(double step_s);
+  static constexpr int kResyncSteps = 4096;
   // The kinematics of the vibrating sensor on top of the smoothed ones.
   Kinematics apply(const Kinematics& base, const Vec3& base_angular_acceleration_rad_s2, double t_s) const;
   std::size_t random_components() const { return comps_.size(); }
@@ -92,8 +100,17 @@ class Vibration {
     double w_rad_s, amplitude_m_s2, phase_rad;
     int axis;
   };
+  // e^{i phase} of every random component at t_cached_s (valid) and the
+  // per-step rotation e^{i w step}.
+  void random_phasors(double t_s) const;
   VibrationSpec spec_;
   std::vector<Component> comps_;
+  double step_s_ = 0.0;
+  std::vector<std::complex<double>> rotation_;
+  mutable std::vector<std::complex<double>> phasor_;
+  mutable bool cached_ = false;
+  mutable double t_cached_s_ = 0.0;
+  mutable int steps_since_exact_ = 0;
 };
 
 // The interval's motion with the vibration on top; positions (for the ecef
