@@ -73,7 +73,8 @@ Vibration::Vibration(const VibrationSpec& spec, const std::string& device) : spe
       const double phase = kTwoPi * stream.uniform();
       // The bin's power S(f) df (m/s^2)^2 as a sinusoid's amplitude^2 / 2.
       const double power = psd_at(r.psd, f) * r.axis_scale[axis] * kG_m_s2 * kG_m_s2 * width;
-      comps_.push_back({kTwoPi * f, std::sqrt(2.0 * power), phase, axis});
+      const double w = kTwoPi * f, a = std::sqrt(2.0 * power);
+      comps_.push_back({w, a, phase, axis, a / w, a / (w * w)});
     }
   }
 }
@@ -100,8 +101,8 @@ VibrationState Vibration::at(double t) const {
   for (std::size_t i = 0; i < comps_.size(); ++i) {
     const Component& c = comps_[i];
     const double cs = phasor_[i].real(), sn = phasor_[i].imag();
-    v.d[c.axis] += -c.amplitude_m_s2 * cs / (c.w_rad_s * c.w_rad_s);
-    v.d_dot[c.axis] += c.amplitude_m_s2 * sn / c.w_rad_s;
+    v.d[c.axis] -= c.amplitude_over_w2 * cs;
+    v.d_dot[c.axis] += c.amplitude_over_w * sn;
     v.d_ddot[c.axis] += c.amplitude_m_s2 * cs;
   }
   return v;

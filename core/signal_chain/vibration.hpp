@@ -99,6 +99,7 @@ class Vibration {
   struct Component {
     double w_rad_s, amplitude_m_s2, phase_rad;
     int axis;
+    double amplitude_over_w, amplitude_over_w2;  // velocity and displacement amplitudes
   };
   // e^{i phase} of every random component at t_cached_s (valid) and the
   // per-step rotation e^{i w step}.
