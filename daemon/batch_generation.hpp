@@ -14,28 +14,34 @@
 #include <vector>
 
 #include "core/sensor/sensor_model.hpp"
+#include "core/signal_chain/signal_chain.hpp"
 #include "core/stream.hpp"
 #include "daemon/error_model_config.hpp"
 
 namespace imuemu::cli {
 
-// The sensor stage of one device, one sample at a time: sample k of the grid
-// t_k = t0 + floor(k 1e9 / rate) is measured as sample k (scene::grid_index),
-// exactly as scene::apply_error_model does for a whole vector and imuemud's
-// producer does for tick k, so all give the same bits. An ideal model leaves
+// The sensor stage of one device, one sample at a time: the device's signal
+// chain (core/signal_chain/signal_chain.hpp: internal rate, sensor model,
+// filters, decimation) on tick k of the grid t_k = t0 + floor(k 1e9 / rate)
+// (scene::grid_index), exactly as imuemud's producer and `imuemu stream` run
+// it on tick k, so all give the same bits. An ideal model and chain leave
 // samples untouched.
 class SensorStage {
  public:
-  // Throws std::invalid_argument for a spec the model refuses.
-  SensorStage(const scene::ErrorModelConfig& model, const std::string& device, std::int64_t rate_hz, TimeNs t0_ns);
-  // Samples in increasing time (SensorModel::measure throws otherwise).
-  void apply(ImuSample& sample);
+  // Throws std::invalid_argument for a spec the model or the chain refuses.
+  SensorStage(const scene::ErrorModelConfig& model, const std::string& device, std::int64_t rate_hz, TimeNs t0_ns,
+              const SceneModel& scene);
+  // Samples in increasing time (SensorModel::measure throws otherwise); the
+  // measured sample (stamped t_k minus the group delay when the chain
+  // compensates it).
+  ImuSample apply(const StreamSample& sample);
   std::uint64_t saturated_samples() const noexcept { return saturated_; }
 
  private:
-  std::optional<sensor::SensorModel> model_;
+  std::optional<signal_chain::DeviceChain> chain_;
   std::int64_t rate_hz_;
   TimeNs t0_ns_;
+  std::optional<std::pair<std::uint64_t, Kinematics>> previous_;  // tick k - 1
   std::uint64_t saturated_ = 0;
 };
 

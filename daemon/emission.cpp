@@ -179,12 +179,16 @@ struct Device {
   OnDemandSource* on_demand = nullptr;  // trajectory input: == samples
   bool mounted = false;                 // mounting is not the identity
   std::vector<Pose> sensor_knots;       // trajectory input, mounted: the sensor's poses
-  std::optional<sensor::SensorModel> sensor;  // producer only; empty: the ideal sensor
+  // Producer only: the sensor model, internal rate, filters and the exact
+  // increments (core/signal_chain/); passes ideal samples through untouched
+  // for the ideal sensor and chain.
+  std::optional<signal_chain::DeviceChain> chain;
+  signal_chain::IncrementConvention increments = signal_chain::IncrementConvention::raw;  // the encoder's
   boost::lockfree::spsc_queue<Slot> ring;
 
   // Producer thread only.
   std::uint64_t next_produce_tick = 0;
-  std::optional<std::pair<std::uint64_t, ImuSample>> previous_imu;  // for the period integrals
+  std::optional<std::pair<std::uint64_t, Kinematics>> previous;  // tick k - 1: the interval's start
 
   // Emission thread only.
   std::uint64_t next_emit_tick = 0;
@@ -320,8 +324,11 @@ EmissionEngine::EmissionEngine(EngineOptions options, std::vector<DeviceOptions>
     lo.underrun = d->options.underrun;
     lo.blend_ns = d->options.blend_ns;
     d->emitter = std::make_unique<live::LiveEmitter>(lo);
-    if (d->options.sensor_model && !d->options.sensor_model->is_ideal())
-      d->sensor.emplace(*d->options.sensor_model, static_cast<double>(d->options.rate_hz), d->options.name);
+    d->chain.emplace(d->options.pipeline.scene, d->options.sensor_model, d->options.chain, d->options.rate_hz,
+                     d->options.name);
+    const bool compensated = d->options.stream_encoder ? d->options.stream_encoder->compensated_increments()
+                                                       : d->options.can_encoder->compensated_increments();
+    d->increments = compensated ? signal_chain::IncrementConvention::compensated : signal_chain::IncrementConvention::raw;
     d->mounted = d->options.mounting.sensor_to_body != Mat3::Identity() || !d->options.mounting.lever_arm_b_m.isZero();
     if (o.source == nullptr) {
       if (d->mounted) {
@@ -372,7 +379,7 @@ void EmissionEngine::Impl::produce(Device& d, bool time_gated) {
       if (time_gated && now < saturating_sub_ns(due, options.producer_lead_ns)) break;
       if (now > due) {  // already too late to send: the emission thread counts it; skip the work
         ++d.next_produce_tick;
-        d.previous_imu.reset();
+        d.previous.reset();
         continue;
       }
     }
@@ -389,42 +396,32 @@ void EmissionEngine::Impl::produce(Device& d, bool time_gated) {
       drivers::ImuFrameInput& f = slot.frame;
       f.sample_counter = k;
       f.t_ns = tick_ns;
-      // The sensor model (core/sensor/): tick k is its sample k, as in
-      // `imuemu generate` (daemon/error_model_config.cpp apply_error_model).
-      ImuSample measured = e.imu;
-      if (d.sensor) {
-        const sensor::Measurement m = d.sensor->measure(k, e.imu.gyro_rad_s, e.imu.accel_m_s2);
-        measured.gyro_rad_s = m.gyro_rad_s;
-        measured.accel_m_s2 = m.accel_m_s2;
-        if (m.saturated_axes != 0) f.status |= drivers::kStatusSaturated;  // counted when sent
+      // The signal chain (core/signal_chain/): the interval (t_{k-1}, t_k] at
+      // the internal rate through the sensor model and the filters, decimated
+      // to tick k, as `imuemu generate` and `imuemu stream` run it; the
+      // increments exact over the interval in the encoder's convention.
+      const Kinematics* previous = d.previous && d.previous->first + 1 == k ? &d.previous->second : nullptr;
+      const signal_chain::ChainOutput m = d.chain->step(k, e.kinematics, e.imu, previous, d.increments);
+      if (m.saturated_axes != 0) f.status |= drivers::kStatusSaturated;  // counted when sent
+      if (m.has_temperature) {
         // The model's temperature profile, for the protocols that carry one
         // (MAVLink HIL_SENSOR/HIGHRES_IMU); ideal sensors keep the option's value.
         f.has_temperature = true;
         f.temperature_c = m.temperature_c;
       }
-      f.gyro_rad_s = measured.gyro_rad_s;
-      f.accel_m_s2 = measured.accel_m_s2;
+      f.t_ns = saturating_sub_ns(tick_ns, m.stamp_shift_ns);  // delay compensation (0 unless configured)
+      f.gyro_rad_s = m.gyro_rad_s;
+      f.accel_m_s2 = m.accel_m_s2;
       f.period_ns = k > 0 ? tick_ns - grid_ns(t0_ns, k - 1, d.options.rate_hz)
                           : grid_ns(t0_ns, 1, d.options.rate_hz) - tick_ns;
-      // Integrals over the period ending at t_k: trapezoid between the
-      // previous tick's sample and this one (second order; no coning or
-      // sculling terms: the signal chain of the next issue integrates at its
-      // internal rate). Without a previous sample (first tick, after a gap):
-      // rectangle.
-      const double dt_s = static_cast<double>(f.period_ns) * 1e-9;
-      if (d.previous_imu && d.previous_imu->first + 1 == k) {
-        f.delta_theta_rad = 0.5 * (d.previous_imu->second.gyro_rad_s + measured.gyro_rad_s) * dt_s;
-        f.delta_velocity_m_s = 0.5 * (d.previous_imu->second.accel_m_s2 + measured.accel_m_s2) * dt_s;
-      } else {
-        f.delta_theta_rad = measured.gyro_rad_s * dt_s;
-        f.delta_velocity_m_s = measured.accel_m_s2 * dt_s;
-      }
+      f.delta_theta_rad = m.delta_theta_rad;
+      f.delta_velocity_m_s = m.delta_velocity_m_s;
       if (!e.exact()) f.status |= drivers::kStatusExtrapolated;
       if (d.options.can_encoder && d.options.can_encoder->needs_level_attitude())
         set_level_attitude(e.kinematics, d.options.pipeline.scene.physics, f);
-      d.previous_imu.emplace(k, measured);
+      d.previous.emplace(k, e.kinematics);
     } else {
-      d.previous_imu.reset();
+      d.previous.reset();
     }
     d.ring.push(slot);
     ++d.next_produce_tick;

@@ -35,6 +35,7 @@
 #include "core/mounting.hpp"
 #include "core/pipeline.hpp"
 #include "core/sensor/sensor_model.hpp"
+#include "core/signal_chain/signal_chain.hpp"
 #include "core/time_mapping.hpp"
 #include "daemon/lateness_histogram.hpp"
 #include "drivers/gpio_sync.hpp"
@@ -86,10 +87,13 @@ struct DeviceOptions {
   // Where this IMU sits on the body (core/mounting.hpp): the device smooths
   // and differentiates the sensor's own poses, sensor_pose(pose, mounting).
   Mounting mounting;
-  // The sensor's errors (core/sensor/sensor_model.hpp), run at rate_hz on
-  // tick k as sample k (the noise streams are keyed by the device's name);
-  // empty or ideal: no stage at all.
+  // The sensor's errors (core/sensor/sensor_model.hpp), run at the signal
+  // chain's internal rate (the noise streams are keyed by the device's name);
+  // empty or ideal: none.
   std::optional<sensor::SensorModelSpec> sensor_model;
+  // The device's signal chain (core/signal_chain/signal_chain.hpp): internal
+  // rate, filters, decimation, delay compensation; ideal by default.
+  signal_chain::ChainSpec chain;
 };
 
 enum class StartAlignment { now, next_realtime_second };

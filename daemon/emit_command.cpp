@@ -169,7 +169,8 @@ int emit(const EmitArgs& a) {
   dev.pipeline.rate_hz = a.rate_hz;
   try {
     const scene::ErrorModelConfig em = scene::error_model_from_option(a.sensor, a.seed);
-    if (!em.ideal()) dev.sensor_model = em.spec;
+    dev.sensor_model = em.sensor();
+    dev.chain = em.chain;
   } catch (const std::exception& e) {
     std::cerr << "imuemu emit: --sensor: " << e.what() << "\n";
     return kBadInput;

@@ -5,6 +5,7 @@
 #include <cmath>
 #include <fstream>
 #include <map>
+#include <numbers>
 #include <sstream>
 #include <stdexcept>
 
@@ -66,12 +67,167 @@ void parse_triad(const Where& w, const toml::table& t, const std::string& path, 
   }
 }
 
+// [signal_chain] (core/signal_chain/signal_chain.hpp):
+//   preset = "icm42688p"          # ideal | icm42688p | adis16470 | stim300 | mip
+//   oversampling = 8              # internal rate = oversampling x rate_hz
+//   compensate_delay = false      # stamp samples t_k - group delay
+//   [[...signal_chain.stage]]     # replaces the preset's stages
+//   kind = "butterworth"          # low-pass | anti-alias | butterworth | notch | average | bartlett
+//   frequency_hz = 100
+//   order = 4                     # low-pass 1..3, butterworth 1..16
+//   q = 5                         # anti-alias (default 0.7071), notch
+//   length = 8                    # average, bartlett
+Vec3 vec3_of(const Where& w, const toml::node& n, const std::string& key, double scale) {
+  const std::vector<double> v = numbers_of(w, n, key);
+  if (v.size() != 3) w.fail(n.source(), key, "expected three numbers [x, y, z] (body axes)");
+  return Vec3(v[0], v[1], v[2]) * scale;
+}
+
+void only_keys(const Where& w, const toml::table& t, const std::string& path, const std::vector<std::string>& allowed) {
+  for (auto&& [key, value] : t) {
+    (void)value;
+    if (std::find(allowed.begin(), allowed.end(), key.str()) != allowed.end()) continue;
+    std::string list;
+    for (const std::string& a : allowed) list += (list.empty() ? "" : ", ") + a;
+    w.fail(key.source(), dotted(path, key.str()), "unknown key '" + std::string(key.str()) + "'; allowed: " + list);
+  }
+}
+
+// [signal_chain.vibration] (core/signal_chain/vibration.hpp), body axes:
+//   [[...vibration.sinusoid]]  frequency_hz, linear_m_s2 = [x, y, z],
+//                              angular_deg_s = [x, y, z], phase_deg = [x, y, z]
+//   [...vibration.random]      psd_g2_per_hz = [[f_hz, g2_per_hz], ...],
+//                              axis_scale = [x, y, z], resolution_hz, seed
+// The lever arm and axes are the device's [imu.mounting].
+signal_chain::VibrationSpec parse_vibration_table(const Where& w, const toml::table& t, const std::string& path) {
+  signal_chain::VibrationSpec v;
+  only_keys(w, t, path, {"sinusoid", "random"});
+  constexpr double kDeg = std::numbers::pi / 180.0;
+  if (const toml::node* n = t.get("sinusoid")) {
+    const toml::array* a = n->as_array();
+    if (a == nullptr) w.fail(n->source(), dotted(path, "sinusoid"), "expected an array of tables ([[...sinusoid]])");
+    for (std::size_t i = 0; i < a->size(); ++i) {
+      const std::string sp = dotted(path, "sinusoid[" + std::to_string(i) + "]");
+      const toml::table* st = (*a)[i].as_table();
+      if (st == nullptr) w.fail((*a)[i].source(), sp, "expected a table");
+      only_keys(w, *st, sp, {"frequency_hz", "linear_m_s2", "angular_deg_s", "phase_deg"});
+      signal_chain::Sinusoid s;
+      const toml::node* f = st->get("frequency_hz");
+      if (f == nullptr) w.fail(st->source(), sp, "missing 'frequency_hz'");
+      const std::vector<double> fv = numbers_of(w, *f, dotted(sp, "frequency_hz"));
+      if (fv.size() != 1 || !(fv[0] > 0.0)) w.fail(f->source(), dotted(sp, "frequency_hz"), "expected one number > 0");
+      s.frequency_hz = fv[0];
+      if (const toml::node* x = st->get("linear_m_s2")) s.linear_m_s2 = vec3_of(w, *x, dotted(sp, "linear_m_s2"), 1.0);
+      if (const toml::node* x = st->get("angular_deg_s")) s.angular_rad_s = vec3_of(w, *x, dotted(sp, "angular_deg_s"), kDeg);
+      if (const toml::node* x = st->get("phase_deg")) s.phase_rad = vec3_of(w, *x, dotted(sp, "phase_deg"), kDeg);
+      v.sinusoids.push_back(s);
+    }
+  }
+  if (const toml::node* n = t.get("random")) {
+    const std::string rp = dotted(path, "random");
+    const toml::table* rt = n->as_table();
+    if (rt == nullptr) w.fail(n->source(), rp, "expected a table");
+    only_keys(w, *rt, rp, {"psd_g2_per_hz", "axis_scale", "resolution_hz", "seed"});
+    signal_chain::RandomVibration r;
+    const toml::node* psd = rt->get("psd_g2_per_hz");
+    const toml::array* pa = psd != nullptr ? psd->as_array() : nullptr;
+    if (pa == nullptr) w.fail(rt->source(), dotted(rp, "psd_g2_per_hz"), "expected [[frequency_hz, g2_per_hz], ...]");
+    for (const toml::node& e : *pa) {
+      const std::vector<double> pt = numbers_of(w, e, dotted(rp, "psd_g2_per_hz"));
+      if (pt.size() != 2) w.fail(e.source(), dotted(rp, "psd_g2_per_hz"), "expected a pair [frequency_hz, g2_per_hz]");
+      r.psd.push_back({pt[0], pt[1]});
+    }
+    if (const toml::node* x = rt->get("axis_scale")) r.axis_scale = vec3_of(w, *x, dotted(rp, "axis_scale"), 1.0);
+    if (const toml::node* x = rt->get("resolution_hz")) {
+      const std::vector<double> rv = numbers_of(w, *x, dotted(rp, "resolution_hz"));
+      if (rv.size() != 1) w.fail(x->source(), dotted(rp, "resolution_hz"), "expected one number");
+      r.resolution_hz = rv[0];
+    }
+    if (const toml::node* x = rt->get("seed")) {
+      if (!x->is_integer() || x->as_integer()->get() < 0) w.fail(x->source(), dotted(rp, "seed"), "expected an integer >= 0");
+      r.seed = static_cast<std::uint64_t>(x->as_integer()->get());
+    }
+    v.random_linear = r;
+  }
+  try {
+    (void)signal_chain::Vibration(v, "check");
+  } catch (const std::invalid_argument& e) {
+    w.fail(t.source(), path, e.what());
+  }
+  return v;
+}
+
+signal_chain::ChainSpec parse_chain_table(const Where& w, const toml::table& t, const std::string& path) {
+  signal_chain::ChainSpec c;
+  only_keys(w, t, path, {"preset", "oversampling", "compensate_delay", "stage", "vibration"});
+  if (const toml::node* n = t.get("vibration")) {
+    if (!n->is_table()) w.fail(n->source(), dotted(path, "vibration"), "expected a table");
+    c.vibration = parse_vibration_table(w, *n->as_table(), dotted(path, "vibration"));
+  }
+  if (const toml::node* n = t.get("preset")) {
+    if (!n->is_string()) w.fail(n->source(), dotted(path, "preset"), "expected a string (a chain preset or \"ideal\")");
+    c.preset = n->as_string()->get();
+    const std::vector<std::string> names = signal_chain::chain_presets();
+    if (std::find(names.begin(), names.end(), c.preset) == names.end())
+      w.fail(n->source(), dotted(path, "preset"),
+             "unknown signal chain preset '" + c.preset + "'; expected ideal, icm42688p, adis16470, stim300 or mip");
+  }
+  if (const toml::node* n = t.get("oversampling")) {
+    if (!n->is_integer() || n->as_integer()->get() < 1 || n->as_integer()->get() > signal_chain::kMaxOversampling)
+      w.fail(n->source(), dotted(path, "oversampling"),
+             "expected an integer in 1.." + std::to_string(signal_chain::kMaxOversampling) +
+                 " (the internal rate as a multiple of the output rate)");
+    c.oversampling = static_cast<int>(n->as_integer()->get());
+  }
+  if (const toml::node* n = t.get("compensate_delay")) {
+    if (!n->is_boolean()) w.fail(n->source(), dotted(path, "compensate_delay"), "expected true or false");
+    c.compensate_delay = n->as_boolean()->get();
+  }
+  if (const toml::node* n = t.get("stage")) {
+    const toml::array* a = n->as_array();
+    if (a == nullptr) w.fail(n->source(), dotted(path, "stage"), "expected an array of tables ([[...stage]])");
+    std::vector<signal_chain::Stage> stages;
+    for (std::size_t i = 0; i < a->size(); ++i) {
+      const std::string sp = dotted(path, "stage[" + std::to_string(i) + "]");
+      const toml::table* st = (*a)[i].as_table();
+      if (st == nullptr) w.fail((*a)[i].source(), sp, "expected a table");
+      signal_chain::Stage stage;
+      for (auto&& [key, value] : *st) {
+        const std::string k(key.str());
+        const std::string full = dotted(sp, k);
+        if (k == "kind") {
+          if (!value.is_string()) w.fail(value.source(), full, "expected a string");
+          try {
+            stage.kind = signal_chain::stage_kind_from_string(value.as_string()->get());
+          } catch (const std::invalid_argument& e) {
+            w.fail(value.source(), full, e.what());
+          }
+        } else if (k == "frequency_hz" || k == "q") {
+          const std::vector<double> v = numbers_of(w, value, full);
+          if (v.size() != 1) w.fail(value.source(), full, "expected one number");
+          (k == "q" ? stage.q : stage.frequency_hz) = v[0];
+        } else if (k == "order" || k == "length") {
+          if (!value.is_integer() || value.as_integer()->get() < 1 || value.as_integer()->get() > 1'000'000)
+            w.fail(value.source(), full, "expected a positive integer");
+          (k == "order" ? stage.order : stage.length) = static_cast<int>(value.as_integer()->get());
+        } else {
+          w.fail(key.source(), full, "unknown key '" + k + "'; allowed: kind, frequency_hz, order, q, length");
+        }
+      }
+      if (!st->contains("kind")) w.fail(st->source(), sp, "missing 'kind'");
+      stages.push_back(stage);
+    }
+    c.stages = stages;
+  }
+  return c;
+}
+
 }  // namespace
 
 ErrorModelConfig parse_error_model_table(const toml::table& table, const std::string& file, const std::string& path) {
   const Where w{file};
   ErrorModelConfig out;
-  static const std::vector<std::string> allowed = {"preset", "seed", "gyro", "accel", "temperature"};
+  static const std::vector<std::string> allowed = {"preset", "seed", "gyro", "accel", "temperature", "signal_chain"};
   // First unknown key in file order.
   const toml::key* first_unknown = nullptr;
   for (auto&& [key, value] : table) {
@@ -85,7 +241,7 @@ ErrorModelConfig parse_error_model_table(const toml::table& table, const std::st
     if (!sensor::term_of(sensor::Triad::gyro, k).empty() || !sensor::term_of(sensor::Triad::accel, k).empty())
       hint = " (per-sensor keys go in [" + dotted(path, "gyro") + "] or [" + dotted(path, "accel") + "])";
     w.fail(first_unknown->source(), dotted(path, k),
-           "unknown key '" + k + "'" + hint + "; allowed: preset, seed, gyro, accel, temperature");
+           "unknown key '" + k + "'" + hint + "; allowed: preset, seed, gyro, accel, temperature, signal_chain");
   }
   if (const toml::node* n = table.get("preset")) {
     if (!n->is_string()) w.fail(n->source(), dotted(path, "preset"), "expected a string (a preset name or \"ideal\")");
@@ -131,6 +287,10 @@ ErrorModelConfig parse_error_model_table(const toml::table& table, const std::st
       }
     }
   }
+  if (const toml::node* n = table.get("signal_chain")) {
+    if (!n->is_table()) w.fail(n->source(), dotted(path, "signal_chain"), "expected a table");
+    out.chain = parse_chain_table(w, *n->as_table(), dotted(path, "signal_chain"));
+  }
   try {
     sensor::validate(out.spec);
   } catch (const std::invalid_argument& e) {
@@ -173,10 +333,18 @@ std::vector<std::string> error_model_lines(const ErrorModelConfig& model, double
     out.push_back("ideal (no sensor errors)");
     return out;
   }
-  out.push_back("preset " + model.preset + ", seed " + std::to_string(model.spec.seed) + ", terms at " +
-                std::to_string(static_cast<long long>(rate_hz)) + " Hz:");
-  for (const sensor::TermReport& r : sensor::describe(model.spec, rate_hz))
-    out.push_back(r.sensor + " " + r.term + ": " + r.value + (r.discrete.empty() ? "" : " -> " + r.discrete));
+  const std::int64_t rate = static_cast<std::int64_t>(rate_hz);
+  const signal_chain::ResolvedChain chain = signal_chain::resolve(model.chain, rate);
+  // The sensor model runs at the chain's internal rate: its discrete values are the ones there.
+  if (model.spec.is_ideal()) {
+    out.push_back("no sensor errors");
+  } else {
+    out.push_back("preset " + model.preset + ", seed " + std::to_string(model.spec.seed) + ", terms at " +
+                  std::to_string(static_cast<long long>(chain.internal_rate_hz)) + " Hz:");
+    for (const sensor::TermReport& r : sensor::describe(model.spec, static_cast<double>(chain.internal_rate_hz)))
+      out.push_back(r.sensor + " " + r.term + ": " + r.value + (r.discrete.empty() ? "" : " -> " + r.discrete));
+  }
+  for (const std::string& line : signal_chain::describe(chain, rate)) out.push_back(line);
   return out;
 }
 

@@ -619,8 +619,23 @@ ImuConfig parse_imu(const Table& t) {
     imu.sync.emplace();
     parse_sync(*s, imu, *imu.sync);
   }
-  if (const auto e = t.subtable("error_model"))  // daemon/error_model_config.cpp
-    imu.error_model = parse_error_model_table(*t.node("error_model")->as_table(), t.ctx().file, e->path());
+  if (const auto e = t.subtable("error_model")) {  // daemon/error_model_config.cpp
+    const toml::table& em = *t.node("error_model")->as_table();
+    imu.error_model = parse_error_model_table(em, t.ctx().file, e->path());
+    // Vibration reaches the sensor through its mounting (lever arm, axes).
+    imu.error_model.chain.vibration.lever_arm_m = imu.mounting.lever_arm_b_m;
+    imu.error_model.chain.vibration.sensor_to_body = imu.mounting.sensor_to_body;
+    // The chain against this device's rate (a preset may not run at it, a
+    // filter frequency may lie beyond half the internal rate).
+    try {
+      (void)signal_chain::resolve(imu.error_model.chain, imu.rate_hz);
+    } catch (const std::invalid_argument& ex) {
+      const toml::node* sc = em.get("signal_chain");
+      const toml::source_region at = sc != nullptr ? sc->source() : em.source();
+      throw SceneError(t.ctx().file, at.begin.line, at.begin.column, e->path() + ".signal_chain",
+                       std::string(ex.what()) + " (at rate_hz " + std::to_string(imu.rate_hz) + ")");
+    }
+  }
   return imu;
 }
 

@@ -19,6 +19,7 @@
 #include "core/mounting.hpp"
 #include "core/pipeline.hpp"
 #include "core/sensor/sensor_model.hpp"
+#include "core/signal_chain/signal_chain.hpp"
 #include "core/time_mapping.hpp"
 #include "drivers/gpio_sync.hpp"
 #include "drivers/protocols/can_protocols.hpp"
@@ -162,11 +163,17 @@ struct SyncConfig {
 };
 
 // [imu.error_model] (daemon/error_model_config.hpp): ideal unless a preset or
-// a term is given.
+// a term is given; its [signal_chain] table is the device's internal rate and
+// filters (core/signal_chain/signal_chain.hpp), ideal unless given.
 struct ErrorModelConfig {
   std::string preset = "ideal";   // the preset the terms start from
   sensor::SensorModelSpec spec;   // preset + overrides, SI units, with the seed
-  bool ideal() const { return spec.is_ideal(); }
+  signal_chain::ChainSpec chain;  // resolved against the device's rate when it is built
+  bool ideal() const { return spec.is_ideal() && chain.is_ideal(); }
+  // The sensor model to run, if any.
+  std::optional<sensor::SensorModelSpec> sensor() const {
+    return spec.is_ideal() ? std::nullopt : std::optional<sensor::SensorModelSpec>(spec);
+  }
 };
 
 struct ImuConfig {

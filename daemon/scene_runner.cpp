@@ -151,7 +151,8 @@ BuiltEngine build_engine(const SceneConfig& scene, const RunnerOptions& options,
     dev.underrun = scene.live.underrun;
     dev.blend_ns = seconds_to_ns(scene.live.blend_s);
     dev.mounting = imu.mounting;
-    if (!imu.error_model.ideal()) dev.sensor_model = imu.error_model.spec;
+    dev.sensor_model = imu.error_model.sensor();
+    dev.chain = imu.error_model.chain;
     max_lookahead_ns = std::max(max_lookahead_ns, StreamPipeline::lookahead_ns(dev.pipeline, knot_interval_ns));
     try {
       if (is_can_protocol(imu.protocol)) {

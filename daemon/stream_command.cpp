@@ -111,12 +111,13 @@ int stream(const StreamArgs& args) {
   po.gap_policy = GapPolicy::split;
   po.max_gap_s = args.max_gap_s;
   const bool as_fast_as_possible = args.speed == "max";
-  // The sensor stage: tick k is the model's sample k, as in generate and imuemud.
-  std::optional<sensor::SensorModel> sensor_model;
+  // The sensor stage: the device's signal chain on tick k (sensor model,
+  // internal rate, filters), as in generate and imuemud.
+  std::optional<signal_chain::DeviceChain> sensor_chain;
   try {
     const scene::ErrorModelConfig em = scene::error_model_from_option(args.sensor, args.seed);
     if (!em.ideal()) {
-      sensor_model.emplace(em.spec, static_cast<double>(args.rate_hz), "imu0");
+      sensor_chain.emplace(po.scene, em.sensor(), em.chain, args.rate_hz, "imu0");
       for (const std::string& line : scene::error_model_lines(em, static_cast<double>(args.rate_hz)))
         std::cerr << "imuemu stream: sensor imu0: " << line << "\n";
     }
@@ -125,11 +126,15 @@ int stream(const StreamArgs& args) {
     return kBadInput;
   }
   std::uint64_t saturated = 0;
+  std::optional<std::pair<std::uint64_t, Kinematics>> previous;  // tick k - 1, for the interval's motion
   auto measured = [&](std::uint64_t k, live::Emission e) {
-    if (sensor_model) {
-      const sensor::Measurement m = sensor_model->measure(k, e.imu.gyro_rad_s, e.imu.accel_m_s2);
+    if (sensor_chain) {
+      const Kinematics* prev = previous && previous->first + 1 == k ? &previous->second : nullptr;
+      const signal_chain::ChainOutput m = sensor_chain->step(k, e.kinematics, e.imu, prev, std::nullopt);
+      previous.emplace(k, e.kinematics);
       e.imu.gyro_rad_s = m.gyro_rad_s;
       e.imu.accel_m_s2 = m.accel_m_s2;
+      e.imu.t_ns = saturating_sub_ns(e.imu.t_ns, m.stamp_shift_ns);
       if (m.saturated_axes != 0) ++saturated;
     }
     return e;
@@ -291,7 +296,7 @@ int stream(const StreamArgs& args) {
             << " duplicate, " << c.out_of_order << " out of order), " << c.lost() << " lost, " << refused
             << " refused by the method; samples " << lc.exact + replayed_exact << " exact, " << lc.extrapolated << " extrapolated, "
             << lc.blending << " blending, " << lc.paused << " paused, " << lc.waiting << " waiting (" << lc.underrun_events << " underruns, " << lc.stale_discarded << " stale)";
-  if (sensor_model) std::cerr << ", " << saturated << " saturated";
+  if (sensor_chain) std::cerr << ", " << saturated << " saturated";
   std::cerr << "\n";
   if (std::ferror(out.file)) return kOutputError;
   return code;

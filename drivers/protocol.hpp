@@ -32,8 +32,12 @@ struct ImuFrameInput {
   TimeNs t_ns = 0;                       // sample instant, trajectory time
   Vec3 gyro_rad_s = Vec3::Zero();        // angular rate omega_ib^b, body FRD
   Vec3 accel_m_s2 = Vec3::Zero();        // specific force f^b, body FRD
-  // Integrals over the sample period ending at t_ns (coning/sculling
-  // compensated by the sensor model); zero if the device has none.
+  // Increments over the sample period ending at t_ns, exact for the
+  // emulated motion (core/signal_chain/increments.hpp), in the convention
+  // the encoder asks for (compensated_increments(); docs/emission.md): raw
+  // integrals of rate and specific force, or coning/sculling-compensated
+  // (rotation vector of the attitude change, velocity change in the body
+  // frame at the period's start).
   Vec3 delta_theta_rad = Vec3::Zero();
   Vec3 delta_velocity_m_s = Vec3::Zero();
   TimeNs period_ns = 0;                  // the output period
@@ -75,6 +79,9 @@ class StreamEncoder {
   // Largest number of bytes one sample (plus periodic traffic, averaged per
   // sample) puts on the wire: for the link budget.
   virtual std::size_t max_bytes_per_sample() const = 0;
+  // The frame's delta_theta / delta_velocity are coning/sculling-compensated
+  // increments (true) or raw integrals (false, the default).
+  virtual bool compensated_increments() const { return false; }
 };
 
 // CAN protocols: frames appended to `out`.
@@ -87,6 +94,8 @@ class CanEncoder {
   // The encoder sends the attitude (ImuFrameInput::pitch_rad / roll_rad):
   // the producer computes it only then.
   virtual bool needs_level_attitude() const { return false; }
+  // As StreamEncoder::compensated_increments.
+  virtual bool compensated_increments() const { return false; }
 };
 
 // What a decoder recovered from a frame: the fields the protocol carries

@@ -21,6 +21,10 @@ set(IMUEMU_HEAVY_TESTS
   AllanPresets.Adis16470OneDayAt25Hz
   AllanPresets.Stim300EightDaysAt20Hz
   AllanPresets.Hg9900SevenHundredHoursAt1Hz
+  # an hour at 200 Hz of coning and of sculling (issue 16 acceptance 1)
+  SignalChain.ConingCompensatedIncrementsReproduceTheAttitudeAfterOneHour
+  SignalChain.ScullingCompensatedIncrementsReproduceTheVelocityAfterOneHour
+  SignalChain.RandomVibrationPsdMatchesItsProfileWithinOneDecibel
 )
 if(NOT IMUEMU_HEAVY_LIST_ONLY)
   set_tests_properties(${IMUEMU_HEAVY_TESTS} PROPERTIES LABELS heavy)

@@ -10,6 +10,7 @@
 #include <cstdio>
 #include <filesystem>
 #include <fstream>
+#include <functional>
 #include <mutex>
 #include <numbers>
 #include <set>
@@ -20,8 +21,11 @@
 #include "core/pipeline.hpp"
 #include "core/sensor/datasheet.hpp"
 #include "core/sensor/sensor_model.hpp"
+#include "core/signal_chain/signal_chain.hpp"
+#include "core/so3.hpp"
 #include "daemon/emission.hpp"
 #include "daemon/error_model_config.hpp"
+#include "daemon/scene_check.hpp"
 #include "daemon/scene_config.hpp"
 #include "daemon/scene_runner.hpp"
 #include "core/reference_motion.hpp"
@@ -103,6 +107,46 @@ int run_cli(const std::string& args, std::string* output = nullptr) {
   return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
 }
 
+// The scene's first device in the emission engine, as imuemud runs it, with
+// its transport in memory: `ticks` ticks, all computed before the clock
+// starts (counts exact on a loaded host). `adjust` changes the device first.
+struct EngineRun {
+  bool finished = false;
+  std::vector<std::uint8_t> bytes;
+  emission::EngineStats stats;
+};
+EngineRun run_scene_device(const scene::SceneConfig& sc, std::uint64_t ticks, const std::string& protocol,
+                           const std::function<void(emission::DeviceOptions&)>& adjust = {}) {
+  const scene::ImuConfig& imu = sc.imus.at(0);
+  emission::DeviceOptions dev;
+  dev.name = imu.name;
+  dev.rate_hz = imu.rate_hz;
+  dev.pipeline = scene::pipeline_options(sc, imu);
+  dev.mounting = imu.mounting;
+  dev.sensor_model = imu.error_model.sensor();
+  dev.chain = imu.error_model.chain;
+  dev.stream_encoder = drivers::make_stream_encoder(protocol);
+  if (adjust) adjust(dev);
+  auto rec = std::make_unique<Recording>();
+  Recording* recording = rec.get();
+  dev.transport = std::move(rec);
+  emission::EngineOptions eo;
+  eo.trajectory = scene::scene_trajectory(sc);
+  eo.drop_late_ticks = false;
+  eo.max_ticks_per_device = ticks;
+  eo.ring_capacity = 1024;
+  std::vector<emission::DeviceOptions> devices;
+  devices.push_back(std::move(dev));
+  emission::EmissionEngine engine(std::move(eo), std::move(devices));
+  engine.start();
+  EngineRun run;
+  run.finished = engine.wait(std::chrono::seconds(20));
+  engine.stop();
+  run.bytes = recording->bytes();
+  run.stats = engine.stats();
+  return run;
+}
+
 class SensorIntegration : public ::testing::Test {
  protected:
   void SetUp() override {
@@ -112,6 +156,20 @@ class SensorIntegration : public ::testing::Test {
   }
   void TearDown() override { fs::remove_all(dir_); }
   std::string path(const std::string& name) const { return (dir_ / name).string(); }
+  // `imuemu generate --scene-file` over 4 s (its messages in out, its rows in
+  // batch) and the scene's device in the emission engine (native): 800
+  // samples each at 200 Hz.
+  void generate_and_emit(const std::string& scene_file, const scene::SceneConfig& sc, std::string& out,
+                         std::vector<Row>& batch, EngineRun& run, std::vector<drivers::DecodedSample>& wire) {
+    ASSERT_EQ(run_cli("generate --scene-file " + path(scene_file) + " --max-seconds 4 --out " + path("g.csv"), &out), 0)
+        << out;
+    batch = read_rows(path("g.csv"));
+    ASSERT_EQ(batch.size(), 800u);
+    run = run_scene_device(sc, 800, "native");
+    ASSERT_TRUE(run.finished);
+    wire = decode_native(run.bytes);
+    ASSERT_EQ(wire.size(), 800u);
+  }
   fs::path dir_;
 };
 
@@ -154,37 +212,14 @@ TEST_F(SensorIntegration, GenerateSceneFileAndTheEmissionEngineGiveTheSameBitsAn
   EXPECT_DOUBLE_EQ(imu.error_model.spec.gyro.range, 5.7 * std::numbers::pi / 180.0);
   EXPECT_GT(imu.error_model.spec.gyro.bias_instability.x(), 0.0);  // the preset's, kept
 
-  // The batch reference: the CLI, as a user runs it.
+  // The batch reference (the CLI, as a user runs it) and what imuemud runs.
   std::string out;
-  ASSERT_EQ(run_cli("generate --scene-file " + path("s.toml") + " --max-seconds 4 --out " + path("g.csv"), &out), 0) << out;
+  std::vector<Row> batch;
+  EngineRun run;
+  std::vector<drivers::DecodedSample> wire;
+  generate_and_emit("s.toml", sc, out, batch, run, wire);
+  if (HasFatalFailure()) return;
   EXPECT_NE(out.find("sigma = N sqrt(fs)"), std::string::npos) << out;  // the discrete sigma is printed
-  const std::vector<Row> batch = read_rows(path("g.csv"));
-  ASSERT_EQ(batch.size(), 800u);
-
-  // What imuemud runs: the scene's device in the emission engine.
-  emission::DeviceOptions dev;
-  dev.name = imu.name;
-  dev.rate_hz = imu.rate_hz;
-  dev.pipeline = scene::pipeline_options(sc, imu);
-  dev.mounting = imu.mounting;
-  dev.sensor_model = imu.error_model.spec;
-  dev.stream_encoder = drivers::make_stream_encoder("native");
-  auto rec = std::make_unique<Recording>();
-  Recording* recording = rec.get();
-  dev.transport = std::move(rec);
-  emission::EngineOptions eo;
-  eo.trajectory = scene::scene_trajectory(sc);
-  eo.drop_late_ticks = false;
-  eo.max_ticks_per_device = 800;
-  eo.ring_capacity = 1024;
-  std::vector<emission::DeviceOptions> devices;
-  devices.push_back(std::move(dev));
-  emission::EmissionEngine engine(std::move(eo), std::move(devices));
-  engine.start();
-  ASSERT_TRUE(engine.wait(20s));
-  engine.stop();
-  const auto wire = decode_native(recording->bytes());
-  ASSERT_EQ(wire.size(), 800u);
 
   // Independent saturation truth from the sensor model itself on the ideal batch.
   std::vector<Pose> knots = scene::scene_trajectory(sc);
@@ -206,14 +241,63 @@ TEST_F(SensorIntegration, GenerateSceneFileAndTheEmissionEngineGiveTheSameBitsAn
   }
   EXPECT_GT(saturated, 100u);
   EXPECT_LT(saturated, 800u);
-  EXPECT_EQ(engine.stats().devices.front().saturated, saturated);
-  EXPECT_EQ(emission::to_json(engine.stats())["devices"][0]["saturated"], saturated);
+  EXPECT_EQ(run.stats.devices.front().saturated, saturated);
+  EXPECT_EQ(emission::to_json(run.stats)["devices"][0]["saturated"], saturated);
   // The seed matters; the ideal path does not change.
   ASSERT_EQ(run_cli("generate --scene-file " + path("s.toml") + " --max-seconds 4 --seed 10 --quiet --out " + path("g10.csv")), 0);
   EXPECT_NE(read_rows(path("g10.csv"))[5].gyro, batch[5].gyro);
   ASSERT_EQ(run_cli("generate --scene-file " + path("s.toml") + " --max-seconds 4 --sensor ideal --quiet --out " + path("gi.csv")), 0);
   const auto ideal_rows = read_rows(path("gi.csv"));
   for (std::size_t k = 0; k < 800; ++k) ASSERT_EQ(ideal_rows[k].gyro, ideal.imu[k].gyro_rad_s) << k;
+}
+
+// Issue 16: the device's signal chain in every path. The stim300 sensor
+// model runs at the icm42688p chain's internal rate (8 kHz = 40 x 200 Hz)
+// before the anti-alias and UI filters and the decimation; generate and the
+// emission engine (what imuemud runs) give the same bits, which are the
+// chain's own on the batch trajectory; check-config prints the group delay
+// (analytic: 1/(2 tan(pi fc/fs) sin(pi/4)) samples for each 2nd-order
+// Butterworth, fc = 258 Hz and 100 Hz at 8 kHz: 24.9524 samples = 3.11905 ms).
+TEST_F(SensorIntegration, SignalChainGivesTheSameBitsInGenerateAndTheEmissionEngineAndCheckConfigPrintsItsDelay) {
+  std::string text = kScene;
+  text.replace(text.find("[imu.error_model.gyro]\nrange_dps = 5.7\n"), 39, "");
+  text += "[imu.error_model.signal_chain]\npreset = \"icm42688p\"\n";
+  {
+    std::ofstream f(path("c.toml"));
+    f << text;
+  }
+  const scene::SceneConfig sc = scene::parse_scene_file(path("c.toml"));
+  const scene::ImuConfig& imu = sc.imus.at(0);
+  ASSERT_EQ(imu.error_model.chain.preset, "icm42688p");
+  const std::string check = scene::to_text(scene::check_scene(sc));
+  EXPECT_NE(check.find("internal rate 8000 Hz (40 x 200 Hz)"), std::string::npos) << check;
+  EXPECT_NE(check.find("group delay: 3.11905 ms at DC"), std::string::npos) << check;
+
+  std::string out;
+  std::vector<Row> batch;
+  EngineRun run;
+  std::vector<drivers::DecodedSample> wire;
+  generate_and_emit("c.toml", sc, out, batch, run, wire);
+  if (HasFatalFailure()) return;
+  EXPECT_NE(out.find("group delay: 3.11905 ms at DC"), std::string::npos) << out;
+  EXPECT_NE(out.find("terms at 8000 Hz"), std::string::npos) << out;  // the model runs at the internal rate
+
+  const BatchResult ideal = run_batch(scene::scene_trajectory(sc), scene::pipeline_options(sc, imu));
+  signal_chain::DeviceChain chain(sc.physics, imu.error_model.sensor(), imu.error_model.chain, 200, "imuA");
+  double filtered_vs_ideal = 0.0;
+  for (std::size_t k = 0; k < wire.size(); ++k) {
+    ASSERT_EQ(wire[k].gyro_rad_s, batch[k].gyro) << k;
+    ASSERT_EQ(wire[k].accel_m_s2, batch[k].accel) << k;
+    const signal_chain::ChainOutput o =
+        chain.step(k, ideal.trajectory[k], ideal.imu[k], k > 0 ? &ideal.trajectory[k - 1] : nullptr, std::nullopt);
+    ASSERT_EQ(o.gyro_rad_s, batch[k].gyro) << k;
+    if (k >= 200) filtered_vs_ideal = std::max(filtered_vs_ideal, (o.gyro_rad_s - ideal.imu[k].gyro_rad_s).norm());
+  }
+  // The 100 Hz UI filter leaves the slow circle's rate (0.1 rad/s) and
+  // takes most of the noise: STIM300 ARW 0.15 deg/sqrt(h) is 4.4e-5 rad/s/sqrt(Hz),
+  // ~3e-3 rad/s per sample at 8 kHz, ~7e-4 rad/s within 100 Hz (x sqrt(1.1 x 100)).
+  EXPECT_LT(filtered_vs_ideal, 5e-3);
+  EXPECT_GT(filtered_vs_ideal, 1e-4);
 }
 
 TEST_F(SensorIntegration, StreamReplayEqualsGenerateWithTheSameSensorAndSeed) {
@@ -411,11 +495,31 @@ struct BadCase {
   std::uint32_t line;
 };
 
+// A static flat scene with one null-transport native device at rate_hz, 11
+// lines: a table appended starts on line 12.
+std::string scene_head(int rate_hz) {
+  return "[scene]\nname = \"x\"\nphysics = \"flat\"\n[trajectory]\nsource = \"sample:static\"\n"
+         "[[imu]]\nname = \"a\"\nrate_hz = " + std::to_string(rate_hz) +
+         "\nprotocol = \"native\"\n[imu.transport]\ntype = \"null\"\n";
+}
+
+// Each case appended to `head` is refused naming bad.toml, its line and key.
+void expect_refused(const std::string& head, const std::vector<BadCase>& cases) {
+  for (const BadCase& c : cases) {
+    try {
+      (void)scene::parse_scene_text(head + c.table, "bad.toml", ".");
+      ADD_FAILURE() << c.name << ": accepted";
+    } catch (const scene::SceneError& e) {
+      EXPECT_EQ(e.file(), "bad.toml") << c.name;
+      EXPECT_EQ(e.key(), c.key) << c.name << ": " << e.what();
+      EXPECT_EQ(e.line(), c.line) << c.name << ": " << e.what();
+      EXPECT_NE(std::string(e.what()).find(c.what), std::string::npos) << c.name << ": " << e.what();
+    }
+  }
+}
+
 TEST(ErrorModelConfig, RefusesUnknownUnitlessAndAmbiguousKeysNamingFileLineAndKey) {
-  const std::string head =
-      "[scene]\nname = \"x\"\nphysics = \"flat\"\n[trajectory]\nsource = \"sample:static\"\n"
-      "[[imu]]\nname = \"a\"\nrate_hz = 100\nprotocol = \"native\"\n[imu.transport]\ntype = \"null\"\n"
-      "[imu.error_model]\n";  // line 12
+  const std::string head = scene_head(100) + "[imu.error_model]\n";  // line 12
   const std::vector<BadCase> cases = {
       {"unknown", "preset = \"adis16470\"\nnoise = 3\n", "imu[0].error_model.noise", "unknown key", 14},
       {"triad key at the top", "arw_deg_rt_h = 0.1\n", "imu[0].error_model.arw_deg_rt_h", "[imu[0].error_model.gyro]", 13},
@@ -429,17 +533,7 @@ TEST(ErrorModelConfig, RefusesUnknownUnitlessAndAmbiguousKeysNamingFileLineAndKe
       {"string value", "[imu.error_model.accel]\nrange_g = \"16\"\n", "imu[0].error_model.accel.range_g", "expected a number", 14},
       {"seed", "seed = -3\n", "imu[0].error_model.seed", "integer >= 0", 13},
   };
-  for (const BadCase& c : cases) {
-    try {
-      (void)scene::parse_scene_text(head + c.table, "bad.toml", ".");
-      ADD_FAILURE() << c.name << ": accepted";
-    } catch (const scene::SceneError& e) {
-      EXPECT_EQ(e.file(), "bad.toml") << c.name;
-      EXPECT_EQ(e.key(), c.key) << c.name << ": " << e.what();
-      EXPECT_EQ(e.line(), c.line) << c.name << ": " << e.what();
-      EXPECT_NE(std::string(e.what()).find(c.what), std::string::npos) << c.name << ": " << e.what();
-    }
-  }
+  expect_refused(head, cases);
   // Overrides replace the preset's term (another key of the same term is not ambiguous across tables).
   const scene::SceneConfig ok = scene::parse_scene_text(
       head + "preset = \"adis16470\"\n[imu.error_model.gyro]\narw_deg_rt_h = 0.3\n", "ok.toml", ".");
@@ -447,6 +541,89 @@ TEST(ErrorModelConfig, RefusesUnknownUnitlessAndAmbiguousKeysNamingFileLineAndKe
   EXPECT_NEAR(s.gyro.white_density.x(), 0.3 * std::numbers::pi / 180.0 / 60.0, 1e-18);
   EXPECT_EQ(s.gyro.bias_instability, sensor::preset_spec("adis16470").gyro.bias_instability);
   EXPECT_TRUE(scene::parse_scene_text(head, "ideal.toml", ".").imus[0].error_model.ideal());
+}
+
+// Issue 16 B: the increments on the wire are the exact ones in the
+// protocol's convention. MIP (compensated: the rotation vector of the attitude
+// change and the velocity change in the body frame at the period's start)
+// against the closed form on the batch trajectory, written here: for the flat
+// scene dtheta = log(R_{k-1}^T R_k), dv = R_{k-1}^T (v_k - v_{k-1} - g h);
+// with delay compensation the time stamps move back by the group delay.
+TEST_F(SensorIntegration, MipCarriesCompensatedIncrementsAndDelayCompensationMovesTheStamps) {
+  const scene::SceneConfig sc = scene::parse_scene_text(kScene, "s.toml", ".");
+  const scene::ImuConfig& imu = sc.imus.at(0);
+  const EngineRun run = run_scene_device(sc, 400, "mip", [](emission::DeviceOptions& dev) {
+    dev.sensor_model.reset();  // the ideal sensor: the increments are the motion's alone
+    dev.chain.preset = "mip";  // single pole at 100 Hz, 8 kHz internal
+    dev.chain.compensate_delay = true;
+  });
+  ASSERT_TRUE(run.finished);
+  auto decoder = drivers::make_stream_decoder("mip");
+  std::vector<drivers::DecodedSample> wire;
+  decoder->feed(run.bytes, [&](const drivers::DecodedSample& s) { wire.push_back(s); });
+  ASSERT_EQ(wire.size(), 400u);
+  const BatchResult b = run_batch(scene::scene_trajectory(sc), scene::pipeline_options(sc, imu));
+  const double h = 1.0 / 200.0;
+  // Single pole at fc = 100 Hz, fs = 8000 Hz: DC delay 1/(2 tan(pi fc/fs)) samples.
+  const TimeNs delay_ns = std::llround(1.0 / (2.0 * std::tan(std::numbers::pi * 100.0 / 8000.0)) / 8000.0 * 1e9);
+  for (std::size_t k = 1; k < wire.size(); ++k) {
+    const Mat3& R0 = b.trajectory[k - 1].attitude;
+    const Vec3 dtheta = so3::log(R0.transpose() * b.trajectory[k].attitude);
+    const Vec3 dv = R0.transpose() * (b.trajectory[k].velocity_m_s - b.trajectory[k - 1].velocity_m_s -
+                                      sc.physics.flat_gravity_m_s2 * h);
+    // float32 on the wire: 2^-24 relative.
+    EXPECT_LT((wire[k].delta_theta_rad - dtheta).norm(), 1e-7 * dtheta.norm() + 1e-12) << k;
+    EXPECT_LT((wire[k].delta_velocity_m_s - dv).norm(), 1e-7 * dv.norm() + 1e-12) << k;
+    EXPECT_NEAR(static_cast<double>(b.imu[k].t_ns - wire[k].t_ns), static_cast<double>(delay_ns), 1000.0) << k;
+  }
+}
+
+// [imu.error_model.signal_chain] is parsed strictly, and checked against the
+// device's rate at parse time (check-config refuses what a start would).
+TEST(SignalChainConfig, RefusesUnknownKeysAndChainsTheRateCannotRunNamingFileLineAndKey) {
+  const std::string head = scene_head(300) + "[imu.error_model.signal_chain]\n";  // line 12
+  const std::vector<BadCase> cases = {
+      {"unknown key", "preset = \"mip\"\ncutoff = 3\n", "imu[0].error_model.signal_chain.cutoff", "unknown key", 14},
+      {"unknown preset", "preset = \"bmi088\"\n", "imu[0].error_model.signal_chain.preset", "unknown signal chain preset", 13},
+      {"oversampling", "oversampling = 0\n", "imu[0].error_model.signal_chain.oversampling", "1..1024", 13},
+      {"adis at 300 Hz", "preset = \"adis16470\"\n", "imu[0].error_model.signal_chain",
+       "does not divide 2000 (at rate_hz 300)", 12},
+      {"beyond half the internal rate", "oversampling = 2\n[[imu.error_model.signal_chain.stage]]\nkind = \"butterworth\"\nfrequency_hz = 400\n",
+       "imu[0].error_model.signal_chain", "stage 1 (butterworth): frequency_hz 400", 12},
+      {"stage kind", "[[imu.error_model.signal_chain.stage]]\nkind = \"kalman\"\n",
+       "imu[0].error_model.signal_chain.stage[0].kind", "unknown filter kind 'kalman'", 14},
+      {"vibration key", "[imu.error_model.signal_chain.vibration]\nshock = 1\n",
+       "imu[0].error_model.signal_chain.vibration.shock", "unknown key 'shock'; allowed: sinusoid, random", 14},
+      {"psd order", "[imu.error_model.signal_chain.vibration.random]\npsd_g2_per_hz = [[100, 0.01], [50, 0.02]]\n",
+       "imu[0].error_model.signal_chain.vibration", "PSD point 2 must have a frequency above the previous one", 13},
+  };
+  expect_refused(head, cases);
+  const scene::SceneConfig ok = scene::parse_scene_text(
+      head + "oversampling = 4\ncompensate_delay = true\n[[imu.error_model.signal_chain.stage]]\nkind = \"notch\"\n"
+             "frequency_hz = 250\nq = 4\n",
+      "ok.toml", ".");
+  const signal_chain::ChainSpec& c = ok.imus[0].error_model.chain;
+  EXPECT_FALSE(ok.imus[0].error_model.ideal());
+  EXPECT_FALSE(ok.imus[0].error_model.sensor().has_value());
+  ASSERT_TRUE(c.stages && c.stages->size() == 1);
+  EXPECT_EQ((*c.stages)[0].kind, signal_chain::StageKind::notch);
+  EXPECT_EQ(c.oversampling, 4);
+  EXPECT_TRUE(c.compensate_delay);
+  // Vibration in body axes, reaching the sensor through its mounting.
+  const std::string shaken =
+      scene_head(400) + "[imu.mounting]\nlever_arm_m = [0.3, 0.0, -0.1]\n"
+      "[[imu.error_model.signal_chain.vibration.sinusoid]]\nfrequency_hz = 120\nlinear_m_s2 = [0, 0, 3]\n"
+      "angular_deg_s = [0, 2, 0]\n"
+      "[imu.error_model.signal_chain.vibration.random]\npsd_g2_per_hz = [[20, 0.01], [500, 0.01]]\nseed = 4\n";
+  const scene::SceneConfig v = scene::parse_scene_text(shaken, "v.toml", ".");
+  const signal_chain::VibrationSpec& vib = v.imus[0].error_model.chain.vibration;
+  ASSERT_EQ(vib.sinusoids.size(), 1u);
+  EXPECT_EQ(vib.sinusoids[0].linear_m_s2, Vec3(0.0, 0.0, 3.0));
+  EXPECT_DOUBLE_EQ(vib.sinusoids[0].angular_rad_s.y(), 2.0 * std::numbers::pi / 180.0);
+  ASSERT_TRUE(vib.random_linear.has_value());
+  EXPECT_EQ(vib.random_linear->seed, 4u);
+  EXPECT_EQ(vib.lever_arm_m, Vec3(0.3, 0.0, -0.1));
+  EXPECT_FALSE(v.imus[0].error_model.ideal());
 }
 
 }  // namespace

@@ -52,6 +52,10 @@ class Encoder final : public StreamEncoder {
   std::string name() const override { return "mip"; }
   void encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out) override;
   std::size_t max_bytes_per_sample() const override;
+  // Delta theta / delta velocity (0x80,0x07 / 0x80,0x08) as the device sends
+  // them with its coning and sculling compensation (MIP 3DM command
+  // 0x0C,0x51) on: an INS integrates them without corrections of its own.
+  bool compensated_increments() const override { return true; }
 
  private:
   StreamEncoderOptions options_;

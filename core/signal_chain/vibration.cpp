@@ -1,0 +1,172 @@
+#include "core/signal_chain/vibration.hpp"
+
+#include <algorithm>
+#include <cmath>
+#include <numbers>
+#include <stdexcept>
+
+#include "core/sensor/sensor_model.hpp"
+#include "core/so3.hpp"
+
+namespace imuemu::signal_chain {
+
+namespace {
+
+constexpr double kTwoPi = 2.0 * std::numbers::pi;
+constexpr double kG_m_s2 = 9.80665;
+// The random vibration's noise stream: its own "sensor" index in the keys of
+// core/sensor (0 gyro, 1 accel), so no sensor-model stream is shared.
+constexpr unsigned kVibrationStream = 7;
+
+}  // namespace
+
+double psd_at(const std::vector<PsdPoint>& psd, double f) {
+  if (psd.empty() || f < psd.front().frequency_hz || f > psd.back().frequency_hz) return 0.0;
+  for (std::size_t i = 1; i < psd.size(); ++i) {
+    const PsdPoint& a = psd[i - 1];
+    const PsdPoint& b = psd[i];
+    if (f <= b.frequency_hz) {
+      // Straight line in log S against log f (dB/octave slopes of the standards).
+      const double x = std::log(f / a.frequency_hz) / std::log(b.frequency_hz / a.frequency_hz);
+      return a.g2_per_hz * std::pow(b.g2_per_hz / a.g2_per_hz, x);
+    }
+  }
+  return psd.back().g2_per_hz;
+}
+
+Vibration::Vibration(const VibrationSpec& spec, const std::string& device) : spec_(spec) {
+  for (std::size_t i = 0; i < spec.sinusoids.size(); ++i) {
+    const Sinusoid& s = spec.sinusoids[i];
+    if (!(s.frequency_hz > 0.0) || !std::isfinite(s.frequency_hz) || !s.linear_m_s2.allFinite() ||
+        !s.angular_rad_s.allFinite() || !s.phase_rad.allFinite())
+      throw std::invalid_argument("vibration sinusoid " + std::to_string(i + 1) +
+                                  ": frequency_hz must be > 0 and every amplitude and phase finite");
+  }
+  if (!spec.random_linear) return;
+  const RandomVibration& r = *spec.random_linear;
+  if (r.psd.size() < 2) throw std::invalid_argument("random vibration: the PSD table needs at least two points");
+  for (std::size_t i = 0; i < r.psd.size(); ++i) {
+    if (!(r.psd[i].frequency_hz > 0.0) || !(r.psd[i].g2_per_hz > 0.0) || !std::isfinite(r.psd[i].g2_per_hz) ||
+        (i > 0 && !(r.psd[i].frequency_hz > r.psd[i - 1].frequency_hz)))
+      throw std::invalid_argument("random vibration: PSD point " + std::to_string(i + 1) +
+                                  " must have a frequency above the previous one and a positive g^2/Hz");
+  }
+  if (!(r.resolution_hz > 0.0) || !std::isfinite(r.resolution_hz))
+    throw std::invalid_argument("random vibration: resolution_hz must be > 0");
+  if (!r.axis_scale.allFinite() || (r.axis_scale.array() < 0.0).any())
+    throw std::invalid_argument("random vibration: axis_scale must be finite and >= 0");
+  const double f0 = r.psd.front().frequency_hz, f1 = r.psd.back().frequency_hz;
+  const std::size_t bins = static_cast<std::size_t>(std::ceil((f1 - f0) / r.resolution_hz));
+  if (bins * 3 > kMaxComponents)
+    throw std::invalid_argument("random vibration: " + std::to_string(bins) + " bins per axis of " +
+                                std::to_string(r.resolution_hz) + " Hz; at most " +
+                                std::to_string(kMaxComponents / 3) + " (raise resolution_hz)");
+  const std::uint64_t dev = sensor::device_hash(device);
+  for (int axis = 0; axis < 3; ++axis) {
+    if (r.axis_scale[axis] == 0.0) continue;
+    sensor::Stream stream;
+    stream.state = sensor::stream_key(r.seed, dev, kVibrationStream, static_cast<unsigned>(axis), 0, 0);
+    for (std::size_t b = 0; b < bins; ++b) {
+      const double lo = f0 + static_cast<double>(b) * r.resolution_hz;
+      const double width = std::min(r.resolution_hz, f1 - lo);
+      const double f = lo + stream.uniform() * width;
+      const double phase = kTwoPi * stream.uniform();
+      // The bin's power S(f) df (m/s^2)^2 as a sinusoid's amplitude^2 / 2.
+      const double power = psd_at(r.psd, f) * r.axis_scale[axis] * kG_m_s2 * kG_m_s2 * width;
+      const double w = kTwoPi * f, a = std::sqrt(2.0 * power);
+      comps_.push_back({w, a, phase, axis, a / w, a / (w * w)});
+    }
+  }
+}
+
+VibrationState Vibration::at(double t) const {
+  VibrationState v;
+  for (const Sinusoid& s : spec_.sinusoids) {
+    const double w = kTwoPi * s.frequency_hz;
+    for (int i = 0; i < 3; ++i) {
+      const double ph = w * t + s.phase_rad[i];
+      const double sn = std::sin(ph), cs = std::cos(ph);
+      // Zero-mean displacement and angle whose second / first derivative is
+      // the given amplitude times sin(ph).
+      v.d[i] += -s.linear_m_s2[i] * sn / (w * w);
+      v.d_dot[i] += -s.linear_m_s2[i] * cs / w;
+      v.d_ddot[i] += s.linear_m_s2[i] * sn;
+      v.theta[i] += -s.angular_rad_s[i] * cs / w;
+      v.theta_dot[i] += s.angular_rad_s[i] * sn;
+      v.theta_ddot[i] += s.angular_rad_s[i] * w * cs;
+    }
+  }
+  if (comps_.empty()) return v;
+  random_phasors(t);
+  for (std::size_t i = 0; i < comps_.size(); ++i) {
+    const Component& c = comps_[i];
+    const double cs = phasor_[i].real(), sn = phasor_[i].imag();
+    v.d[c.axis] -= c.amplitude_over_w2 * cs;
+    v.d_dot[c.axis] += c.amplitude_over_w * sn;
+    v.d_ddot[c.axis] += c.amplitude_m_s2 * cs;
+  }
+  return v;
+}
+
+void Vibration::set_grid_step(double step_s) {
+  step_s_ = step_s;
+  rotation_.resize(comps_.size());
+  for (std::size_t i = 0; i < comps_.size(); ++i) rotation_[i] = std::polar(1.0, comps_[i].w_rad_s * step_s);
+  cached_ = false;
+}
+
+void Vibration::random_phasors(double t) const {
+  phasor_.resize(comps_.size());
+  if (cached_ && t == t_cached_s_) return;
+  // One grid step after the cached instant, to the rounding of the caller's
+  // t = t0 + s h (agreeing to ~1e-15 relative; 1e-12 is allowed).
+  const bool next_step = cached_ && step_s_ > 0.0 && std::abs(t - (t_cached_s_ + step_s_)) <= 1e-12 * std::max(1.0, t) &&
+                         steps_since_exact_ < kResyncSteps;
+  if (next_step) {
+    for (std::size_t i = 0; i < comps_.size(); ++i) phasor_[i] *= rotation_[i];
+    t_cached_s_ = t;
+    ++steps_since_exact_;
+    return;
+  }
+  for (std::size_t i = 0; i < comps_.size(); ++i) phasor_[i] = std::polar(1.0, comps_[i].w_rad_s * t + comps_[i].phase_rad);
+  // Only grid instants become the cache (the raw increments' Gauss-Legendre
+  // nodes between them are computed and forgotten).
+  const bool on_grid = step_s_ > 0.0 && std::abs(t / step_s_ - std::round(t / step_s_)) < 1e-6;
+  cached_ = on_grid;
+  t_cached_s_ = t;
+  steps_since_exact_ = 0;
+}
+
+Kinematics Vibration::apply(const Kinematics& base, const Vec3& alpha_s, double t) const {
+  const VibrationState v = at(t);
+  const Mat3& M = spec_.sensor_to_body;
+  const Vec3& l = spec_.lever_arm_m;
+  // The sensor point's displacement p = d + (exp([th]) - I) l and its
+  // derivatives, with the turn's body rate w_v = W(th) th' and acceleration
+  // a_v (Eq. 3.59, 3.61): d/dt exp([th]) l = exp([th]) (w_v x l).
+  const Mat3 E = so3::exp(v.theta);
+  const Vec3 w_v = so3::W(v.theta) * v.theta_dot;
+  const Vec3 a_v = so3::angular_acceleration(v.theta, v.theta_dot, v.theta_ddot);
+  const Vec3 p = v.d + E * l - l;
+  const Vec3 p_dot = v.d_dot + E * w_v.cross(l);
+  const Vec3 p_ddot = v.d_ddot + E * (a_v.cross(l) + w_v.cross(w_v.cross(l)));
+  // In sensor axes.
+  const Vec3 th_s = M.transpose() * v.theta, th_s_dot = M.transpose() * v.theta_dot;
+  const Vec3 q = M.transpose() * p, q_dot = M.transpose() * p_dot, q_ddot = M.transpose() * p_ddot;
+  const Mat3 Es = so3::exp(th_s);
+  const Vec3& w_s = base.angular_rate_rad_s;
+  Kinematics k = base;
+  k.attitude = base.attitude * Es;
+  k.angular_rate_rad_s = Es.transpose() * w_s + so3::W(th_s) * th_s_dot;
+  k.position_m = base.position_m + base.attitude * q;
+  k.velocity_m_s = base.velocity_m_s + base.attitude * (w_s.cross(q) + q_dot);
+  k.acceleration_m_s2 = base.acceleration_m_s2 + base.attitude * (alpha_s.cross(q) + w_s.cross(w_s.cross(q)) +
+                                                                  2.0 * w_s.cross(q_dot) + q_ddot);
+  return k;
+}
+
+Kinematics VibratingInterval::at(double s) const {
+  return vibration_.apply(base_.at(s), base_.angular_acceleration_at(s), t0_s_ + s * h_s_);
+}
+
+}  // namespace imuemu::signal_chain

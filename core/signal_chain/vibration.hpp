@@ -1,0 +1,133 @@
+// Vibration as rigid-body motion (issue 16, acceptance 2; first part):
+// added to the smoothed trajectory after the smoothing (so the kernel cannot
+// remove it), linear and angular, in body axes at the body's reference
+// point, carried to the IMU through its lever arm, so that gyro, accelerometer
+// and the increments agree and coning and sculling appear by construction.
+//
+// Sources in this first part: sinusoids (frequency, amplitude and phase per
+// axis; linear as acceleration, angular as rate) and random linear vibration
+// from a one-sided acceleration PSD table (g^2/Hz against Hz, interpolated
+// log-log as test standards write it, e.g. MIL-STD-810H Method 514.8). The
+// random part is a random-phase multisine: one component per `resolution_hz`
+// bin at a frequency drawn uniformly inside the bin (incommensurate: the
+// signal never repeats) and a uniform phase, its amplitude^2 / 2 the bin's
+// power S(f) df, so that its PSD is the table's; Gaussian by the central
+// limit theorem over the hundreds of components a profile spans. Rotor harmonics and shocks are
+// not yet here.
+//
+// Motion: the vibration displaces the body by d(t) and turns it by exp([th(t)])
+// about the reference point (th, d in body axes, closed form with their first
+// and second derivatives). A sensor at lever arm l (body axes) with axes
+// sensor_to_body = M moves by p = d + (exp([th]) - I) l; in sensor axes the
+// turn is exp([M^T th]) and the displacement q = M^T p. On top of the smoothed
+// sensor trajectory (x_s, R_s, omega_s, alpha_s):
+//   R = R_s exp([M^T th]),  omega = exp([M^T th])^T omega_s + W(M^T th) M^T th'
+//   x = x_s + R_s q,  v = v_s + R_s (omega_s x q + q'),
+//   a = a_s + R_s (alpha_s x q + omega_s x (omega_s x q) + 2 omega_s x q' + q'')
+// (Eq. 3.59 and 3.61 for the turn's rate and acceleration).
+#pragma once
+
+#include <complex>
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "core/signal_chain/increments.hpp"
+#include "core/trajectory.hpp"
+
+namespace imuemu::signal_chain {
+
+struct Sinusoid {
+  double frequency_hz = 0.0;
+  Vec3 linear_m_s2 = Vec3::Zero();   // acceleration amplitude per body axis
+  Vec3 angular_rad_s = Vec3::Zero(); // angular-rate amplitude per body axis
+  Vec3 phase_rad = Vec3::Zero();     // per axis: a(t) = A sin(2 pi f t + phase)
+};
+
+struct PsdPoint {
+  double frequency_hz = 0.0;
+  double g2_per_hz = 0.0;  // one-sided acceleration PSD, g^2/Hz (g = 9.80665 m/s^2)
+};
+
+struct RandomVibration {
+  std::vector<PsdPoint> psd;            // increasing frequencies, log-log interpolated between them
+  Vec3 axis_scale = Vec3(1.0, 1.0, 1.0);  // PSD multiplier per body axis (0: none on that axis)
+  double resolution_hz = 0.5;           // one component per bin of this width
+  std::uint64_t seed = 0;
+};
+
+struct VibrationSpec {
+  std::vector<Sinusoid> sinusoids;
+  std::optional<RandomVibration> random_linear;
+  Vec3 lever_arm_m = Vec3::Zero();   // the sensor relative to the vibration's reference point, body axes
+  Mat3 sensor_to_body = Mat3::Identity();
+  bool empty() const { return sinusoids.empty() && !random_linear; }
+};
+
+// th, d and their derivatives at one instant, body axes.
+struct VibrationState {
+  Vec3 theta = Vec3::Zero(), theta_dot = Vec3::Zero(), theta_ddot = Vec3::Zero();
+  Vec3 d = Vec3::Zero(), d_dot = Vec3::Zero(), d_ddot = Vec3::Zero();
+};
+
+// One-sided PSD table value at f (log-log interpolation; 0 outside the table).
+double psd_at(const std::vector<PsdPoint>& psd, double f_hz);
+
+class Vibration {
+ public:
+  // Throws std::invalid_argument naming the field (frequency not positive,
+  // PSD table not increasing or not positive, resolution not positive, more
+  // than kMaxComponents random components). device: the noise stream's name.
+  Vibration(const VibrationSpec& spec, const std::string& device);
+  // t_s: seconds since the start of the run. Not thread-safe (the random
+  // part keeps its phasors between calls): one Vibration per device chain.
+  VibrationState at(double t_s) const;
+  // The internal sample period: a call one period after the previous grid
+  // instant advances the random components' phasors by one rotation each
+  // (a complex product) instead of a sine and a cosine; re-synchronised
+  // exactly every kResyncSteps steps, and by any call off that sequence.
+  void set_grid_step(double step_s);
+  static constexpr int kResyncSteps = 4096;
+  // The kinematics of the vibrating sensor on top of the smoothed ones.
+  Kinematics apply(const Kinematics& base, const Vec3& base_angular_acceleration_rad_s2, double t_s) const;
+  std::size_t random_components() const { return comps_.size(); }
+
+  static constexpr std::size_t kMaxComponents = 200'000;
+
+ private:
+  struct Component {
+    double w_rad_s, amplitude_m_s2, phase_rad;
+    int axis;
+    double amplitude_over_w, amplitude_over_w2;  // velocity and displacement amplitudes
+  };
+  // e^{i phase} of every random component at t_cached_s (valid) and the
+  // per-step rotation e^{i w step}.
+  void random_phasors(double t_s) const;
+  VibrationSpec spec_;
+  std::vector<Component> comps_;
+  double step_s_ = 0.0;
+  std::vector<std::complex<double>> rotation_;
+  mutable std::vector<std::complex<double>> phasor_;
+  mutable bool cached_ = false;
+  mutable double t_cached_s_ = 0.0;
+  mutable int steps_since_exact_ = 0;
+};
+
+// The interval's motion with the vibration on top; positions (for the ecef
+// gravitation integral only) stay the base's: the vibration's displacement,
+// micrometres to millimetres, moves gravity by less than 1e-8 m/s^2.
+class VibratingInterval final : public IntervalMotion {
+ public:
+  VibratingInterval(const IntervalMotion& base, const Vibration& vibration, double t0_s, double h_s)
+      : base_(base), vibration_(vibration), t0_s_(t0_s), h_s_(h_s) {}
+  Kinematics at(double s) const override;
+  Vec3 position_at(double s) const override { return base_.position_at(s); }
+
+ private:
+  const IntervalMotion& base_;
+  const Vibration& vibration_;
+  double t0_s_, h_s_;
+};
+
+}  // namespace imuemu::signal_chain
