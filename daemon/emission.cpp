@@ -456,7 +456,10 @@ void EmissionEngine::Impl::take_live_pose(const io::SourcedPose& p) {
     bool refused = false;
     for (auto& d : devices) {
       try {
-        d->engine->push(d->mounted ? sensor_pose(p.pose, d->options.mounting) : p.pose);
+        // The pose's own rates are the body's; a mounted sensor's differ
+        // (lever arm, misalignment): its slopes are estimated from its poses.
+        if (d->mounted) d->engine->push(sensor_pose(p.pose, d->options.mounting));
+        else d->engine->push(p.pose, p.rates);
       } catch (const std::exception&) {
         refused = true;  // counted, never fatal (as `imuemu stream`)
       }
