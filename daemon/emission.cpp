@@ -467,10 +467,13 @@ void EmissionEngine::Impl::take_live_pose(const io::SourcedPose& p) {
     if (refused) poses_refused.fetch_add(1, std::memory_order_relaxed);
     else poses_pushed.fetch_add(1, std::memory_order_relaxed);
     if (!mapping_ready.load(std::memory_order_relaxed) && devices.front()->engine->knots_pushed() > 0) {
-      // The first pose fixes the grid and the clock: its time is "now" on the
-      // sender's clock; ticks go out emit_delay_ns after their own time.
+      // The first pose fixes the grid and the clock: its time is the
+      // instant it arrived (receive_ns), not when the producer took it (a
+      // stream is acquired at its second pose, and the producer polls): else
+      // that wait, a pose interval and more, would add to every sample's
+      // latency (issue 17). Ticks go out emit_delay_ns after their own time.
       t0_ns = devices.front()->engine->first_knot_ns();
-      const TimeNs now = monotonic_now_ns();
+      const TimeNs now = p.receive_ns > 0 ? std::min(p.receive_ns, monotonic_now_ns()) : monotonic_now_ns();
       mapping_value = options.start == StartAlignment::now
                           ? live::TimeMapping::start_now(t0_ns, now, options.speed)
                           : live::TimeMapping::start_at_next_realtime_second(t0_ns, now, realtime_now_ns(), 0,
