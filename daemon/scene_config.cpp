@@ -843,7 +843,9 @@ LatencyPlan latency_plan(const SceneConfig& scene, const ImuConfig& imu) {
   if (!scene.live.latency_budget_ms || !is_live(scene.trajectory.kind)) return plan;
   const auto budget_ns = static_cast<TimeNs>(std::llround(*scene.live.latency_budget_ms * 1e6));
   plan.emission_delay_ns = budget_ns;
-  if (budget_ns >= plan.smoothing_lookahead_ns) return plan;  // the window of Eq. 3.68 fits in the budget
+  // The window of Eq. 3.68 fits in the budget, with the producer's default
+  // lead (it computes each tick that long before it is due).
+  if (budget_ns >= saturating_add_ns(plan.smoothing_lookahead_ns, plan.producer_lead_ns)) return plan;
   plan.causal = true;
   plan.lookahead_ns = CausalHermite::lookahead_ns(knot_interval_ns);
   // The producer computes a tick producer_lead before it is due: half of what

@@ -100,7 +100,8 @@ struct LiveConfig {
   double margin_s = 0.1;  // delay beyond the engine's look-ahead (absorbs input jitter)
   // Live input: samples leave this long after their trajectory time (on the
   // mapping anchored at the first pose's arrival), replacing look-ahead +
-  // margin_s. Below the smoothing method's look-ahead + margin the causal
+  // margin_s. Below the smoothing method's look-ahead + the producer's 20 ms
+  // lead the causal
   // Hermite method runs instead (core/causal_hermite.hpp, docs/streaming.md
   // "Low-latency live input"). Empty: look-ahead + margin_s, the smoothing method.
   std::optional<double> latency_budget_ms;
