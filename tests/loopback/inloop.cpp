@@ -53,6 +53,7 @@
 #include "drivers/protocol.hpp"
 #include "drivers/protocols/stream_protocols.hpp"
 #include "io/mavlink_pose.hpp"
+#include "io/pose_source.hpp"
 #include "tests/support/spawn.hpp"
 
 namespace fs = std::filesystem;
@@ -61,11 +62,7 @@ using namespace std::chrono_literals;
 namespace imuemu::inloop {
 namespace {
 
-TimeNs now_ns() {
-  timespec ts{};
-  ::clock_gettime(CLOCK_MONOTONIC, &ts);
-  return static_cast<TimeNs>(ts.tv_sec) * kNsPerSecond + ts.tv_nsec;
-}
+TimeNs now_ns() { return io::monotonic_now_ns(); }
 
 void sleep_until_ns(TimeNs t) {
   timespec ts{static_cast<time_t>(t / kNsPerSecond), static_cast<long>(t % kNsPerSecond)};
