@@ -50,6 +50,7 @@
 #include <vector>
 
 #include "core/so3.hpp"
+#include "daemon/status_command.hpp"
 #include "drivers/protocol.hpp"
 #include "drivers/protocols/stream_protocols.hpp"
 #include "io/mavlink_pose.hpp"
@@ -157,6 +158,15 @@ class Daemon {
   std::vector<Sample> samples() const {
     std::lock_guard lock(mutex_);
     return samples_;
+  }
+  // The daemon's own pose latency (status: engine.devices[0].pose_latency).
+  std::optional<nlohmann::json> pose_latency() const {
+    try {
+      const nlohmann::json s = cli::query_control_socket((dir_ / "c.sock").string(), "status", 2000ms);
+      return s.at("engine").at("devices").at(0).at("pose_latency");
+    } catch (const std::exception&) {
+      return std::nullopt;
+    }
   }
 
  private:
@@ -366,8 +376,6 @@ int run_latency(const char* imuemud, double pose_hz, std::int64_t rate_hz, doubl
     if (i >= samples.size()) continue;
     latency_ms.push_back(static_cast<double>(samples[i].read_ns - sent[k]) * 1e-6);
   }
-  std::error_code ec;
-  fs::remove_all(dir, ec);
   if (latency_ms.empty()) {
     std::printf("no latency measured (%zu samples read)\n%s\n", samples.size(), daemon.log().c_str());
     return 1;
@@ -392,6 +400,13 @@ int run_latency(const char* imuemud, double pose_hz, std::int64_t rate_hz, doubl
   std::printf("p50 %.2f ms, p90 %.2f ms, p99 %.2f ms, max %.2f ms; goal p99 <= %.2f ms (one pose interval + 1 ms): %s\n",
               pct(0.5), pct(0.9), pct(0.99), sorted.back(), goal_ms, pct(0.99) <= goal_ms ? "MET" : "NOT MET");
   std::printf("poses whose interval began extrapolated (arrived after the budget): %zu of %zu\n", late, pose_t.size() - 1);
+  if (const auto internal = daemon.pose_latency())
+    std::printf("imuemud status pose_latency (arrival -> first dependent sample handed to the transport): %zu poses, "
+                "p50 %.2f ms, p99 %.2f ms, max %.2f ms\n",
+                internal->value("count", std::size_t{0}), internal->value("p50_ns", 0.0) * 1e-6,
+                internal->value("p99_ns", 0.0) * 1e-6, internal->value("max_ns", 0.0) * 1e-6);
+  std::error_code ec;
+  fs::remove_all(dir, ec);
   return 0;
 }
 
