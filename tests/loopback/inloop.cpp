@@ -245,6 +245,9 @@ struct LoopResult {
   bool grid_ok = false;
   double present = 0, flagged = 0;
   std::size_t samples = 0;
+  // imuemud's own measurement (status pose_latency): poses measured, p99.
+  std::size_t latency_count = 0;
+  double latency_p99_ms = 0;
 };
 
 constexpr double kHoldMax = 0.03, kTrackMax = 0.05, kOvershootMax = 0.25;
@@ -301,6 +304,10 @@ LoopResult closed_loop(const char* imuemud, bool low_latency, const fs::path& di
     if (t >= step_at_s + 1.0) r.track_max_err_rad_s = std::max(r.track_max_err_rad_s, (omega - step).norm());
   }
   r.gyro_delay_s = delay_n ? delay_sum / static_cast<double>(delay_n) : 0.0;
+  if (const auto l = daemon.pose_latency()) {
+    r.latency_count = l->value("count", std::size_t{0});
+    r.latency_p99_ms = l->value("p99_ns", 0.0) * 1e-6;
+  }
   const std::vector<Sample> out = daemon.samples();
   r.samples = out.size();
   if (out.size() >= 2) {
@@ -330,6 +337,7 @@ int run_closed_loop(const char* imuemud) {
     std::printf("%-28s output: %zu samples, on the 1 kHz grid and finite: %s, %.1f %% of grid ticks present, "
                 "%.1f %% flagged\n",
                 "", r.samples, r.grid_ok ? "yes" : "NO", 100 * r.present, 100 * r.flagged);
+    std::printf("%-28s imuemud pose_latency: %zu poses, p99 %.2f ms\n", "", r.latency_count, r.latency_p99_ms);
   };
   const LoopResult fast = closed_loop(imuemud, true, dir / "fast");
   print("low latency (8 ms budget):", fast);
@@ -347,6 +355,12 @@ int run_closed_loop(const char* imuemud) {
   // only a gross loss fails.
   if (!fast.grid_ok || fast.present < 0.5) {
     std::printf("FAIL: the low-latency output must stay on its 1 kHz grid, finite, with >= 50 %% of its ticks\n");
+    ok = false;
+  }
+  // The causal method measures its own latency (status pose_latency); the
+  // smoothing method does not (its dependency is a window, not one pose).
+  if (fast.latency_count == 0 || slow.latency_count != 0) {
+    std::printf("FAIL: status pose_latency must count the low-latency run's poses (and only its)\n");
     ok = false;
   }
   if (!slow.imu_seen) {
