@@ -119,6 +119,11 @@ struct PipelineOptions {
   // motion itself; see docs/accuracy.md) smoothed by the fourth-order bump.
   interp::Options interpolation{.method = interp::Method::hermite};
   smoothing::KernelOptions kernel{.delta = 10, .width = smoothing::KernelWidth::window, .half_width_s = 1.0, .order = 4};
+  // Live input under a latency budget below the smoothing look-ahead (issue
+  // 17): StreamPipeline runs the causal cubic Hermite of
+  // core/causal_hermite.hpp instead of Eq. 3.68 (look-ahead one knot
+  // interval; interpolation, kernel, chart, derivatives and ends unused).
+  bool causal = false;
 };
 
 struct BatchResult {

@@ -736,8 +736,30 @@ StreamPipeline::StreamPipeline(const PipelineOptions& options) : options_(option
   if (options.kernel.delta > limits::kMaxWindowSamples)
     throw limits::SizeLimitError("smoothing window Delta " + std::to_string(options.kernel.delta) +
                                  " samples: at most " + std::to_string(limits::kMaxWindowSamples));
+  if (options.causal) {
+    CausalHermiteOptions co;
+    co.scene = options.scene;
+    co.rate_hz = options.rate_hz;
+    co.max_gap_ns = static_cast<TimeNs>(std::llround(std::min(options.max_gap_s, 1e9) * 1e9));
+    causal_ = std::make_unique<CausalHermite>(co);
+  }
   // Construct one run now so bad kernel/spline options fail here, not at the first knot.
   run_ = std::make_unique<Run>(options_, out_, 0);
+}
+
+void StreamPipeline::push(const Pose& knot, const PoseRates& rates) {
+  if (!causal_) return push(knot);
+  if (finished_) throw std::logic_error("StreamPipeline::push after finish");
+  causal_->push(knot, rates);  // refuses (changing nothing) what it cannot follow
+  if (knots_pushed_ == 0) first_knot_ns_ = knot.t_ns;
+  last_knot_ = knot;
+  ++knots_pushed_;
+  CausalSample c;
+  while (causal_->pop(c)) {
+    out_.push_back({c.kinematics, c.imu});
+    newest_output_ns_ = c.kinematics.t_ns;
+    any_output_ = true;
+  }
 }
 
 StreamPipeline::~StreamPipeline() = default;
@@ -749,6 +771,7 @@ std::string knot_name(std::size_t index, TimeNs t_ns) {
 }  // namespace
 
 void StreamPipeline::push(const Pose& knot) {
+  if (causal_) return push(knot, PoseRates{});
   if (finished_) throw std::logic_error("StreamPipeline::push after finish");
   // Every knot-level rule first; nothing changes until they all pass.
   const bool gap = check_knot(knot);
@@ -882,6 +905,10 @@ void StreamPipeline::check_chart_span(const Pose& knot, bool new_run) const {
 
 void StreamPipeline::finish() {
   if (finished_) return;
+  if (causal_) {  // every sample up to the last knot is already out; nothing extrapolated beyond it
+    finished_ = true;
+    return;
+  }
   check_last_run();
   run_->finish();
   finished_ = true;
@@ -898,13 +925,17 @@ bool StreamPipeline::pop(StreamSample& out) {
   return true;
 }
 
-std::size_t StreamPipeline::buffered_samples() const { return run_->buffered() + out_.size(); }
+std::size_t StreamPipeline::buffered_samples() const {
+  return causal_ ? out_.size() : run_->buffered() + out_.size();
+}
 
 TimeNs StreamPipeline::current_lag_ns() const {
   return any_output_ && knots_pushed_ > 0 ? last_knot_.t_ns - newest_output_ns_ : 0;
 }
 
 TimeNs StreamPipeline::lookahead_ns(const PipelineOptions& output_options, TimeNs knot_interval_ns) {
+  // The causal method: a sample is final once the knot after it arrived.
+  if (output_options.causal) return CausalHermite::lookahead_ns(knot_interval_ns);
   const PipelineOptions options = internal_options(output_options);
   const auto delta = static_cast<std::int64_t>(options.kernel.delta);
   const bool global = options.chart == Chart::global;

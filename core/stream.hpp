@@ -14,7 +14,9 @@
 #include <memory>
 #include <vector>
 
+#include "core/causal_hermite.hpp"
 #include "core/pipeline.hpp"
+#include "core/pose_rates.hpp"
 
 namespace imuemu {
 
@@ -42,6 +44,10 @@ class StreamPipeline {
   // holds. Strong guarantee: a refused knot changes nothing (no output, no
   // counter), so a live caller may count it and go on.
   void push(const Pose& knot);
+  // The same with the knot's own derivatives (live input): the causal method
+  // (PipelineOptions::causal) uses them as its Hermite slopes; the smoothing
+  // method ignores them.
+  void push(const Pose& knot, const PoseRates& rates);
   // End of input: computes the end of the trajectory (Ends policy). Throws
   // GapError for a last run of a single knot, std::invalid_argument for a
   // run shorter than two output samples (Ends::clip).
@@ -89,6 +95,7 @@ class StreamPipeline {
   void check_chart_span(const Pose& knot, bool new_run) const;
   PipelineOptions options_;
   std::unique_ptr<Run> run_;
+  std::unique_ptr<CausalHermite> causal_;  // PipelineOptions::causal
   std::deque<StreamSample> out_;
   std::size_t knots_pushed_ = 0;
   std::size_t run_first_knot_ = 0;

@@ -12,6 +12,7 @@
 #include <cerrno>
 #include <condition_variable>
 #include <cstring>
+#include <deque>
 #include <future>
 #include <limits>
 #include <mutex>
@@ -49,6 +50,9 @@ __extension__ typedef __int128 Int128;  // exact products of int64 times (GCC/Cl
 
 constexpr TimeNs kMaxSleepChunkNs = 50'000'000;  // a stop request is seen within this
 constexpr TimeNs kProducerPollNs = 1'000'000;
+// Poses waiting for their first dependent sample (a stalled emitter must not
+// grow the list without bound).
+constexpr std::size_t kMaxPoseMarks = 4096;
 
 TimeNs thread_cpu_ns() noexcept {
   timespec ts{};
@@ -121,6 +125,9 @@ struct Slot {
   bool send = false;  // false: the emitter had nothing to send (waiting, paused)
   live::EmissionStatus status = live::EmissionStatus::waiting;
   drivers::ImuFrameInput frame;
+  // The arrival (CLOCK_MONOTONIC) of the newest pose this is the first
+  // sample to depend on; 0: none (issue 17's end-to-end latency).
+  TimeNs pose_receive_ns = 0;
 };
 
 // Trajectory input: the stream engine is fed knots only as far as the next
@@ -203,6 +210,12 @@ struct Device {
       producer_late{0}, deadline_misses{0}, dropped_late{0}, write_errors{0}, last_counter{0}, saturated{0};
   std::atomic<TimeNs> engine_lag_ns{0};
   LatenessHistogram lateness;
+  // End-to-end latency of live poses (causal method): from a pose's arrival
+  // to its first dependent sample handed to the transport. pose_marks
+  // (producer thread only): (previous pose's time, this pose's arrival); the
+  // first tick after that time not extrapolated is the first to depend on it.
+  LatenessHistogram pose_latency;
+  std::deque<std::pair<TimeNs, TimeNs>> pose_marks;
   mutable std::mutex live_mutex;  // producer <-> stats(), never the emission thread
   live::LiveCounters live_counters;
   // The transport as it was when take_transports() moved it out.
@@ -392,6 +405,12 @@ void EmissionEngine::Impl::produce(Device& d, bool time_gated) {
     slot.tick = k;
     slot.status = e.status;
     slot.send = e.has_sample();
+    if (slot.send && e.status != live::EmissionStatus::extrapolated) {
+      while (!d.pose_marks.empty() && d.pose_marks.front().first < tick_ns) {
+        slot.pose_receive_ns = d.pose_marks.front().second;
+        d.pose_marks.pop_front();
+      }
+    }
     if (slot.send) {
       drivers::ImuFrameInput& f = slot.frame;
       f.sample_counter = k;
@@ -453,7 +472,18 @@ void EmissionEngine::Impl::take_live_pose(const io::SourcedPose& p) {
     bool refused = false;
     for (auto& d : devices) {
       try {
-        d->engine->push(d->mounted ? sensor_pose(p.pose, d->options.mounting) : p.pose);
+        // The pose's own rates are the body's; a mounted sensor's differ
+        // (lever arm, misalignment): its slopes are estimated from its poses.
+        const bool had_knot = d->engine->knots_pushed() > 0;
+        const TimeNs previous_ns = d->engine->last_knot_ns();
+        if (d->mounted) d->engine->push(sensor_pose(p.pose, d->options.mounting));
+        else d->engine->push(p.pose, p.rates);
+        // The causal method's first sample depending on this pose is the
+        // first tick after the previous pose's time.
+        if (d->options.pipeline.causal && had_knot && p.receive_ns > 0) {
+          d->pose_marks.emplace_back(previous_ns, p.receive_ns);
+          if (d->pose_marks.size() > kMaxPoseMarks) d->pose_marks.pop_front();
+        }
       } catch (const std::exception&) {
         refused = true;  // counted, never fatal (as `imuemu stream`)
       }
@@ -461,10 +491,13 @@ void EmissionEngine::Impl::take_live_pose(const io::SourcedPose& p) {
     if (refused) poses_refused.fetch_add(1, std::memory_order_relaxed);
     else poses_pushed.fetch_add(1, std::memory_order_relaxed);
     if (!mapping_ready.load(std::memory_order_relaxed) && devices.front()->engine->knots_pushed() > 0) {
-      // The first pose fixes the grid and the clock: its time is "now" on the
-      // sender's clock; ticks go out emit_delay_ns after their own time.
+      // The first pose fixes the grid and the clock: its time is the
+      // instant it arrived (receive_ns), not when the producer took it (a
+      // stream is acquired at its second pose, and the producer polls): else
+      // that wait, a pose interval and more, would add to every sample's
+      // latency (issue 17). Ticks go out emit_delay_ns after their own time.
       t0_ns = devices.front()->engine->first_knot_ns();
-      const TimeNs now = monotonic_now_ns();
+      const TimeNs now = p.receive_ns > 0 ? std::min(p.receive_ns, monotonic_now_ns()) : monotonic_now_ns();
       mapping_value = options.start == StartAlignment::now
                           ? live::TimeMapping::start_now(t0_ns, now, options.speed)
                           : live::TimeMapping::start_at_next_realtime_second(t0_ns, now, realtime_now_ns(), 0,
@@ -595,6 +628,8 @@ void EmissionEngine::Impl::emit_tick(Device& d, std::uint64_t k, bool drop) {
     d.options.stream_encoder->periodic(frame.t_ns, d.bytes);
     if (!d.options.transport->write_frame(std::as_bytes(std::span<const std::uint8_t>(d.bytes))))
       d.write_errors.fetch_add(1, std::memory_order_relaxed);
+    else if (slot->pose_receive_ns > 0)
+      d.pose_latency.record(monotonic_now_ns() - slot->pose_receive_ns);
   } else {
     d.can_frames.clear();
     d.options.can_encoder->encode(frame, d.can_frames);
@@ -889,6 +924,7 @@ EngineStats EmissionEngine::stats() const {
       ds.live = d.live_counters;
     }
     ds.lateness = d.lateness.summary();
+    ds.pose_latency = d.pose_latency.summary();
     ds.engine_lag_ns = d.engine_lag_ns.load(std::memory_order_relaxed);
     ds.last_sample_counter = d.last_counter.load(std::memory_order_relaxed);
     s.emitted += ds.emitted;
@@ -998,6 +1034,7 @@ nlohmann::json to_json(const EngineStats& s) {
                        {"underrun_events", d.live.underrun_events},
                        {"stale_discarded", d.live.stale_discarded}}},
                      {"lateness", lateness_json(d.lateness)},
+                     {"pose_latency", lateness_json(d.pose_latency)},
                      {"engine_lag_ns", d.engine_lag_ns},
                      {"last_sample_counter", d.last_sample_counter}};
     if (d.gpio)

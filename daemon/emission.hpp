@@ -155,6 +155,9 @@ struct DeviceStats {
   std::optional<drivers::GpioSyncCounters> gpio;
   live::LiveCounters live;
   LatenessSummary lateness;
+  // Live input, causal method: pose arrival -> its first dependent sample
+  // handed to the transport (docs/streaming.md "Low-latency live input").
+  LatenessSummary pose_latency;
   TimeNs engine_lag_ns = 0;          // StreamPipeline::current_lag_ns, as last seen by the producer
   std::uint64_t last_sample_counter = 0;
 };

@@ -151,8 +151,7 @@ void run_build_job(BuildJob& job) {
   sc::SceneConfig next = job.scene_path.empty() ? sc::default_scene() : sc::parse_scene_file(job.scene_path);
   const sc::SceneCheck check = sc::check_scene(next);
   if (check.refused) throw std::runtime_error("link budget over 100 %:\n" + sc::to_text(check));
-  const bool live = next.trajectory.kind == sc::SourceKind::udp || next.trajectory.kind == sc::SourceKind::tcp ||
-                    next.trajectory.kind == sc::SourceKind::stdin_lines;
+  const bool live = sc::is_live(next.trajectory.kind);
   if (!live) {
     // The trajectory's content (a file that became malformed) is what most
     // often fails a reload: found here, while the old scene still runs.

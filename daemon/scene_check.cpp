@@ -4,6 +4,8 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <iomanip>
+#include <numbers>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <sstream>
@@ -48,6 +50,8 @@ std::string fixed(double v, int digits) {
 }
 
 std::string seconds_text(TimeNs ns) { return fixed(static_cast<double>(ns) * 1e-9, 3) + " s"; }
+// Latencies of the causal method are a few ms: shown to 0.1 ms.
+std::string ms_text(TimeNs ns) { return fixed(static_cast<double>(ns) * 1e-6, 1) + " ms"; }
 
 // A path as the kernel resolves it, as far as can be told without following
 // links that do not exist yet: absolute, ".", ".." and repeated slashes
@@ -135,7 +139,6 @@ SceneCheck check_scene(const SceneConfig& scene) {
   check.source = scene.trajectory.source;
   check.knot_interval_s = scene.trajectory.knot_interval_s;
   const auto knot_interval_ns = static_cast<TimeNs>(std::llround(scene.trajectory.knot_interval_s * 1e9));
-  const auto margin_ns = static_cast<TimeNs>(std::llround(scene.live.margin_s * 1e9));
 
   // CAN traffic grouped by interface: the devices there share one bus.
   std::map<std::string, std::vector<std::size_t>> can_devices;
@@ -150,8 +153,26 @@ SceneCheck check_scene(const SceneConfig& scene) {
     c.rate_hz = imu.rate_hz;
     const PipelineOptions po = pipeline_options(scene, imu);
     c.delta_samples = po.kernel.delta;
-    c.lookahead_ns = StreamPipeline::lookahead_ns(po, knot_interval_ns);
-    c.emission_delay_ns = c.lookahead_ns + margin_ns;
+    const LatencyPlan plan = latency_plan(scene, imu);
+    c.lookahead_ns = plan.lookahead_ns;
+    c.emission_delay_ns = plan.emission_delay_ns;
+    c.causal = plan.causal;
+    c.smoothing_lookahead_ns = plan.smoothing_lookahead_ns;
+    c.producer_lead_ns = plan.producer_lead_ns;
+    c.arrival_slack_ns = plan.arrival_slack_ns;
+    if (c.causal) {
+      const double x = 2.0 * std::numbers::pi * scene.trajectory.knot_interval_s;  // 2 pi f h at f = 1 Hz
+      c.accel_error_1hz_with_rates = x * x / 12.0;
+      c.accel_error_1hz_estimated = 2.0 * x * x;
+      if (plan.arrival_slack_ns < 0)
+        check.warnings.push_back(imu.name + ": latency_budget_ms is below one pose interval + the producer lead (" +
+                                 ms_text(knot_interval_ns + plan.producer_lead_ns) +
+                                 "): the end of every pose interval is extrapolated (flagged) and blended back");
+      if (scene.trajectory.knot_interval_s > 0.01 && scene.trajectory.kind != SourceKind::mavlink_udp)
+        check.warnings.push_back(imu.name + ": the causal method at " + fixed(1.0 / scene.trajectory.knot_interval_s, 0) +
+                                 " Hz poses: below 100 Hz it needs the poses' own rates (pose datagram v2, MAVLink) "
+                                 "to be accurate (docs/streaming.md \"Low-latency live input\")");
+    }
     c.cpu_fraction = static_cast<double>(imu.rate_hz) * kCpuSecondsPerSample;
     const auto rate = static_cast<double>(imu.rate_hz);
     if (is_can_protocol(imu.protocol)) {
@@ -211,8 +232,21 @@ std::string to_text(const SceneCheck& c) {
       << ", knots every " << fixed(c.knot_interval_s, 3) << " s\n";
   for (const ImuCheck& d : c.imus) {
     out << "  imu " << d.name << ": " << d.rate_hz << " Hz " << d.protocol << " over " << d.transport << "\n"
-        << "    window Delta " << d.delta_samples << " samples; look-ahead " << seconds_text(d.lookahead_ns)
-        << ", emitted " << seconds_text(d.emission_delay_ns) << " after the pose (look-ahead + margin)\n";
+        << (d.causal ? "    causal Hermite (latency budget below the smoothing look-ahead of " +
+                           ms_text(d.smoothing_lookahead_ns) + "); look-ahead " + ms_text(d.lookahead_ns) +
+                           " (one pose interval)"
+                     : "    window Delta " + std::to_string(d.delta_samples) + " samples; look-ahead " +
+                           seconds_text(d.lookahead_ns))
+        << ", emitted " << (d.causal ? ms_text(d.emission_delay_ns) : seconds_text(d.emission_delay_ns)) << " after the pose"
+        << (d.causal ? " (latency budget)" : " (look-ahead + margin or latency budget)") << "\n";
+    if (d.causal)
+      out << "    latency: producer lead " << ms_text(d.producer_lead_ns) << "; a pose arriving up to "
+          << ms_text(d.arrival_slack_ns) << " after its mapped time is used exactly, a later one is bridged "
+          << "(extrapolated, flagged, blended back)\n"
+          << "    accuracy: acceleration error <= " << std::scientific << std::setprecision(1)
+          << d.accel_error_1hz_with_rates << " (poses with rates) / " << d.accel_error_1hz_estimated
+          << " (rates estimated) of a 1 Hz motion's acceleration amplitude; x f^2 at f Hz\n"
+          << std::defaultfloat;
     if (d.bytes_per_second) out << "    traffic " << fixed(*d.bytes_per_second, 0) << " B/s (worst case per sample x rate)\n";
     if (d.can_frames_per_second) out << "    traffic " << fixed(*d.can_frames_per_second, 1) << " CAN frames/s\n";
     if (d.link)
@@ -261,6 +295,12 @@ std::string to_json(const SceneCheck& c) {
            {"delta_samples", d.delta_samples},
            {"lookahead_ns", d.lookahead_ns},
            {"emission_delay_ns", d.emission_delay_ns},
+           {"method", d.causal ? "causal-hermite" : "smoothing"},
+           {"smoothing_lookahead_ns", d.smoothing_lookahead_ns},
+           {"producer_lead_ns", d.producer_lead_ns},
+           {"arrival_slack_ns", d.arrival_slack_ns},
+           {"accel_error_1hz_with_rates", d.accel_error_1hz_with_rates},
+           {"accel_error_1hz_estimated", d.accel_error_1hz_estimated},
            {"cpu_fraction", d.cpu_fraction}};
     e["bytes_per_second"] = d.bytes_per_second ? json(*d.bytes_per_second) : json(nullptr);
     e["can_frames_per_second"] = d.can_frames_per_second ? json(*d.can_frames_per_second) : json(nullptr);

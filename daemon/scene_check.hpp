@@ -27,7 +27,16 @@ struct ImuCheck {
   std::int64_t rate_hz = 0;
   int delta_samples = 0;                 // Delta of Eq. 3.68 at this rate
   TimeNs lookahead_ns = 0;               // StreamPipeline::lookahead_ns for the scene's knot interval
-  TimeNs emission_delay_ns = 0;          // lookahead + live.margin_s: samples go out this long after their pose
+  TimeNs emission_delay_ns = 0;          // lookahead + live.margin_s, or live.latency_budget_ms: samples go out this long after their pose
+  bool causal = false;                   // the causal Hermite method (live.latency_budget_ms below the smoothing look-ahead)
+  TimeNs smoothing_lookahead_ns = 0;     // what the smoothing method would need
+  TimeNs producer_lead_ns = 0;           // live: the producer computes a tick this long before it is due
+  TimeNs arrival_slack_ns = 0;           // causal: a pose arriving this late after its mapped time is still used exactly
+  // Causal: relative acceleration error bound of the Hermite cubic for a
+  // motion at 1 Hz, (2 pi f h)^2 / 12 with the poses' rates (cubic Hermite
+  // bound |p'' - H''| <= h^2/12 |p''''|), and 2 (2 pi f h)^2 with slopes
+  // estimated from the poses (tests/test_causal_hermite.cpp).
+  double accel_error_1hz_with_rates = 0.0, accel_error_1hz_estimated = 0.0;
   std::optional<double> bytes_per_second;     // byte-stream protocols: max_bytes_per_sample x rate
   std::optional<double> can_frames_per_second;
   std::optional<drivers::LinkBudget> link;    // serial and can transports (pty and null have no line rate)

@@ -21,6 +21,7 @@
 #include "core/attitude.hpp"
 #include "core/limits.hpp"
 #include "core/stream.hpp"
+#include "core/time_arith.hpp"
 #include "drivers/protocols/protocol_options.hpp"
 #include "drivers/transport.hpp"
 
@@ -269,7 +270,8 @@ void parse_endpoint(const Table& t, const std::string& rest, TrajectoryConfig& o
 
 void parse_trajectory_section(const Table& t, const SceneConfig& scene, TrajectoryConfig& out) {
   t.allow_only({"source", "duration_s", "speed", "knot_interval_s", "loop", "start", "tcp_idle_timeout_s"});
-  const std::string usage = "expected file:PATH, udp:ADDR:PORT, tcp:ADDR:PORT, stdin or sample:flight|circle|static";
+  const std::string usage =
+      "expected file:PATH, udp:ADDR:PORT, mavlink:ADDR:PORT, tcp:ADDR:PORT, stdin or sample:flight|circle|static";
   out.source = t.required_string("source", usage);
   const std::string& s = out.source;
   if (s.rfind("file:", 0) == 0) {
@@ -284,6 +286,9 @@ void parse_trajectory_section(const Table& t, const SceneConfig& scene, Trajecto
   } else if (s.rfind("udp:", 0) == 0) {
     out.kind = SourceKind::udp;
     parse_endpoint(t, s.substr(4), out);
+  } else if (s.rfind("mavlink:", 0) == 0) {
+    out.kind = SourceKind::mavlink_udp;  // MAVLink 2 HIL_STATE_QUATERNION over UDP (docs/pose-wire-format.md §4)
+    parse_endpoint(t, s.substr(8), out);
   } else if (s.rfind("tcp:", 0) == 0) {
     out.kind = SourceKind::tcp;
     parse_endpoint(t, s.substr(4), out);
@@ -382,10 +387,17 @@ void parse_smoothing_section(const Table& t, SmoothingConfig& out) {
 }
 
 void parse_live_section(const Table& t, LiveConfig& out) {
-  t.allow_only({"underrun", "blend_s", "margin_s"});
+  t.allow_only({"underrun", "blend_s", "margin_s", "latency_budget_ms"});
   out.underrun = live::underrun_policy_from_string(t.choice("underrun", "extrapolate", {"extrapolate", "pause"}));
   out.blend_s = t.number("blend_s", 0.2, 0.0, 60.0);
   out.margin_s = t.number("margin_s", 0.1, 0.0, 60.0);
+  if (t.has("latency_budget_ms")) {
+    // At least 1 ms (the producer's wake-up and the write need time), at
+    // most a minute (the smoothing method fits in far less).
+    out.latency_budget_ms = t.number("latency_budget_ms", 0.0, 1.0, 60000.0);
+    if (t.has("margin_s"))
+      t.fail_at("latency_budget_ms", "set either latency_budget_ms or margin_s: the budget replaces look-ahead + margin");
+  }
 }
 
 void parse_daemon_section(const Table& t, const std::string& scene_name, DaemonConfig& out) {
@@ -828,7 +840,36 @@ PipelineOptions pipeline_options(const SceneConfig& scene, const ImuConfig& imu)
   po.kernel.order = s.kernel_order;
   po.kernel.width = s.kernel;
   po.kernel.half_width_s = s.kernel_half_width_s;
+  // Only a live scene with a latency budget may change the method (and
+  // latency_plan asks this function back with the budget cleared).
+  po.causal = scene.live.latency_budget_ms && is_live(scene.trajectory.kind) && latency_plan(scene, imu).causal;
   return po;
+}
+
+LatencyPlan latency_plan(const SceneConfig& scene, const ImuConfig& imu) {
+  LatencyPlan plan;
+  const auto knot_interval_ns = static_cast<TimeNs>(std::llround(scene.trajectory.knot_interval_s * 1e9));
+  const auto margin_ns = static_cast<TimeNs>(std::llround(scene.live.margin_s * 1e9));
+  SceneConfig smoothing_scene = scene;
+  smoothing_scene.live.latency_budget_ms.reset();  // pipeline_options below must not ask back
+  plan.smoothing_lookahead_ns = StreamPipeline::lookahead_ns(pipeline_options(smoothing_scene, imu), knot_interval_ns);
+  plan.lookahead_ns = plan.smoothing_lookahead_ns;
+  plan.emission_delay_ns = saturating_add_ns(plan.smoothing_lookahead_ns, margin_ns);
+  if (!scene.live.latency_budget_ms || !is_live(scene.trajectory.kind)) return plan;
+  const auto budget_ns = static_cast<TimeNs>(std::llround(*scene.live.latency_budget_ms * 1e6));
+  plan.emission_delay_ns = budget_ns;
+  // The window of Eq. 3.68 fits in the budget, with the producer's default
+  // lead (it computes each tick that long before it is due).
+  if (budget_ns >= saturating_add_ns(plan.smoothing_lookahead_ns, plan.producer_lead_ns)) return plan;
+  plan.causal = true;
+  plan.lookahead_ns = CausalHermite::lookahead_ns(knot_interval_ns);
+  // The producer computes a tick producer_lead before it is due: half of what
+  // the budget leaves beyond one pose interval, between 0.5 ms (the
+  // producer's wake-up must still come before the emission thread's) and the
+  // default 20 ms.
+  plan.producer_lead_ns = std::clamp<TimeNs>((budget_ns - knot_interval_ns) / 2, 500'000, 20'000'000);
+  plan.arrival_slack_ns = budget_ns - plan.producer_lead_ns - knot_interval_ns;
+  return plan;
 }
 
 }  // namespace imuemu::scene

@@ -46,12 +46,17 @@ class SceneError : public std::runtime_error {
 
 // ---- [trajectory] ----
 
-enum class SourceKind { file, udp, tcp, stdin_lines, sample };
+enum class SourceKind { file, udp, tcp, stdin_lines, sample, mavlink_udp };
+// Poses arrive while the daemon runs (udp, mavlink, tcp, stdin).
+inline bool is_live(SourceKind kind) {
+  return kind == SourceKind::udp || kind == SourceKind::mavlink_udp || kind == SourceKind::tcp ||
+         kind == SourceKind::stdin_lines;
+}
 enum class SampleMotion { flight, circle, stationary };  // "flight" | "circle" | "static"
 enum class StartAlignment { now, next_second };          // "now" | "next-second"
 
 struct TrajectoryConfig {
-  std::string source;  // as written: file:PATH | udp:ADDR:PORT | tcp:ADDR:PORT | stdin | sample:KIND
+  std::string source;  // as written: file:PATH | udp:ADDR:PORT | mavlink:ADDR:PORT | tcp:ADDR:PORT | stdin | sample:KIND
   SourceKind kind = SourceKind::sample;
   std::string file_path;     // file: resolved against the scene file's directory
   std::string address;       // udp/tcp: address to bind
@@ -94,6 +99,13 @@ struct LiveConfig {
   live::UnderrunPolicy underrun = live::UnderrunPolicy::extrapolate;
   double blend_s = 0.2;
   double margin_s = 0.1;  // delay beyond the engine's look-ahead (absorbs input jitter)
+  // Live input: samples leave this long after their trajectory time (on the
+  // mapping anchored at the first pose's arrival), replacing look-ahead +
+  // margin_s. Below the smoothing method's look-ahead + the producer's 20 ms
+  // lead the causal
+  // Hermite method runs instead (core/causal_hermite.hpp, docs/streaming.md
+  // "Low-latency live input"). Empty: look-ahead + margin_s, the smoothing method.
+  std::optional<double> latency_budget_ms;
 };
 
 // ---- [daemon] ----
@@ -213,5 +225,19 @@ SceneConfig parse_scene_text(std::string_view toml_text, const std::string& file
 // The smoothing engine's options for one device of the scene (its rate and
 // window); what imuemud hands to StreamPipeline.
 PipelineOptions pipeline_options(const SceneConfig& scene, const ImuConfig& imu);
+
+// How one device meets the scene's latency (live.latency_budget_ms).
+struct LatencyPlan {
+  bool causal = false;                 // the causal Hermite method instead of Eq. 3.68
+  TimeNs smoothing_lookahead_ns = 0;   // the smoothing method's look-ahead for this scene
+  TimeNs lookahead_ns = 0;             // of the method used
+  TimeNs emission_delay_ns = 0;        // samples leave this long after their trajectory time
+  TimeNs producer_lead_ns = 20'000'000;  // the producer computes a tick this long before it is due
+  // Causal: a pose is used exactly (not extrapolated over) when it arrives
+  // within this of its mapped time: emission delay - producer lead - one
+  // pose interval (negative: every pose interval ends extrapolated).
+  TimeNs arrival_slack_ns = 0;
+};
+LatencyPlan latency_plan(const SceneConfig& scene, const ImuConfig& imu);
 
 }  // namespace imuemu::scene

@@ -112,9 +112,7 @@ std::string reuse_key(const ImuConfig& imu, const RunnerOptions& options) {
 BuiltEngine build_engine(const SceneConfig& scene, const RunnerOptions& options, ReusableTransports* reuse) {
   BuiltEngine built;
   emission::EngineOptions eo;
-  const bool live_input = scene.trajectory.kind == SourceKind::udp || scene.trajectory.kind == SourceKind::tcp ||
-                          scene.trajectory.kind == SourceKind::stdin_lines;
-  const TimeNs knot_interval_ns = seconds_to_ns(scene.trajectory.knot_interval_s);
+  const bool live_input = is_live(scene.trajectory.kind);
   if (live_input) {
     io::PoseSourceOptions so;
     so.physics = scene.physics.physics;
@@ -126,6 +124,7 @@ BuiltEngine build_engine(const SceneConfig& scene, const RunnerOptions& options,
     io::NetEndpoint endpoint{scene.trajectory.address, scene.trajectory.port, 0};
     endpoint.tcp_idle_timeout_ns = seconds_to_ns(scene.trajectory.tcp_idle_timeout_s);
     if (scene.trajectory.kind == SourceKind::udp) built.source = io::make_udp_pose_source(endpoint, so);
+    else if (scene.trajectory.kind == SourceKind::mavlink_udp) built.source = io::make_mavlink_udp_pose_source(endpoint, so);
     else if (scene.trajectory.kind == SourceKind::tcp) built.source = io::make_tcp_pose_source(endpoint, so);
     else built.source = io::make_fd_pose_source(0, so);
     eo.source = built.source.get();
@@ -142,7 +141,8 @@ BuiltEngine build_engine(const SceneConfig& scene, const RunnerOptions& options,
   eo.drop_late_ticks = options.drop_late_ticks.value_or(scene.daemon.drop_late_ticks);
 
   std::vector<emission::DeviceOptions> devices;
-  TimeNs max_lookahead_ns = 0;
+  TimeNs max_emission_delay_ns = 0;
+  TimeNs producer_lead_ns = eo.producer_lead_ns;
   for (const ImuConfig& imu : scene.imus) {
     emission::DeviceOptions dev;
     dev.name = imu.name;
@@ -153,7 +153,9 @@ BuiltEngine build_engine(const SceneConfig& scene, const RunnerOptions& options,
     dev.mounting = imu.mounting;
     dev.sensor_model = imu.error_model.sensor();
     dev.chain = imu.error_model.chain;
-    max_lookahead_ns = std::max(max_lookahead_ns, StreamPipeline::lookahead_ns(dev.pipeline, knot_interval_ns));
+    const LatencyPlan plan = latency_plan(scene, imu);
+    max_emission_delay_ns = std::max(max_emission_delay_ns, plan.emission_delay_ns);
+    producer_lead_ns = std::min(producer_lead_ns, plan.producer_lead_ns);
     try {
       if (is_can_protocol(imu.protocol)) {
         dev.can_encoder = drivers::make_can_encoder(imu.protocol, imu.can_options);
@@ -214,7 +216,10 @@ BuiltEngine build_engine(const SceneConfig& scene, const RunnerOptions& options,
     }
     devices.push_back(std::move(dev));
   }
-  if (live_input) eo.emit_delay_ns = max_lookahead_ns + seconds_to_ns(scene.live.margin_s);
+  if (live_input) {
+    eo.emit_delay_ns = max_emission_delay_ns;  // look-ahead + margin, or the scene's latency budget
+    eo.producer_lead_ns = producer_lead_ns;
+  }
   built.engine = std::make_unique<emission::EmissionEngine>(std::move(eo), std::move(devices));
   for (const emission::DeviceStats& d : built.engine->stats().devices)
     built.outputs.push_back(d.name + ": " + d.output + " at " + std::to_string(d.rate_hz) + " Hz");

@@ -107,6 +107,12 @@ void print_status_summary(const nlohmann::json& status, std::ostream& out) {
         << microseconds(number_or_zero(lateness, "p99_ns")) << ", max "
         << microseconds(number_or_zero(lateness, "max_ns")) << "; smoother running "
         << number_or_zero(d, "engine_lag_ns") / 1e9 << " s ahead (newest knot minus newest sample ready)\n";
+    const nlohmann::json pose_latency = d.value("pose_latency", nlohmann::json::object());
+    if (count_of(pose_latency, "count") > 0)
+      out << "    pose latency (arrival -> first dependent sample to the transport; " << count_of(pose_latency, "count")
+          << " poses): p50 " << microseconds(number_or_zero(pose_latency, "p50_ns")) << ", p99 "
+          << microseconds(number_or_zero(pose_latency, "p99_ns")) << ", max "
+          << microseconds(number_or_zero(pose_latency, "max_ns")) << "\n";
     out << "    transport: " << count_of(transport, "frames_sent") << " frames sent, "
         << count_of(transport, "queued") << " queued; not taken: " << count_of(d, "write_errors")
         << " packets (link down " << count_of(transport, "dropped_link_down")

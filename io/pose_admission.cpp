@@ -233,6 +233,34 @@ bool PoseAdmission::receive_datagram(std::span<const std::uint8_t> bytes, TimeNs
   return admit(datagram.record, datagram.sequence, receive_ns, out);
 }
 
+bool PoseAdmission::receive_mavlink_datagram(std::span<const std::uint8_t> bytes, TimeNs receive_ns,
+                                             std::string_view from, SourcedPose& out) {
+  received();
+  mavlink::HilStateQuaternion message;
+  mavlink::PacketInfo info;
+  DatagramDecodeError error;
+  const mavlink::Outcome outcome = mavlink::decode_datagram(bytes, message, info, error);
+  if (outcome == mavlink::Outcome::other) {
+    ignored();  // HEARTBEAT, HIL_SENSOR, ... from the same bridge: not poses
+    return false;
+  }
+  if (outcome == mavlink::Outcome::refused) {
+    reject_datagram(error.reason, "from " + std::string(from) + ": " + error.message);
+    return false;
+  }
+  // The checksum matched: the packet arrived intact and counts for the loss
+  // statistics even if its values are refused.
+  const std::uint64_t sequence = mavlink_sequences_.widen(info);
+  TrajectoryRecord record;
+  const bool valid = mavlink::to_record(message, record, error);
+  observe_sequence(sequence, valid ? record.t_ns : 0);
+  if (!valid) {
+    reject_datagram(error.reason, "from " + std::string(from) + ": HIL_STATE_QUATERNION " + error.message);
+    return false;
+  }
+  return admit(record, sequence, receive_ns, out);
+}
+
 namespace {
 
 std::string where(std::size_t line, std::optional<std::uint64_t> sequence) {
@@ -258,9 +286,10 @@ void PoseAdmission::drop_candidates() {
 }
 
 void PoseAdmission::release(const Pose& pose, std::optional<std::uint64_t> sequence, TimeNs receive_ns,
-                            std::size_t line) {
+                            std::size_t line, const PoseRates& rates) {
   SourcedPose item;
   item.pose = pose;
+  item.rates = rates;
   item.sequence = sequence;
   item.receive_ns = receive_ns;
   item.line = line;
@@ -284,7 +313,7 @@ bool PoseAdmission::release_candidates(TimeNs offset_ns, SourcedPose& out) {
   for (const Candidate& c : candidates_) {
     Pose p = c.pose;
     p.t_ns += offset_ns;
-    release(p, c.sequence, c.receive_ns, c.line);
+    release(p, c.sequence, c.receive_ns, c.line, c.rates);
   }
   last_sender_ns_ = candidates_.back().pose.t_ns;
   candidates_.clear();
@@ -332,7 +361,10 @@ bool PoseAdmission::admit(const TrajectoryRecord& record, std::optional<std::uin
   }
   // Finite inputs can still overflow (an ECEF coordinate near 1e308 moved
   // to the tangent frame): the engine must never see a non-finite pose.
-  if (!pose.position_m.allFinite() || !pose.attitude.allFinite()) {
+  const PoseRates rates = converter_.convert_rates(record);
+  const auto finite = [](const std::optional<Vec3>& v) { return !v || v->allFinite(); };
+  if (!pose.position_m.allFinite() || !pose.attitude.allFinite() || !finite(rates.velocity_m_s) ||
+      !finite(rates.angular_rate_rad_s) || !finite(rates.acceleration_m_s2)) {
     reject(kSceneRefused, "scene_refused", where(record.line, sequence) + ": the pose is not finite in the scene frame");
     return false;
   }
@@ -361,14 +393,14 @@ bool PoseAdmission::admit(const TrajectoryRecord& record, std::optional<std::uin
     last_sender_ns_ = record.t_ns;
     Pose shifted = pose;
     shifted.t_ns += offset_ns_;  // |t| <= 2^62 and the offset is bounded the same way (release_candidates)
-    release(shifted, sequence, receive_ns, record.line);
+    release(shifted, sequence, receive_ns, record.line, rates);
     return take_released(out);
   }
   // Not part of the locked stream (or none yet): a candidate for a new one.
   Pose sender_pose = pose;
   sender_pose.t_ns = record.t_ns;
   if (!candidates_.empty() && !consistent(candidates_.back().pose, sender_pose)) drop_candidates();
-  candidates_.push_back({sender_pose, sequence, receive_ns, record.line});
+  candidates_.push_back({sender_pose, sequence, receive_ns, record.line, rates});
   counters_[kHeld].store(candidates_.size(), std::memory_order_relaxed);
   if (candidates_.size() < resync_poses_) {
     if (locked_)

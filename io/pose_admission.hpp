@@ -17,6 +17,7 @@
 #include <string>
 #include <string_view>
 
+#include "io/mavlink_pose.hpp"
 #include "io/pose_source.hpp"
 #include "io/scene_poses.hpp"
 
@@ -133,6 +134,12 @@ class PoseAdmission {
   bool receive_datagram(std::span<const std::uint8_t> bytes, TimeNs receive_ns, std::string_view from,
                         SourcedPose& out);
 
+  // The same for a datagram of MAVLink 2 packets (docs/pose-wire-format.md
+  // §4): its HIL_STATE_QUATERNION is the pose, its 8-bit sequence widened per
+  // sender; a datagram of other messages only is counted ignored.
+  bool receive_mavlink_datagram(std::span<const std::uint8_t> bytes, TimeNs receive_ns, std::string_view from,
+                                SourcedPose& out);
+
   void overflow_dropped() noexcept { add(kOverflowDropped); }
   void backpressure_event() noexcept { add(kBackpressureEvents); }
   void connection() noexcept { add(kConnections); }
@@ -192,11 +199,13 @@ class PoseAdmission {
     std::optional<std::uint64_t> sequence;
     TimeNs receive_ns;
     std::size_t line;
+    PoseRates rates;
   };
   bool consistent(const Pose& from, const Pose& to) const;
   void drop_candidates();
   bool release_candidates(TimeNs offset_ns, SourcedPose& out);
-  void release(const Pose& pose, std::optional<std::uint64_t> sequence, TimeNs receive_ns, std::size_t line);
+  void release(const Pose& pose, std::optional<std::uint64_t> sequence, TimeNs receive_ns, std::size_t line,
+               const PoseRates& rates);
 
   double max_chart_angle_rad_;
   TimeNs max_time_step_ns_;
@@ -210,6 +219,7 @@ class PoseAdmission {
   std::deque<SourcedPose> released_;
   std::optional<Pose> last_accepted_;  // output time
   std::array<std::atomic<std::uint64_t>, kSlotCount> counters_{};
+  mavlink::SequenceWidener mavlink_sequences_;
 };
 
 // One line stream (a TCP connection, stdin) through framer, decoder and

@@ -44,6 +44,7 @@ struct SourcedPose {
   std::optional<std::uint64_t> sequence;  // the datagram's sequence number (datagrams only)
   TimeNs receive_ns = 0;                  // CLOCK_MONOTONIC when its bytes were read (file replay: released)
   std::size_t line = 0;                   // line in the file or stream (per TCP connection); 0 for datagrams
+  PoseRates rates;                        // derivatives the input carried, scene frame (datagram v2, MAVLink)
 };
 
 // Bounded single-producer single-consumer hand-off. A mutex guards a
@@ -250,6 +251,9 @@ struct NetEndpoint {
 // the freshest poses matter most to a live stream. Throws std::runtime_error
 // if the address cannot be bound.
 std::unique_ptr<PoseSource> make_udp_pose_source(const NetEndpoint& endpoint, PoseSourceOptions options);
+// MAVLink 2 HIL_STATE_QUATERNION datagrams (docs/pose-wire-format.md §4),
+// otherwise as make_udp_pose_source: the simulator bridges' own message.
+std::unique_ptr<PoseSource> make_mavlink_udp_pose_source(const NetEndpoint& endpoint, PoseSourceOptions options);
 // Pose lines (docs/pose-wire-format.md §1) from one TCP client at a time;
 // other clients are closed at once while one is connected and active (see
 // NetEndpoint::tcp_takeover_idle_ns for when a new client replaces it, and

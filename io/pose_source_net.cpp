@@ -46,8 +46,8 @@ std::string endpoint_name(std::string_view protocol, const std::string& address,
 
 class UdpPoseSource final : public PoseSource {
  public:
-  UdpPoseSource(const NetEndpoint& endpoint, PoseSourceOptions options)
-      : PoseSource(std::move(options)), socket_(io_), buffer_(kMaxDatagramBytes) {
+  UdpPoseSource(const NetEndpoint& endpoint, PoseSourceOptions options, bool mavlink)
+      : PoseSource(std::move(options)), socket_(io_), buffer_(kMaxDatagramBytes), mavlink_(mavlink) {
     const asio::ip::udp::endpoint local(parse_address(endpoint, "udp"), endpoint.port);
     error_code ec;
     socket_.open(local.protocol(), ec);
@@ -56,7 +56,7 @@ class UdpPoseSource final : public PoseSource {
     if (!ec) socket_.bind(local, ec);
     if (ec) bind_failed(endpoint_name("udp", endpoint.address, endpoint.port), ec);
     port_ = socket_.local_endpoint().port();
-    if (name_.empty()) set_name(endpoint_name("udp", endpoint.address, port_));
+    if (name_.empty()) set_name(endpoint_name(mavlink ? "mavlink udp" : "udp", endpoint.address, port_));
   }
   ~UdpPoseSource() override { stop(); }
   std::uint16_t local_port() const noexcept override { return port_; }
@@ -91,7 +91,10 @@ class UdpPoseSource final : public PoseSource {
       named_sender_ = sender_;
       sender_name_ = sender_.address().to_string() + ":" + std::to_string(sender_.port());
     }
-    if (!admission_->receive_datagram(std::span(buffer_.data(), size), receive_ns, sender_name_, pose)) return;
+    const std::span<const std::uint8_t> bytes(buffer_.data(), size);
+    if (!(mavlink_ ? admission_->receive_mavlink_datagram(bytes, receive_ns, sender_name_, pose)
+                   : admission_->receive_datagram(bytes, receive_ns, sender_name_, pose)))
+      return;
     do {  // an acquisition releases the held poses too
       // A burst beyond the queue: the freshest poses matter most.
       if (queue_.push_or_drop_oldest(pose)) admission_->overflow_dropped();
@@ -105,6 +108,7 @@ class UdpPoseSource final : public PoseSource {
   std::string sender_name_;
   std::vector<std::uint8_t> buffer_;
   std::uint16_t port_ = 0;
+  bool mavlink_;  // MAVLink 2 HIL_STATE_QUATERNION datagrams instead of pose datagrams
 };
 
 // ---------------------------------------------------------------- TCP
@@ -312,7 +316,11 @@ class TcpPoseSource final : public PoseSource {
 }  // namespace
 
 std::unique_ptr<PoseSource> make_udp_pose_source(const NetEndpoint& endpoint, PoseSourceOptions options) {
-  return std::make_unique<UdpPoseSource>(endpoint, std::move(options));
+  return std::make_unique<UdpPoseSource>(endpoint, std::move(options), false);
+}
+
+std::unique_ptr<PoseSource> make_mavlink_udp_pose_source(const NetEndpoint& endpoint, PoseSourceOptions options) {
+  return std::make_unique<UdpPoseSource>(endpoint, std::move(options), true);
 }
 
 std::unique_ptr<PoseSource> make_tcp_pose_source(const NetEndpoint& endpoint, PoseSourceOptions options) {

@@ -4,6 +4,7 @@
 #include <boost/crc.hpp>
 #include <cmath>
 #include <cstring>
+#include <optional>
 #include <utility>
 
 namespace imuemu::io {
@@ -153,13 +154,15 @@ std::uint32_t crc32c(std::span<const std::uint8_t> bytes) noexcept {
   return crc.checksum();
 }
 
-std::array<std::uint8_t, kPoseDatagramV1Size> encode_pose_datagram(const PoseDatagram& d) noexcept {
-  std::array<std::uint8_t, kPoseDatagramV1Size> out{};
-  std::memcpy(out.data(), kPoseDatagramMagic.data(), kPoseDatagramMagic.size());
-  out[kDatagramVersionOffset] = kPoseDatagramVersion;
+namespace {
+
+// The fields v1 and v2 share (bytes 0..79 but the version and byte 7).
+void encode_common(const PoseDatagram& d, std::uint8_t version, std::uint8_t byte7, std::uint8_t* out) noexcept {
+  std::memcpy(out, kPoseDatagramMagic.data(), kPoseDatagramMagic.size());
+  out[kDatagramVersionOffset] = version;
   out[kDatagramPositionKindOffset] = static_cast<std::uint8_t>(d.record.position_kind);
   out[kDatagramAttitudeKindOffset] = static_cast<std::uint8_t>(d.record.attitude_kind);
-  out[kDatagramReservedOffset] = 0;
+  out[kDatagramReservedOffset] = byte7;
   put_u64(&out[kDatagramSequenceOffset], d.sequence);
   put_u64(&out[kDatagramTimeOffset], static_cast<std::uint64_t>(d.record.t_ns));
   for (int k = 0; k < 3; ++k)
@@ -168,8 +171,41 @@ std::array<std::uint8_t, kPoseDatagramV1Size> encode_pose_datagram(const PoseDat
   for (int k = 0; k < 4; ++k)
     put_u64(&out[kDatagramAttitudeOffset + 8 * static_cast<std::size_t>(k)],
             std::bit_cast<std::uint64_t>(d.record.attitude[k]));
-  const std::uint32_t crc = crc32c(std::span(out.data(), kDatagramCrcOffset));
-  for (int i = 0; i < 4; ++i) out[kDatagramCrcOffset + static_cast<std::size_t>(i)] = static_cast<std::uint8_t>(crc >> (8 * i));
+}
+
+void put_vec3(std::uint8_t* out, const Vec3& v) noexcept {
+  for (int k = 0; k < 3; ++k) put_u64(out + 8 * k, std::bit_cast<std::uint64_t>(v[k]));
+}
+Vec3 get_vec3(const std::uint8_t* in) noexcept {
+  return {std::bit_cast<double>(get_u64(in)), std::bit_cast<double>(get_u64(in + 8)),
+          std::bit_cast<double>(get_u64(in + 16))};
+}
+
+void seal(std::uint8_t* out, std::size_t crc_offset) noexcept {
+  const std::uint32_t crc = crc32c(std::span<const std::uint8_t>(out, crc_offset));
+  for (std::size_t i = 0; i < 4; ++i) out[crc_offset + i] = static_cast<std::uint8_t>(crc >> (8 * i));
+}
+
+}  // namespace
+
+std::array<std::uint8_t, kPoseDatagramV1Size> encode_pose_datagram(const PoseDatagram& d) noexcept {
+  std::array<std::uint8_t, kPoseDatagramV1Size> out{};
+  encode_common(d, kPoseDatagramVersion, 0, out.data());
+  seal(out.data(), kDatagramCrcOffset);
+  return out;
+}
+
+std::array<std::uint8_t, kPoseDatagramV2Size> encode_pose_datagram_v2(const PoseDatagram& d) noexcept {
+  std::array<std::uint8_t, kPoseDatagramV2Size> out{};
+  const PoseRates& r = d.record.rates;
+  const std::uint8_t mask = static_cast<std::uint8_t>((r.velocity_m_s ? kRatesVelocity : 0) |
+                                                      (r.angular_rate_rad_s ? kRatesAngularRate : 0) |
+                                                      (r.acceleration_m_s2 ? kRatesAcceleration : 0));
+  encode_common(d, kPoseDatagramVersion2, mask, out.data());
+  if (r.velocity_m_s) put_vec3(&out[kDatagramVelocityOffset], *r.velocity_m_s);
+  if (r.angular_rate_rad_s) put_vec3(&out[kDatagramAngularRateOffset], *r.angular_rate_rad_s);
+  if (r.acceleration_m_s2) put_vec3(&out[kDatagramAccelerationOffset], *r.acceleration_m_s2);
+  seal(out.data(), kDatagramV2CrcOffset);
   return out;
 }
 
@@ -186,18 +222,23 @@ bool decode_pose_datagram(std::span<const std::uint8_t> bytes, PoseDatagram& out
                     detail::printable(std::string_view(reinterpret_cast<const char*>(bytes.data()), 4)),
                 false);
   }
-  if (bytes[kDatagramVersionOffset] != kPoseDatagramVersion) {
+  const std::uint8_t version = bytes[kDatagramVersionOffset];
+  if (version != kPoseDatagramVersion && version != kPoseDatagramVersion2) {
     return fail(error, DatagramError::unsupported_version,
-                "datagram version " + std::to_string(bytes[kDatagramVersionOffset]) +
-                    " is not supported; this reader knows version 1",
+                "datagram version " + std::to_string(version) + " is not supported; this reader knows versions 1 and 2",
                 false);
   }
-  if (bytes.size() != kPoseDatagramV1Size) {
+  const bool v2 = version == kPoseDatagramVersion2;
+  const std::size_t expected_size = v2 ? kPoseDatagramV2Size : kPoseDatagramV1Size;
+  if (bytes.size() != expected_size) {
     return fail(error, DatagramError::bad_length,
-                "datagram of " + std::to_string(bytes.size()) + " bytes: a version 1 pose datagram has 84", false);
+                "datagram of " + std::to_string(bytes.size()) + " bytes: a version " + std::to_string(version) +
+                    " pose datagram has " + std::to_string(expected_size),
+                false);
   }
-  const std::uint32_t expected_crc = crc32c(bytes.first(kDatagramCrcOffset));
-  const std::uint32_t sent_crc = get_u32(&bytes[kDatagramCrcOffset]);
+  const std::size_t crc_offset = v2 ? kDatagramV2CrcOffset : kDatagramCrcOffset;
+  const std::uint32_t expected_crc = crc32c(bytes.first(crc_offset));
+  const std::uint32_t sent_crc = get_u32(&bytes[crc_offset]);
   if (sent_crc != expected_crc) {
     return fail(error, DatagramError::bad_checksum, "datagram CRC-32C mismatch (corrupted in transit)", false);
   }
@@ -225,9 +266,17 @@ bool decode_pose_datagram(std::span<const std::uint8_t> bytes, PoseDatagram& out
     return fail(error, DatagramError::bad_kind,
                 "an ECEF attitude (kind 2) needs an Earth-fixed position (kind 0 or 1), not a local NED one", true);
   }
-  if (bytes[kDatagramReservedOffset] != 0) {
+  const std::uint8_t byte7 = bytes[kDatagramReservedOffset];
+  constexpr std::uint8_t kKnownRates = kRatesVelocity | kRatesAngularRate | kRatesAcceleration;
+  if (!v2 && byte7 != 0) {
     return fail(error, DatagramError::reserved_not_zero,
-                "reserved byte 7 is " + hex_byte(bytes[kDatagramReservedOffset]) + ", expected 0x00", true);
+                "reserved byte 7 is " + hex_byte(byte7) + ", expected 0x00", true);
+  }
+  if (v2 && (byte7 & ~kKnownRates) != 0) {
+    return fail(error, DatagramError::reserved_not_zero,
+                "rates mask (byte 7) is " + hex_byte(byte7) + ": only bits 0x01 (velocity), 0x02 (angular rate) and "
+                "0x04 (acceleration) are defined",
+                true);
   }
   for (int k = 0; k < 3; ++k)
     r.position[k] = std::bit_cast<double>(get_u64(&bytes[kDatagramPositionOffset + 8 * static_cast<std::size_t>(k)]));
@@ -253,6 +302,42 @@ bool decode_pose_datagram(std::span<const std::uint8_t> bytes, PoseDatagram& out
     if (!normalise_unit_quaternion(r.attitude, norm)) {
       return fail(error, DatagramError::bad_value,
                   "expected a unit quaternion (|q| within 1e-6 of 1), got |q| = " + detail::format_double(norm), true);
+    }
+  }
+  if (v2) {
+    // Each rate vector: finite when its mask bit is set, all zero when not
+    // (so a sender cannot mean something the reader ignores).
+    struct RateField {
+      std::uint8_t bit;
+      std::size_t offset;
+      const char* name;
+      std::optional<Vec3>* into;
+    };
+    const RateField fields[] = {{kRatesVelocity, kDatagramVelocityOffset, "velocity_m_s", &r.rates.velocity_m_s},
+                                {kRatesAngularRate, kDatagramAngularRateOffset, "angular_rate_rad_s",
+                                 &r.rates.angular_rate_rad_s},
+                                {kRatesAcceleration, kDatagramAccelerationOffset, "acceleration_m_s2",
+                                 &r.rates.acceleration_m_s2}};
+    for (const RateField& f : fields) {
+      const Vec3 v = get_vec3(&bytes[f.offset]);
+      if ((byte7 & f.bit) == 0) {
+        for (int k = 0; k < 3; ++k) {
+          if (std::bit_cast<std::uint64_t>(v[k]) != 0)
+            return fail(error, DatagramError::reserved_not_zero,
+                        std::string(f.name) + " component " + std::to_string(k) + " is " + detail::format_double(v[k]) +
+                            " with its rates-mask bit clear, expected 0",
+                        true);
+        }
+        continue;
+      }
+      for (int k = 0; k < 3; ++k) {
+        if (!std::isfinite(v[k]))
+          return fail(error, DatagramError::bad_value,
+                      std::string(f.name) + " component " + std::to_string(k) + ": expected a finite value, got " +
+                          detail::format_double(v[k]),
+                      true);
+      }
+      *f.into = v;
     }
   }
   return true;

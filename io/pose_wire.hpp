@@ -3,7 +3,8 @@
 //      one line at a time (TCP, stdin), optionally opened by a
 //      "# imuemu-pose-lines v1" version comment;
 //   2. pose datagram v1: one pose per little-endian binary datagram (UDP),
-//      sealed with a CRC-32C.
+//      sealed with a CRC-32C; v2 is v1 with optional velocity, angular rate
+//      and acceleration appended (§2.5; a v2 reader reads both).
 // Both decode into a TrajectoryRecord validated by the same rules as the
 // trajectory file reader (io/trajectory_csv.hpp): finite values, latitude and
 // pitch in [-90, 90] degrees, unit quaternion within kQuaternionNormTolerance
@@ -84,6 +85,18 @@ inline constexpr std::size_t kDatagramTimeOffset = 16;
 inline constexpr std::size_t kDatagramPositionOffset = 24;
 inline constexpr std::size_t kDatagramAttitudeOffset = 48;
 inline constexpr std::size_t kDatagramCrcOffset = 80;
+// Version 2 (docs/pose-wire-format.md §2.5): byte 7 is the rates mask, three
+// vectors follow the attitude, the CRC moves to the end.
+inline constexpr std::uint8_t kPoseDatagramVersion2 = 2;
+inline constexpr std::size_t kPoseDatagramV2Size = 156;
+inline constexpr std::size_t kDatagramRatesMaskOffset = 7;
+inline constexpr std::size_t kDatagramVelocityOffset = 80;
+inline constexpr std::size_t kDatagramAngularRateOffset = 104;
+inline constexpr std::size_t kDatagramAccelerationOffset = 128;
+inline constexpr std::size_t kDatagramV2CrcOffset = 152;
+inline constexpr std::uint8_t kRatesVelocity = 0x01;
+inline constexpr std::uint8_t kRatesAngularRate = 0x02;
+inline constexpr std::uint8_t kRatesAcceleration = 0x04;
 
 struct PoseDatagram {
   std::uint64_t sequence = 0;  // the sender's counter, +1 per datagram
@@ -95,11 +108,12 @@ struct PoseDatagram {
 enum class DatagramError : std::uint8_t {
   too_short,            // fewer than the 5 bytes of magic and version
   bad_magic,            // not "IMUP"
-  unsupported_version,  // version byte != 1
-  bad_length,           // a v1 datagram must be exactly 84 bytes
+  unsupported_version,  // version byte not 1 or 2
+  bad_length,           // a v1 datagram must be exactly 84 bytes, a v2 one 156
   bad_checksum,         // CRC-32C mismatch (corrupted in transit)
   bad_kind,             // unknown position/attitude kind byte, or ECEF attitude with local NED position
-  reserved_not_zero,    // reserved byte, or the 4th attitude component of heading-pitch-roll, not 0
+  reserved_not_zero,    // reserved byte (v1) or unknown rates-mask bit (v2), the 4th attitude component of
+                        // heading-pitch-roll, or an absent (mask bit clear) rate vector, not 0
   bad_value,            // not finite, out of range (latitude, pitch) or not a unit quaternion
 };
 inline constexpr std::size_t kDatagramErrorCount = 8;
@@ -121,7 +135,11 @@ std::uint32_t crc32c(std::span<const std::uint8_t> bytes) noexcept;
 // purpose); kinds are written as their enumerator index.
 std::array<std::uint8_t, kPoseDatagramV1Size> encode_pose_datagram(const PoseDatagram& datagram) noexcept;
 
-// Validates and decodes a datagram. On failure returns false and fills
+// Writes a v2 datagram: the rates present in d.record.rates are written and
+// flagged in the mask, absent ones are zeros. Does not validate.
+std::array<std::uint8_t, kPoseDatagramV2Size> encode_pose_datagram_v2(const PoseDatagram& datagram) noexcept;
+
+// Validates and decodes a datagram (v1 or v2). On failure returns false and fills
 // `error`; `out` is then only meaningful as error.intact says.
 bool decode_pose_datagram(std::span<const std::uint8_t> bytes, PoseDatagram& out, DatagramDecodeError& error);
 

@@ -72,6 +72,61 @@ Pose ScenePoseConverter::convert(const TrajectoryRecord& rec, const std::string&
   return {rec.t_ns, tangent_->ned_from_ecef(p.x_e), tangent_->R_n_to_e().transpose() * p.R_b_e};
 }
 
+namespace {
+
+// WGS84 defining constants (NIMA TR8350.2): semi-major axis and flattening.
+constexpr double kWgs84A_m = 6378137.0;
+constexpr double kWgs84F = 1.0 / 298.257223563;
+
+// omega_el^l, the rotation rate of the local NED frame carried along at
+// velocity v_l (NED) at geodetic g: (lambda_dot cos(lat), -lat_dot,
+// -lambda_dot sin(lat)) with lat_dot = v_N/(R_M+h), lambda_dot =
+// v_E/((R_N+h) cos(lat)) (meridian and prime-vertical radii of curvature).
+Vec3 transport_rate_local(const earth::Geodetic& g, const Vec3& v_l) {
+  const double e2 = kWgs84F * (2.0 - kWgs84F);
+  const double s = std::sin(g.latitude_rad);
+  const double w = std::sqrt(1.0 - e2 * s * s);
+  const double r_n = kWgs84A_m / w;
+  const double r_m = kWgs84A_m * (1.0 - e2) / (w * w * w);
+  return {v_l.y() / (r_n + g.height_m), -v_l.x() / (r_m + g.height_m),
+          -v_l.y() * std::tan(g.latitude_rad) / (r_n + g.height_m)};
+}
+
+}  // namespace
+
+PoseRates ScenePoseConverter::convert_rates(const TrajectoryRecord& rec) const {
+  const PoseRates& in = rec.rates;
+  if (!in.any() || rec.position_kind == PositionKind::local_ned) return in;  // local NED is the flat scene's frame
+  const Vec3 x_e = rec.position_kind == PositionKind::geodetic
+                       ? earth::ecef_from_geodetic(geodetic_of(rec, Vec3::Zero()))
+                       : rec.position;
+  const earth::Geodetic g = geodetic_of(rec, x_e);
+  const Mat3 R_l_e = attitude::ned_to_ecef(g.latitude_rad, g.longitude_rad);
+  // Velocity and acceleration as given: in local NED for geodetic records,
+  // in ECEF for ECEF ones.
+  const bool given_in_local = rec.position_kind == PositionKind::geodetic;
+  const auto to_ecef = [&](const Vec3& v) -> Vec3 { return given_in_local ? Vec3(R_l_e * v) : v; };
+  // The scene's axes: ECEF, or the fixed tangent frame of the first record.
+  const auto to_scene = [&](const Vec3& v_e) -> Vec3 {
+    return physics_ == Physics::ecef || !tangent_ ? v_e : Vec3(tangent_->R_n_to_e().transpose() * v_e);
+  };
+  PoseRates out;
+  if (in.velocity_m_s) out.velocity_m_s = to_scene(to_ecef(*in.velocity_m_s));
+  if (in.acceleration_m_s2) out.acceleration_m_s2 = to_scene(to_ecef(*in.acceleration_m_s2));
+  if (in.angular_rate_rad_s) {
+    Vec3 w = *in.angular_rate_rad_s;
+    if (rec.attitude_kind != AttitudeKind::quaternion_ecef && in.velocity_m_s) {
+      // omega_eb^b = omega_lb^b + R_b^l^T omega_el^l (R_b^e = R_l^e R_b^l
+      // differentiated); the tangent frame is fixed to the Earth, so the
+      // same rate is relative to it.
+      const Vec3 v_l = given_in_local ? *in.velocity_m_s : Vec3(R_l_e.transpose() * *in.velocity_m_s);
+      w += body_to_local(rec).transpose() * transport_rate_local(g, v_l);
+    }
+    out.angular_rate_rad_s = w;
+  }
+  return out;
+}
+
 std::vector<Pose> poses_in_scene(const Trajectory& trajectory, Physics physics) {
   std::vector<Pose> poses;
   poses.reserve(trajectory.records.size());

@@ -29,6 +29,14 @@ class ScenePoseConverter {
   explicit ScenePoseConverter(Physics physics) noexcept : physics_(physics) {}
 
   Pose convert(const TrajectoryRecord& record, const std::string& source = {});
+  // The record's rates (TrajectoryRecord::rates) in the scene frame, after
+  // convert() accepted the same record: velocity and acceleration rotated
+  // into the scene's axes (ecef: R_l^e; flat with Earth-fixed input: R_e^n0
+  // R_l^e), the body rate made relative to the scene frame by adding the
+  // transport rate R_b^l^T omega_el^l when it is relative to local NED
+  // (omega_el^l = (v_E/(R_N+h), -v_N/(R_M+h), -v_E tan(lat)/(R_N+h)), WGS84
+  // radii; left out without a velocity). Absent rates stay absent.
+  PoseRates convert_rates(const TrajectoryRecord& record) const;
 
   Physics physics() const noexcept { return physics_; }
   // Flat scene with Earth-fixed input: the tangent frame's origin, once the

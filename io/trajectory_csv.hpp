@@ -19,6 +19,7 @@
 #include <string_view>
 #include <vector>
 
+#include "core/pose_rates.hpp"
 #include "core/types.hpp"
 
 namespace imuemu::io {
@@ -89,6 +90,13 @@ struct TrajectoryRecord {
   // hpr: (heading, pitch, roll, 0) in degrees; quaternions: (w, x, y, z), unit.
   Eigen::Vector4d attitude = Eigen::Vector4d::Zero();
   std::size_t line = 0;  // 1-based line of the file the record came from
+  // Optional derivatives (live inputs only: pose datagram v2, MAVLink
+  // HIL_STATE_QUATERNION; docs/pose-wire-format.md §2.5). Velocity and
+  // acceleration in the position kind's frame (geodetic: local NED at the
+  // record's position; ECEF; local NED), angular rate relative to the
+  // attitude's reference frame (local NED for heading-pitch-roll and q_b^l,
+  // ECEF for q_b^e), body FRD axes. Files and pose lines carry none.
+  PoseRates rates;
 };
 
 struct Trajectory {

@@ -271,11 +271,14 @@ TEST(PoseDatagram, EveryRejectionReason) {
   Bytes magic = good;
   magic[0] = 'i';
   expect_refused(magic, DatagramError::bad_magic, false, "IMUP");
-  Bytes v2 = good;
+  Bytes v3 = good;
+  v3[4] = 3;
+  expect_refused(v3, DatagramError::unsupported_version, false, "version 3");
+  v3.resize(100);  // a future version may be longer: the version is reported, not the length
+  expect_refused(v3, DatagramError::unsupported_version, false, "version 3");
+  Bytes v2 = good;  // version 2 (rates, §2.5) is known: an 84-byte one has the wrong length
   v2[4] = 2;
-  expect_refused(v2, DatagramError::unsupported_version, false, "version 2");
-  v2.resize(100);  // a future version may be longer: the version is reported, not the length
-  expect_refused(v2, DatagramError::unsupported_version, false, "version 2");
+  expect_refused(v2, DatagramError::bad_length, false, "version 2 pose datagram has 156");
   expect_refused(Bytes(good.begin(), good.end() - 1), DatagramError::bad_length, false, "83 bytes");
   Bytes longer = good;
   longer.push_back(0);

@@ -46,12 +46,26 @@ def mip_fletcher(data: bytes) -> int:
 def crc_extra(name: str, wire_fields) -> int:
     """MAVLink guide, "CRC_EXTRA Calculation": X.25 CRC over the message name
     and each non-extension field's type and name (wire order, each followed by
-    a space), folded to 8 bits."""
+    a space; an array field's base type, then its length as one byte), folded
+    to 8 bits. A field is (type, name) or (type, name, array_length)."""
     crc = crc16_mcrf4xx((name + " ").encode())
-    for ftype, fname in wire_fields:
+    for field in wire_fields:
+        ftype, fname = field[0], field[1]
         crc = crc16_mcrf4xx((ftype + " ").encode(), crc)
         crc = crc16_mcrf4xx((fname + " ").encode(), crc)
+        if len(field) > 2:
+            crc = crc16_mcrf4xx(bytes([field[2]]), crc)
     return (crc & 0xFF) ^ (crc >> 8)
+
+
+_TYPE_BYTES = {"uint64_t": 8, "int64_t": 8, "double": 8, "uint32_t": 4, "int32_t": 4, "float": 4,
+               "uint16_t": 2, "int16_t": 2, "uint8_t": 1, "int8_t": 1, "char": 1}
+
+
+def wire_order(xml_fields):
+    """MAVLink guide, "Field Reordering": stable sort by the base type's size,
+    largest first (arrays sort by their element type)."""
+    return sorted(xml_fields, key=lambda f: -_TYPE_BYTES[f[0]])
 
 
 # Wire order = common.xml order stably sorted by type size, extensions last and
@@ -65,6 +79,16 @@ HIGHRES_IMU = [("uint64_t", "time_usec")] + [("float", f) for f in _IMU_FLOATS] 
               [("uint16_t", "fields_updated")]
 HIL_SENSOR = [("uint64_t", "time_usec")] + [("float", f) for f in _IMU_FLOATS] + \
              [("uint32_t", "fields_updated")]
+
+
+# common.xml HIL_STATE_QUATERNION (#115), fields in XML order.
+HIL_STATE_QUATERNION_XML = [("uint64_t", "time_usec"), ("float", "attitude_quaternion", 4),
+                            ("float", "rollspeed"), ("float", "pitchspeed"), ("float", "yawspeed"),
+                            ("int32_t", "lat"), ("int32_t", "lon"), ("int32_t", "alt"),
+                            ("int16_t", "vx"), ("int16_t", "vy"), ("int16_t", "vz"),
+                            ("uint16_t", "ind_airspeed"), ("uint16_t", "true_airspeed"),
+                            ("int16_t", "xacc"), ("int16_t", "yacc"), ("int16_t", "zacc")]
+HIL_STATE_QUATERNION = wire_order(HIL_STATE_QUATERNION_XML)
 
 
 def mavlink2_frame(seq, sysid, compid, msgid, payload: bytes, extra: int) -> bytes:
@@ -85,8 +109,31 @@ if __name__ == "__main__":
     print(f"CRC-16/MCRF4XX('123456789') = 0x{crc16_mcrf4xx(b'123456789'):04X}")
     print(f"CRC-32C('123456789')        = 0x{crc32c(b'123456789'):08X}")
     for name, fields in (("HEARTBEAT", HEARTBEAT), ("HIGHRES_IMU", HIGHRES_IMU),
-                         ("HIL_SENSOR", HIL_SENSOR)):
+                         ("HIL_SENSOR", HIL_SENSOR), ("HIL_STATE_QUATERNION", HIL_STATE_QUATERNION)):
         print(f"CRC_EXTRA {name} = {crc_extra(name, fields)}")
+
+    # HIL_STATE_QUATERNION (wire order above): time_usec 1700000000123456,
+    # q = (cos 15 deg, 0, 0, sin 15 deg) as floats (heading 30 deg), body
+    # rates (0.01, -0.02, 0.5) rad/s, lat 41.5 deg, lon 2.25 deg, alt 120.5 m,
+    # v (1000, -250, 50) cm/s, airspeeds 1020 and 1030 cm/s, acc (10, -20,
+    # -1000) mG; seq 9, sys 1, comp 1.
+    import math
+    c, s15 = math.cos(math.radians(15)), math.sin(math.radians(15))
+    hsq = struct.pack("<Q4f3f3i3h2H3h", 1700000000123456, c, 0.0, 0.0, s15, 0.01, -0.02, 0.5,
+                      415000000, 22500000, 120500, 1000, -250, 50, 1020, 1030, 10, -20, -1000)
+    assert len(hsq) == 64
+    extra = crc_extra("HIL_STATE_QUATERNION", HIL_STATE_QUATERNION)
+    print("HIL_STATE_QUATERNION seq 9 sys 1 comp 1:", hexs(mavlink2_frame(9, 1, 1, 115, hsq, extra)))
+
+    # Pose datagram v2 (docs/pose-wire-format.md §2.5): sequence 7, time 2.5 s,
+    # local NED (10, -3.5, 0.25) m, identity quaternion, rates mask 0x03:
+    # velocity (1.5, -0.5, 0.25) m/s, angular rate (0.1, 0, -0.2) rad/s,
+    # acceleration absent (zeros).
+    body = b"IMUP" + bytes([2, 2, 1, 0x03]) + struct.pack("<Qq3d4d", 7, 2_500_000_000, 10.0, -3.5, 0.25,
+                                                         1.0, 0.0, 0.0, 0.0) + \
+        struct.pack("<9d", 1.5, -0.5, 0.25, 0.1, 0.0, -0.2, 0.0, 0.0, 0.0)
+    assert len(body) == 152
+    print("pose datagram v2:", hexs(body + struct.pack("<I", crc32c(body))))
 
     # MIP published examples (CV7 online manual, "MIP Packet Overview" and "Data
     # Overview"): the checksums the manual prints are 0x84EE and 0xE0C6.
