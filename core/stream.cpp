@@ -122,6 +122,18 @@ std::vector<Pose> extend(std::span<const Pose> ends, TimeNs pad_ns, std::int64_t
     midpoint[i] = 0.5 * (tau[i] + tau[i + 1]);
     rate[i] = so3::log(ends[i + 1].attitude.transpose() * ends[i].attitude) / std::abs(tau[i] - tau[i + 1]);
   }
+  // The polynomials are trusted only as far out as the end knots reach
+  // (n - 1 end intervals): further out their Lagrange weights grow like
+  // (distance / interval)^degree, and dense live poses (250 Hz with float
+  // attitudes, a 0.28 s padding: 70 intervals) turned their rounding into
+  // body rates of 1e4 rad/s, and no sample was ever emitted. Beyond that
+  // reach the motion goes on at the reach's velocity and body rate.
+  const double reach = static_cast<double>(n - 1) * seconds_between(0, end_h) * (before ? -1.0 : 1.0);
+  const auto beyond_reach = [&](double t) { return before ? t < reach : t > reach; };
+  const Vec3 p_reach = lagrange(tau, position, n, reach);
+  const double dt_fd = 1e-3 * (reach / static_cast<double>(n - 1));
+  const Vec3 v_reach = (p_reach - lagrange(tau, position, n, reach - dt_fd)) / dt_fd;
+  const Vec3 rate_reach = lagrange(midpoint, rate, n - 1, reach);
   Mat3 attitude = from.attitude;
   double t_previous = 0.0;
   for (std::int64_t k = 1; k * h < pad_ns + extra_intervals * h; ++k) {
@@ -130,9 +142,12 @@ std::vector<Pose> extend(std::span<const Pose> ends, TimeNs pad_ns, std::int64_t
     const TimeNs step_ns = saturating_mul_ns(k, h);
     const TimeNs t_ns = before ? saturating_sub_ns(from.t_ns, step_ns) : saturating_add_ns(from.t_ns, step_ns);
     const double t = seconds_between(from.t_ns, t_ns);
-    attitude = attitude * so3::exp(lagrange(midpoint, rate, n - 1, 0.5 * (t + t_previous)) * std::abs(t - t_previous));
+    const double t_mid = 0.5 * (t + t_previous);
+    const Vec3 body_rate = beyond_reach(t_mid) ? rate_reach : lagrange(midpoint, rate, n - 1, t_mid);
+    attitude = attitude * so3::exp(body_rate * std::abs(t - t_previous));
     t_previous = t;
-    out.push_back({t_ns, from.position_m + lagrange(tau, position, n, t), attitude});
+    const Vec3 offset = beyond_reach(t) ? Vec3(p_reach + v_reach * (t - reach)) : lagrange(tau, position, n, t);
+    out.push_back({t_ns, from.position_m + offset, attitude});
   }
   return out;
 }

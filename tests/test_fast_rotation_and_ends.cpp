@@ -22,6 +22,7 @@
 
 #include "core/pipeline.hpp"
 #include "core/reference_motion.hpp"
+#include "core/so3.hpp"
 #include "core/so3_spline.hpp"
 
 using namespace imuemu;
@@ -109,4 +110,35 @@ TEST(Ends, AllSamplesAccelWithinTwiceTheInteriorOnTheFlight) {
                                            600 * kNsPerSecond);
     expect_ends_within_twice_the_interior(flight, physics == Physics::flat ? "flight 600 s (flat)" : "flight 600 s (ecef)");
   }
+}
+
+// The end polynomials reach only as far as the end knots: dense knots with a
+// long padding (250 Hz poses with float attitudes, a 50-sample window at
+// 1 kHz, as a live MAVLink scene at config/live-udp.toml's window) padded 70
+// intervals with a degree-5 body-rate polynomial, whose weights that far out
+// turned the float rounding of the quaternions into rates of 1e4 rad/s, and
+// imuemud emitted nothing. Beyond their reach the ends go on at constant
+// velocity and body rate: every sample stays near the true constant rate.
+TEST(Ends, DenseFloatKnotsWithALongPaddingStayNearTheTrueRate) {
+  const Vec3 omega_rad_s(0.3, -0.2, 0.2);
+  std::vector<Pose> knots;
+  for (int k = 0; k <= 500; ++k) {
+    const double t_s = 0.004 * k;
+    Eigen::Vector4d q = so3::quaternion_from_matrix(so3::exp(omega_rad_s * t_s));
+    for (int i = 0; i < 4; ++i) q[i] = static_cast<double>(static_cast<float>(q[i]));  // MAVLink's float32
+    knots.push_back({static_cast<TimeNs>(k) * 4'000'000, Vec3(0.0, 0.0, -100.0), so3::matrix_from_quaternion(q.normalized())});
+  }
+  PipelineOptions o;
+  o.scene.physics = Physics::flat;
+  o.rate_hz = 1000;
+  o.kernel.delta = 50;
+  const BatchResult out = run_batch(knots, o);
+  ASSERT_GT(out.imu.size(), 1900u);
+  double worst_rad_s = 0.0;
+  for (const ImuSample& s : out.imu) {
+    ASSERT_TRUE(s.gyro_rad_s.allFinite() && s.accel_m_s2.allFinite());
+    worst_rad_s = std::max(worst_rad_s, (s.gyro_rad_s - omega_rad_s).norm());
+  }
+  std::printf("  worst gyro error %.3e rad/s over %zu samples\n", worst_rad_s, out.imu.size());
+  EXPECT_LT(worst_rad_s, 0.02);
 }

@@ -344,7 +344,7 @@ int run_closed_loop(const char* imuemud) {
   const LoopResult slow = closed_loop(imuemud, false, dir / "slow");
   print("smoothing (live-udp, 0.33 s):", slow);
   std::error_code ec;
-  fs::remove_all(dir, ec);
+  if (!std::getenv("INLOOP_KEEP")) fs::remove_all(dir, ec);
   bool ok = true;
   if (!fast.within_spec) {
     std::printf("FAIL: the low-latency loop must hold and track within spec\n");
