@@ -98,11 +98,71 @@ void only_keys(const Where& w, const toml::table& t, const std::string& path, co
 //                              angular_deg_s = [x, y, z], phase_deg = [x, y, z]
 //   [...vibration.random]      psd_g2_per_hz = [[f_hz, g2_per_hz], ...],
 //                              axis_scale = [x, y, z], resolution_hz, seed
+//   [[...vibration.rotor]]     speed_rpm = 6000 or [[time_s, rpm], ...],
+//                              jitter_rpm, jitter_bandwidth_hz, seed,
+//     [[...rotor.harmonic]]    order, linear_m_s2, angular_deg_s, phase_deg
 // The lever arm and axes are the device's [imu.mounting].
+// linear_m_s2, angular_deg_s, phase_deg of a sinusoid or a rotor harmonic.
+void amplitudes_of(const Where& w, const toml::table& t, const std::string& path, Vec3& linear_m_s2,
+                   Vec3& angular_rad_s, Vec3& phase_rad) {
+  constexpr double kDeg = std::numbers::pi / 180.0;
+  if (const toml::node* x = t.get("linear_m_s2")) linear_m_s2 = vec3_of(w, *x, dotted(path, "linear_m_s2"), 1.0);
+  if (const toml::node* x = t.get("angular_deg_s")) angular_rad_s = vec3_of(w, *x, dotted(path, "angular_deg_s"), kDeg);
+  if (const toml::node* x = t.get("phase_deg")) phase_rad = vec3_of(w, *x, dotted(path, "phase_deg"), kDeg);
+}
+
+double one_number(const Where& w, const toml::node& n, const std::string& key, const char* expected) {
+  const std::vector<double> v = numbers_of(w, n, key);
+  if (v.size() != 1) w.fail(n.source(), key, expected);
+  return v[0];
+}
+
+signal_chain::Rotor parse_rotor(const Where& w, const toml::node& node, const std::string& rp) {
+  const toml::table* rt = node.as_table();
+  if (rt == nullptr) w.fail(node.source(), rp, "expected a table");
+  only_keys(w, *rt, rp, {"speed_rpm", "jitter_rpm", "jitter_bandwidth_hz", "seed", "harmonic"});
+  signal_chain::Rotor r;
+  const toml::node* sp = rt->get("speed_rpm");
+  if (sp == nullptr) w.fail(rt->source(), rp, "missing 'speed_rpm' (a number, or [[time_s, rpm], ...])");
+  const std::string sk = dotted(rp, "speed_rpm");
+  if (const toml::array* pa = sp->as_array()) {
+    for (const toml::node& e : *pa) {
+      const std::vector<double> pt = numbers_of(w, e, sk);
+      if (pt.size() != 2) w.fail(e.source(), sk, "expected a pair [time_s, rpm]");
+      r.speed.push_back({pt[0], pt[1]});
+    }
+  } else {
+    r.speed.push_back({0.0, one_number(w, *sp, sk, "expected a number (rpm) or [[time_s, rpm], ...]")});
+  }
+  if (const toml::node* x = rt->get("jitter_rpm")) r.jitter_rpm = one_number(w, *x, dotted(rp, "jitter_rpm"), "expected one number");
+  if (const toml::node* x = rt->get("jitter_bandwidth_hz"))
+    r.jitter_bandwidth_hz = one_number(w, *x, dotted(rp, "jitter_bandwidth_hz"), "expected one number");
+  if (const toml::node* x = rt->get("seed")) {
+    if (!x->is_integer() || x->as_integer()->get() < 0) w.fail(x->source(), dotted(rp, "seed"), "expected an integer >= 0");
+    r.seed = static_cast<std::uint64_t>(x->as_integer()->get());
+  }
+  const toml::node* hn = rt->get("harmonic");
+  const toml::array* ha = hn != nullptr ? hn->as_array() : nullptr;
+  if (ha == nullptr) w.fail(hn != nullptr ? hn->source() : rt->source(), dotted(rp, "harmonic"), "expected [[...harmonic]] tables");
+  for (std::size_t i = 0; i < ha->size(); ++i) {
+    const std::string hp = dotted(rp, "harmonic[" + std::to_string(i) + "]");
+    const toml::table* ht = (*ha)[i].as_table();
+    if (ht == nullptr) w.fail((*ha)[i].source(), hp, "expected a table");
+    only_keys(w, *ht, hp, {"order", "linear_m_s2", "angular_deg_s", "phase_deg"});
+    signal_chain::RotorHarmonic h;
+    const toml::node* o = ht->get("order");
+    if (o == nullptr) w.fail(ht->source(), hp, "missing 'order'");
+    h.order = one_number(w, *o, dotted(hp, "order"), "expected one number > 0");
+    if (!(h.order > 0.0)) w.fail(o->source(), dotted(hp, "order"), "expected one number > 0");
+    amplitudes_of(w, *ht, hp, h.linear_m_s2, h.angular_rad_s, h.phase_rad);
+    r.harmonics.push_back(h);
+  }
+  return r;
+}
+
 signal_chain::VibrationSpec parse_vibration_table(const Where& w, const toml::table& t, const std::string& path) {
   signal_chain::VibrationSpec v;
-  only_keys(w, t, path, {"sinusoid", "random"});
-  constexpr double kDeg = std::numbers::pi / 180.0;
+  only_keys(w, t, path, {"sinusoid", "random", "rotor"});
   if (const toml::node* n = t.get("sinusoid")) {
     const toml::array* a = n->as_array();
     if (a == nullptr) w.fail(n->source(), dotted(path, "sinusoid"), "expected an array of tables ([[...sinusoid]])");
@@ -117,11 +177,14 @@ signal_chain::VibrationSpec parse_vibration_table(const Where& w, const toml::ta
       const std::vector<double> fv = numbers_of(w, *f, dotted(sp, "frequency_hz"));
       if (fv.size() != 1 || !(fv[0] > 0.0)) w.fail(f->source(), dotted(sp, "frequency_hz"), "expected one number > 0");
       s.frequency_hz = fv[0];
-      if (const toml::node* x = st->get("linear_m_s2")) s.linear_m_s2 = vec3_of(w, *x, dotted(sp, "linear_m_s2"), 1.0);
-      if (const toml::node* x = st->get("angular_deg_s")) s.angular_rad_s = vec3_of(w, *x, dotted(sp, "angular_deg_s"), kDeg);
-      if (const toml::node* x = st->get("phase_deg")) s.phase_rad = vec3_of(w, *x, dotted(sp, "phase_deg"), kDeg);
+      amplitudes_of(w, *st, sp, s.linear_m_s2, s.angular_rad_s, s.phase_rad);
       v.sinusoids.push_back(s);
     }
+  }
+  if (const toml::node* n = t.get("rotor")) {
+    const toml::array* a = n->as_array();
+    if (a == nullptr) w.fail(n->source(), dotted(path, "rotor"), "expected an array of tables ([[...rotor]])");
+    for (std::size_t i = 0; i < a->size(); ++i) v.rotors.push_back(parse_rotor(w, (*a)[i], dotted(path, "rotor[" + std::to_string(i) + "]")));
   }
   if (const toml::node* n = t.get("random")) {
     const std::string rp = dotted(path, "random");

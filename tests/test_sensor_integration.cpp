@@ -592,8 +592,19 @@ TEST(SignalChainConfig, RefusesUnknownKeysAndChainsTheRateCannotRunNamingFileLin
        "imu[0].error_model.signal_chain", "stage 1 (butterworth): frequency_hz 400", 12},
       {"stage kind", "[[imu.error_model.signal_chain.stage]]\nkind = \"kalman\"\n",
        "imu[0].error_model.signal_chain.stage[0].kind", "unknown filter kind 'kalman'", 14},
-      {"vibration key", "[imu.error_model.signal_chain.vibration]\nshock = 1\n",
-       "imu[0].error_model.signal_chain.vibration.shock", "unknown key 'shock'; allowed: sinusoid, random", 14},
+      {"vibration key", "[imu.error_model.signal_chain.vibration]\nbump = 1\n",
+       "imu[0].error_model.signal_chain.vibration.bump", "unknown key 'bump'; allowed: sinusoid, random, rotor", 14},
+      {"rotor speed order", "[[imu.error_model.signal_chain.vibration.rotor]]\nspeed_rpm = [[0, 3000], [0, 4000]]\n"
+       "[[imu.error_model.signal_chain.vibration.rotor.harmonic]]\norder = 1\n",
+       "imu[0].error_model.signal_chain.vibration", "rotor 1: speed point 2 must have a time after the previous one", 13},
+      {"rotor harmonic key", "[[imu.error_model.signal_chain.vibration.rotor]]\nspeed_rpm = 6000\n"
+       "[[imu.error_model.signal_chain.vibration.rotor.harmonic]]\norder = 2\namplitude = 1\n",
+       "imu[0].error_model.signal_chain.vibration.rotor[0].harmonic[0].amplitude", "unknown key 'amplitude'", 17},
+      {"rotor without harmonics", "[[imu.error_model.signal_chain.vibration.rotor]]\nspeed_rpm = 6000\n",
+       "imu[0].error_model.signal_chain.vibration.rotor[0].harmonic", "expected [[...harmonic]] tables", 13},
+      {"rotor jitter", "[[imu.error_model.signal_chain.vibration.rotor]]\nspeed_rpm = 600\njitter_rpm = 100\n"
+       "[[imu.error_model.signal_chain.vibration.rotor.harmonic]]\norder = 1\n",
+       "imu[0].error_model.signal_chain.vibration", "rotor 1: jitter_rpm 100", 13},
       {"psd order", "[imu.error_model.signal_chain.vibration.random]\npsd_g2_per_hz = [[100, 0.01], [50, 0.02]]\n",
        "imu[0].error_model.signal_chain.vibration", "PSD point 2 must have a frequency above the previous one", 13},
   };
@@ -614,7 +625,9 @@ TEST(SignalChainConfig, RefusesUnknownKeysAndChainsTheRateCannotRunNamingFileLin
       scene_head(400) + "[imu.mounting]\nlever_arm_m = [0.3, 0.0, -0.1]\n"
       "[[imu.error_model.signal_chain.vibration.sinusoid]]\nfrequency_hz = 120\nlinear_m_s2 = [0, 0, 3]\n"
       "angular_deg_s = [0, 2, 0]\n"
-      "[imu.error_model.signal_chain.vibration.random]\npsd_g2_per_hz = [[20, 0.01], [500, 0.01]]\nseed = 4\n";
+      "[imu.error_model.signal_chain.vibration.random]\npsd_g2_per_hz = [[20, 0.01], [500, 0.01]]\nseed = 4\n"
+      "[[imu.error_model.signal_chain.vibration.rotor]]\nspeed_rpm = [[0, 3000], [10, 6000]]\njitter_rpm = 5\nseed = 3\n"
+      "[[imu.error_model.signal_chain.vibration.rotor.harmonic]]\norder = 2\nangular_deg_s = [1, 0, 0]\nphase_deg = [90, 0, 0]\n";
   const scene::SceneConfig v = scene::parse_scene_text(shaken, "v.toml", ".");
   const signal_chain::VibrationSpec& vib = v.imus[0].error_model.chain.vibration;
   ASSERT_EQ(vib.sinusoids.size(), 1u);
@@ -622,6 +635,15 @@ TEST(SignalChainConfig, RefusesUnknownKeysAndChainsTheRateCannotRunNamingFileLin
   EXPECT_DOUBLE_EQ(vib.sinusoids[0].angular_rad_s.y(), 2.0 * std::numbers::pi / 180.0);
   ASSERT_TRUE(vib.random_linear.has_value());
   EXPECT_EQ(vib.random_linear->seed, 4u);
+  ASSERT_EQ(vib.rotors.size(), 1u);
+  ASSERT_EQ(vib.rotors[0].speed.size(), 2u);
+  EXPECT_EQ(vib.rotors[0].speed[1].time_s, 10.0);
+  EXPECT_EQ(vib.rotors[0].speed[1].rpm, 6000.0);
+  EXPECT_EQ(vib.rotors[0].jitter_rpm, 5.0);
+  EXPECT_EQ(vib.rotors[0].seed, 3u);
+  ASSERT_EQ(vib.rotors[0].harmonics.size(), 1u);
+  EXPECT_EQ(vib.rotors[0].harmonics[0].order, 2.0);
+  EXPECT_DOUBLE_EQ(vib.rotors[0].harmonics[0].phase_rad.x(), std::numbers::pi / 2.0);
   EXPECT_EQ(vib.lever_arm_m, Vec3(0.3, 0.0, -0.1));
   EXPECT_FALSE(v.imus[0].error_model.ideal());
 }

@@ -12,8 +12,11 @@
 // bin at a frequency drawn uniformly inside the bin (incommensurate: the
 // signal never repeats) and a uniform phase, its amplitude^2 / 2 the bin's
 // power S(f) df, so that its PSD is the table's; Gaussian by the central
-// limit theorem over the hundreds of components a profile spans. Rotor harmonics and shocks are
-// not yet here.
+// limit theorem over the hundreds of components a profile spans. Rotor or
+// engine harmonics: a shaft speed (constant or a piecewise-linear (time, rpm)
+// profile, plus a smooth seeded jitter), harmonic orders k with amplitude and
+// phase per axis; the shaft angle Phi(t) is the integral of the speed in
+// closed form. Shocks are not yet here.
 //
 // Motion: the vibration displaces the body by d(t) and turns it by exp([th(t)])
 // about the reference point (th, d in body axes, closed form with their first
@@ -57,18 +60,59 @@ struct RandomVibration {
   std::uint64_t seed = 0;
 };
 
+// Rotor or engine harmonics. The shaft turns at Omega(t) = 2 pi rpm(t) / 60
+// (rpm(t): linear between the profile's points, constant before the first and
+// after the last; one point is a constant speed) plus a jitter: a sum of
+// kJitterComponents sinusoids at frequencies drawn uniformly in
+// (0, jitter_bandwidth_hz] with random phases, of total rms jitter_rpm (its
+// own SplitMix64 stream from seed and the device name, so a run is
+// reproducible bit for bit). The shaft angle Phi(t) = integral of Omega is in
+// closed form (a quadratic per profile segment plus the jitter's sines).
+// Harmonic k drives psi_k = k Phi + phase: angle theta = -A cos(psi)/(k Omega)
+// and displacement d = -A sin(psi)/(k Omega)^2, differentiated exactly (with
+// Omega' and Omega''), so theta' = A sin(psi) and d'' = A sin(psi) exactly at
+// a constant speed, and up to terms of relative size Omega'/(k Omega^2) while
+// the speed changes: the motion stays rigid and consistent (gyro, accel and
+// increments are derivatives of one trajectory) and the amplitude is the
+// datasheet's at the instantaneous speed.
+struct RpmPoint {
+  double time_s = 0.0;  // since the start of the run
+  double rpm = 0.0;     // > 0
+};
+
+struct RotorHarmonic {
+  double order = 1.0;                 // k: frequency k rpm / 60 Hz
+  Vec3 linear_m_s2 = Vec3::Zero();    // acceleration amplitude per body axis
+  Vec3 angular_rad_s = Vec3::Zero();  // angular-rate amplitude per body axis
+  Vec3 phase_rad = Vec3::Zero();      // per axis: A sin(k Phi(t) + phase)
+};
+
+struct Rotor {
+  std::vector<RpmPoint> speed;  // increasing times; one point: constant speed
+  std::vector<RotorHarmonic> harmonics;
+  double jitter_rpm = 0.0;            // rms of the speed jitter
+  double jitter_bandwidth_hz = 1.0;   // the jitter's components lie in (0, this]
+  std::uint64_t seed = 0;
+};
+
 struct VibrationSpec {
   std::vector<Sinusoid> sinusoids;
   std::optional<RandomVibration> random_linear;
+  std::vector<Rotor> rotors;
   Vec3 lever_arm_m = Vec3::Zero();   // the sensor relative to the vibration's reference point, body axes
   Mat3 sensor_to_body = Mat3::Identity();
-  bool empty() const { return sinusoids.empty() && !random_linear; }
+  bool empty() const { return sinusoids.empty() && !random_linear && rotors.empty(); }
 };
 
 // th, d and their derivatives at one instant, body axes.
 struct VibrationState {
   Vec3 theta = Vec3::Zero(), theta_dot = Vec3::Zero(), theta_ddot = Vec3::Zero();
   Vec3 d = Vec3::Zero(), d_dot = Vec3::Zero(), d_ddot = Vec3::Zero();
+};
+
+// A rotor's shaft: angle, speed and its derivatives at one instant.
+struct ShaftState {
+  double angle_rad = 0.0, speed_rad_s = 0.0, accel_rad_s2 = 0.0, jerk_rad_s3 = 0.0;
 };
 
 // One-sided PSD table value at f (log-log interpolation; 0 outside the table).
@@ -92,6 +136,10 @@ class Vibration {
   // The kinematics of the vibrating sensor on top of the smoothed ones.
   Kinematics apply(const Kinematics& base, const Vec3& base_angular_acceleration_rad_s2, double t_s) const;
   std::size_t random_components() const { return comps_.size(); }
+  // Rotor r's shaft at t_s (for the tests and check-config).
+  ShaftState shaft(std::size_t r, double t_s) const;
+
+  static constexpr int kJitterComponents = 16;
 
   static constexpr std::size_t kMaxComponents = 200'000;
 
@@ -104,8 +152,16 @@ class Vibration {
   // e^{i phase} of every random component at t_cached_s (valid) and the
   // per-step rotation e^{i w step}.
   void random_phasors(double t_s) const;
+  struct JitterComponent {
+    double w_rad_s, amplitude_rad_s, phase_rad;
+  };
+  struct RotorState {
+    std::vector<double> angle_at_point_rad;  // Phi at each profile point (without jitter)
+    std::vector<JitterComponent> jitter;
+  };
   VibrationSpec spec_;
   std::vector<Component> comps_;
+  std::vector<RotorState> rotors_;
   double step_s_ = 0.0;
   std::vector<std::complex<double>> rotation_;
   mutable std::vector<std::complex<double>> phasor_;
