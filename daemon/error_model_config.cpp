@@ -101,6 +101,8 @@ void only_keys(const Where& w, const toml::table& t, const std::string& path, co
 //   [[...vibration.rotor]]     speed_rpm = 6000 or [[time_s, rpm], ...],
 //                              jitter_rpm, jitter_bandwidth_hz, seed,
 //     [[...rotor.harmonic]]    order, linear_m_s2, angular_deg_s, phase_deg
+//   [[...vibration.shock]]     time_s, shape = "half_sine" | "sawtooth",
+//                              peak_g = [x, y, z], duration_ms, return_ms
 // The lever arm and axes are the device's [imu.mounting].
 // linear_m_s2, angular_deg_s, phase_deg of a sinusoid or a rotor harmonic.
 void amplitudes_of(const Where& w, const toml::table& t, const std::string& path, Vec3& linear_m_s2,
@@ -160,9 +162,39 @@ signal_chain::Rotor parse_rotor(const Where& w, const toml::node& node, const st
   return r;
 }
 
+signal_chain::Shock parse_shock(const Where& w, const toml::node& node, const std::string& sp) {
+  const toml::table* st = node.as_table();
+  if (st == nullptr) w.fail(node.source(), sp, "expected a table");
+  only_keys(w, *st, sp, {"time_s", "shape", "peak_g", "duration_ms", "return_ms"});
+  signal_chain::Shock k;
+  for (const char* required : {"time_s", "peak_g", "duration_ms"})
+    if (st->get(required) == nullptr) w.fail(st->source(), sp, std::string("missing '") + required + "'");
+  k.time_s = one_number(w, *st->get("time_s"), dotted(sp, "time_s"), "expected one number >= 0 (s since the start)");
+  constexpr double kG = 9.80665;  // standard gravity: test standards give shock peaks in g
+  k.peak_m_s2 = vec3_of(w, *st->get("peak_g"), dotted(sp, "peak_g"), kG);
+  k.duration_s = one_number(w, *st->get("duration_ms"), dotted(sp, "duration_ms"), "expected one number > 0") * 1e-3;
+  if (const toml::node* x = st->get("return_ms"))
+    k.return_s = one_number(w, *x, dotted(sp, "return_ms"), "expected one number > 0") * 1e-3;
+  if (const toml::node* x = st->get("shape")) {
+    const std::optional<std::string> shape = x->value<std::string>();
+    if (shape == "half_sine")
+      k.shape = signal_chain::ShockShape::half_sine;
+    else if (shape == "sawtooth")
+      k.shape = signal_chain::ShockShape::sawtooth;
+    else
+      w.fail(x->source(), dotted(sp, "shape"), "expected \"half_sine\" or \"sawtooth\" (terminal peak)");
+  }
+  return k;
+}
+
 signal_chain::VibrationSpec parse_vibration_table(const Where& w, const toml::table& t, const std::string& path) {
   signal_chain::VibrationSpec v;
-  only_keys(w, t, path, {"sinusoid", "random", "rotor"});
+  only_keys(w, t, path, {"sinusoid", "random", "rotor", "shock"});
+  if (const toml::node* n = t.get("shock")) {
+    const toml::array* a = n->as_array();
+    if (a == nullptr) w.fail(n->source(), dotted(path, "shock"), "expected an array of tables ([[...shock]])");
+    for (std::size_t i = 0; i < a->size(); ++i) v.shocks.push_back(parse_shock(w, (*a)[i], dotted(path, "shock[" + std::to_string(i) + "]")));
+  }
   if (const toml::node* n = t.get("sinusoid")) {
     const toml::array* a = n->as_array();
     if (a == nullptr) w.fail(n->source(), dotted(path, "sinusoid"), "expected an array of tables ([[...sinusoid]])");

@@ -100,6 +100,23 @@ Vibration::Vibration(const VibrationSpec& spec, const std::string& device) : spe
     }
     rotors_.push_back(std::move(st));
   }
+  for (std::size_t i = 0; i < spec.shocks.size(); ++i) {
+    const Shock& k = spec.shocks[i];
+    if (!std::isfinite(k.time_s) || !(k.time_s >= 0.0) || !(k.duration_s > 0.0) || !std::isfinite(k.duration_s) ||
+        !(k.return_s > 0.0) || !std::isfinite(k.return_s) || !k.peak_m_s2.allFinite())
+      throw std::invalid_argument("shock " + std::to_string(i + 1) +
+                                  ": time_s must be >= 0, duration and return > 0 and the peak finite");
+    const double T = k.duration_s, R = k.return_s;
+    // The unit pulse's velocity and displacement at its end.
+    const double v_end = k.shape == ShockShape::half_sine ? 2.0 * T / std::numbers::pi : 0.5 * T;
+    const double d_end = k.shape == ShockShape::half_sine ? T * T / std::numbers::pi : T * T / 6.0;
+    // Return: v_end + R (c1/30 + c2/60) = 0 and
+    // d_end + v_end R + R^2 (c1/60 + c2/140) = 0 (the moments of
+    // x^2 (1-x)^2 and x^3 (1-x)^2 and of (1 - x) times them over [0, 1]).
+    const double b1 = -v_end / R, b2 = -(d_end + v_end * R) / (R * R);
+    const double det = (1.0 / 30.0) * (1.0 / 140.0) - (1.0 / 60.0) * (1.0 / 60.0);
+    shocks_.push_back({v_end, d_end, (b1 / 140.0 - b2 / 60.0) / det, (b2 / 30.0 - b1 / 60.0) / det});
+  }
   if (!spec.random_linear) return;
   const RandomVibration& r = *spec.random_linear;
   if (r.psd.size() < 2) throw std::invalid_argument("random vibration: the PSD table needs at least two points");
@@ -167,8 +184,43 @@ ShaftState Vibration::shaft(std::size_t index, double t) const {
   return s;
 }
 
+void Vibration::add_shock(double t, VibrationState& v) const {
+  for (std::size_t i = 0; i < shocks_.size(); ++i) {
+    const Shock& k = spec_.shocks[i];
+    const ShockState& st = shocks_[i];
+    const double tau = t - k.time_s, T = k.duration_s, R = k.return_s;
+    if (!(tau >= 0.0) || !(tau < T + R)) continue;  // outside the event: nothing
+    double a, vel, d;  // per unit peak
+    if (tau < T) {
+      if (k.shape == ShockShape::half_sine) {
+        const double w = std::numbers::pi / T;
+        a = std::sin(w * tau);
+        vel = (1.0 - std::cos(w * tau)) / w;
+        d = (tau - std::sin(w * tau) / w) / w;
+      } else {
+        a = tau / T;
+        vel = tau * tau / (2.0 * T);
+        d = tau * tau * tau / (6.0 * T);
+      }
+    } else {
+      // The return's polynomial in x and its integrals (R x^{n+1}/(n+1), R^2 x^{n+2}/((n+1)(n+2))).
+      const double x = (tau - T) / R, x2 = x * x, x3 = x2 * x, x4 = x3 * x, x5 = x4 * x, x6 = x5 * x, x7 = x6 * x;
+      const double c1 = st.c1, c2 = st.c2;
+      // c1 (x^2 - 2x^3 + x^4) + c2 (x^3 - 2x^4 + x^5)
+      a = c1 * (x2 - 2.0 * x3 + x4) + c2 * (x3 - 2.0 * x4 + x5);
+      vel = st.v_end + R * (c1 * (x3 / 3.0 - x4 / 2.0 + x5 / 5.0) + c2 * (x4 / 4.0 - 2.0 * x5 / 5.0 + x6 / 6.0));
+      d = st.d_end + st.v_end * (tau - T) +
+          R * R * (c1 * (x4 / 12.0 - x5 / 10.0 + x6 / 30.0) + c2 * (x5 / 20.0 - x6 / 15.0 + x7 / 42.0));
+    }
+    v.d += d * k.peak_m_s2;
+    v.d_dot += vel * k.peak_m_s2;
+    v.d_ddot += a * k.peak_m_s2;
+  }
+}
+
 VibrationState Vibration::at(double t) const {
   VibrationState v;
+  add_shock(t, v);
   for (std::size_t r = 0; r < spec_.rotors.size(); ++r) {
     const ShaftState sh = shaft(r, t);
     const double W = sh.speed_rad_s, W1 = sh.accel_rad_s2, W2 = sh.jerk_rad_s3;

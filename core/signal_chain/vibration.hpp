@@ -16,7 +16,9 @@
 // engine harmonics: a shaft speed (constant or a piecewise-linear (time, rpm)
 // profile, plus a smooth seeded jitter), harmonic orders k with amplitude and
 // phase per axis; the shaft angle Phi(t) is the integral of the speed in
-// closed form. Shocks are not yet here.
+// closed form. Shocks: half-sine or terminal-peak sawtooth acceleration
+// pulses (MIL-STD-810H Method 516.8 shapes) at given times, followed by a
+// smooth return of the mount (below).
 //
 // Motion: the vibration displaces the body by d(t) and turns it by exp([th(t)])
 // about the reference point (th, d in body axes, closed form with their first
@@ -95,13 +97,35 @@ struct Rotor {
   std::uint64_t seed = 0;
 };
 
+// A shock: a linear acceleration pulse per body axis starting at time_s,
+// peak_m_s2 [x, y, z] and duration T (one shape for the three axes):
+//   half_sine:  a(tau) = P sin(pi tau / T), 0 <= tau < T
+//   sawtooth:   a(tau) = P tau / T (terminal peak, then back to 0 at tau = T).
+// As rigid-body motion the pulse leaves the mount with a velocity
+// (2 P T / pi or P T / 2) and a displacement (P T^2 / pi or P T^2 / 6). The
+// mount then returns over return_s: an acceleration R(x) = c1 x^2 (1 - x)^2 +
+// c2 x^3 (1 - x)^2 (x = (tau - T) / return_s) with c1, c2 so that velocity and
+// displacement are zero at the return's end (starting and ending at zero
+// acceleration and jerk). Outside [time_s, time_s + T + return_s] the shock
+// contributes nothing: the trajectory is the one without it.
+enum class ShockShape { half_sine, sawtooth };
+
+struct Shock {
+  double time_s = 0.0;
+  ShockShape shape = ShockShape::half_sine;
+  Vec3 peak_m_s2 = Vec3::Zero();
+  double duration_s = 0.011;
+  double return_s = 0.2;
+};
+
 struct VibrationSpec {
   std::vector<Sinusoid> sinusoids;
+  std::vector<Shock> shocks;
   std::optional<RandomVibration> random_linear;
   std::vector<Rotor> rotors;
   Vec3 lever_arm_m = Vec3::Zero();   // the sensor relative to the vibration's reference point, body axes
   Mat3 sensor_to_body = Mat3::Identity();
-  bool empty() const { return sinusoids.empty() && !random_linear && rotors.empty(); }
+  bool empty() const { return sinusoids.empty() && !random_linear && rotors.empty() && shocks.empty(); }
 };
 
 // th, d and their derivatives at one instant, body axes.
@@ -162,6 +186,13 @@ class Vibration {
   VibrationSpec spec_;
   std::vector<Component> comps_;
   std::vector<RotorState> rotors_;
+  // Per shock, per unit peak: the pulse's end velocity and displacement and
+  // the return's coefficients c1, c2.
+  struct ShockState {
+    double v_end, d_end, c1, c2;
+  };
+  std::vector<ShockState> shocks_;
+  void add_shock(double t, VibrationState& v) const;
   double step_s_ = 0.0;
   std::vector<std::complex<double>> rotation_;
   mutable std::vector<std::complex<double>> phasor_;
