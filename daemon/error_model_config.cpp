@@ -97,7 +97,8 @@ void only_keys(const Where& w, const toml::table& t, const std::string& path, co
 //   [[...vibration.sinusoid]]  frequency_hz, linear_m_s2 = [x, y, z],
 //                              angular_deg_s = [x, y, z], phase_deg = [x, y, z]
 //   [...vibration.random]      psd_g2_per_hz = [[f_hz, g2_per_hz], ...],
-//                              axis_scale = [x, y, z], resolution_hz, seed
+//                              axis_scale = [x, y, z], resolution_hz, seed,
+//                              amplitude_scale = [[time_s, scale], ...]
 //   [[...vibration.rotor]]     speed_rpm = 6000 or [[time_s, rpm], ...],
 //                              jitter_rpm, jitter_bandwidth_hz, seed,
 //     [[...rotor.harmonic]]    order, linear_m_s2, angular_deg_s, phase_deg
@@ -222,7 +223,7 @@ signal_chain::VibrationSpec parse_vibration_table(const Where& w, const toml::ta
     const std::string rp = dotted(path, "random");
     const toml::table* rt = n->as_table();
     if (rt == nullptr) w.fail(n->source(), rp, "expected a table");
-    only_keys(w, *rt, rp, {"psd_g2_per_hz", "axis_scale", "resolution_hz", "seed"});
+    only_keys(w, *rt, rp, {"psd_g2_per_hz", "axis_scale", "resolution_hz", "seed", "amplitude_scale"});
     signal_chain::RandomVibration r;
     const toml::node* psd = rt->get("psd_g2_per_hz");
     const toml::array* pa = psd != nullptr ? psd->as_array() : nullptr;
@@ -231,6 +232,16 @@ signal_chain::VibrationSpec parse_vibration_table(const Where& w, const toml::ta
       const std::vector<double> pt = numbers_of(w, e, dotted(rp, "psd_g2_per_hz"));
       if (pt.size() != 2) w.fail(e.source(), dotted(rp, "psd_g2_per_hz"), "expected a pair [frequency_hz, g2_per_hz]");
       r.psd.push_back({pt[0], pt[1]});
+    }
+    if (const toml::node* x = rt->get("amplitude_scale")) {
+      const std::string ak = dotted(rp, "amplitude_scale");
+      const toml::array* aa = x->as_array();
+      if (aa == nullptr) w.fail(x->source(), ak, "expected [[time_s, scale], ...]");
+      for (const toml::node& e : *aa) {
+        const std::vector<double> pt = numbers_of(w, e, ak);
+        if (pt.size() != 2) w.fail(e.source(), ak, "expected a pair [time_s, scale]");
+        r.amplitude_scale.push_back({pt[0], pt[1]});
+      }
     }
     if (const toml::node* x = rt->get("axis_scale")) r.axis_scale = vec3_of(w, *x, dotted(rp, "axis_scale"), 1.0);
     if (const toml::node* x = rt->get("resolution_hz")) {

@@ -599,6 +599,9 @@ TEST(SignalChainConfig, RefusesUnknownKeysAndChainsTheRateCannotRunNamingFileLin
        "imu[0].error_model.signal_chain.vibration.shock[0].shape", "expected \"half_sine\" or \"sawtooth\"", 17},
       {"shock missing peak", "[[imu.error_model.signal_chain.vibration.shock]]\ntime_s = 2\nduration_ms = 11\n",
        "imu[0].error_model.signal_chain.vibration.shock[0]", "missing 'peak_g'", 13},
+      {"amplitude scale order", "[imu.error_model.signal_chain.vibration.random]\npsd_g2_per_hz = [[20, 0.01], [500, 0.01]]\n"
+       "amplitude_scale = [[5, 1], [2, 3]]\n",
+       "imu[0].error_model.signal_chain.vibration", "amplitude_scale point 2 must have a time after the previous one", 13},
       {"shock duration", "[[imu.error_model.signal_chain.vibration.shock]]\ntime_s = 2\npeak_g = [0, 0, 20]\nduration_ms = 0\n",
        "imu[0].error_model.signal_chain.vibration", "shock 1: time_s must be >= 0, duration and return > 0", 13},
       {"rotor speed order", "[[imu.error_model.signal_chain.vibration.rotor]]\nspeed_rpm = [[0, 3000], [0, 4000]]\n"
@@ -633,6 +636,7 @@ TEST(SignalChainConfig, RefusesUnknownKeysAndChainsTheRateCannotRunNamingFileLin
       "[[imu.error_model.signal_chain.vibration.sinusoid]]\nfrequency_hz = 120\nlinear_m_s2 = [0, 0, 3]\n"
       "angular_deg_s = [0, 2, 0]\n"
       "[imu.error_model.signal_chain.vibration.random]\npsd_g2_per_hz = [[20, 0.01], [500, 0.01]]\nseed = 4\n"
+      "amplitude_scale = [[10, 1], [20, 2]]\n"
       "[[imu.error_model.signal_chain.vibration.rotor]]\nspeed_rpm = [[0, 3000], [10, 6000]]\njitter_rpm = 5\nseed = 3\n"
       "[[imu.error_model.signal_chain.vibration.rotor.harmonic]]\norder = 2\nangular_deg_s = [1, 0, 0]\nphase_deg = [90, 0, 0]\n"
       "[[imu.error_model.signal_chain.vibration.shock]]\ntime_s = 2.5\nshape = \"sawtooth\"\npeak_g = [0, 0, 20]\n"
@@ -644,6 +648,9 @@ TEST(SignalChainConfig, RefusesUnknownKeysAndChainsTheRateCannotRunNamingFileLin
   EXPECT_DOUBLE_EQ(vib.sinusoids[0].angular_rad_s.y(), 2.0 * std::numbers::pi / 180.0);
   ASSERT_TRUE(vib.random_linear.has_value());
   EXPECT_EQ(vib.random_linear->seed, 4u);
+  ASSERT_EQ(vib.random_linear->amplitude_scale.size(), 2u);
+  EXPECT_EQ(vib.random_linear->amplitude_scale[1].time_s, 20.0);
+  EXPECT_EQ(vib.random_linear->amplitude_scale[1].scale, 2.0);
   ASSERT_EQ(vib.rotors.size(), 1u);
   ASSERT_EQ(vib.rotors[0].speed.size(), 2u);
   EXPECT_EQ(vib.rotors[0].speed[1].time_s, 10.0);

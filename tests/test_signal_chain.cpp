@@ -832,5 +832,44 @@ TEST(SignalChain, ShockPulsesAreTheAnalyticPulseAndLeaveTheTrajectoryUnchangedOu
   }
 }
 
+// The random profile scaled over time (amplitude 1 until 1 s, 3 from 2 s,
+// smootherstep between): before the ramp every state is bit-identical to the
+// unscaled profile's (same seed), after it exactly 3 times it, and across the
+// ramp the scaled motion is still one trajectory (d' and d'' within 1e-6 of
+// the peak of the central differences of d and d', h = 1e-7 s); scaling d, d'
+// and d'' by s(t) alone would be off by 2 s' d' (about 1 % here).
+TEST(SignalChain, RandomVibrationScaledOverTimeIsTheProfileTimesTheScaleAndStaysRigid) {
+  VibrationSpec plain_spec;
+  RandomVibration r;
+  r.psd = {{20.0, 0.01}, {500.0, 0.01}};
+  r.axis_scale = Vec3(1.0, 0.0, 0.5);
+  r.resolution_hz = 2.0;
+  r.seed = 3;
+  plain_spec.random_linear = r;
+  VibrationSpec scaled_spec = plain_spec;
+  scaled_spec.random_linear->amplitude_scale = {{1.0, 1.0}, {2.0, 3.0}};
+  const Vibration plain(plain_spec, "imu0"), scaled(scaled_spec, "imu0");
+  int before_differs = 0, after_differs = 0;
+  double worst_fd = 0.0, amplitude = 0.0;
+  for (int j = 0; j < 12000; ++j) {
+    const double t = j / 4000.0 + 1e-4;
+    const VibrationState p = plain.at(t), s = scaled.at(t);
+    amplitude = std::max(amplitude, p.d_ddot.norm());
+    if (t < 1.0 && (s.d != p.d || s.d_dot != p.d_dot || s.d_ddot != p.d_ddot)) ++before_differs;
+    if (t > 2.0 && (s.d != 3.0 * p.d || s.d_dot != 3.0 * p.d_dot || s.d_ddot != 3.0 * p.d_ddot)) ++after_differs;
+    if (t > 0.9 && t < 2.1 && j % 10 == 0) {
+      const double e = 1e-7;  // truncation (e w)^2 / 6 ~ 2e-8 at 500 Hz
+      const VibrationState a = scaled.at(t - e), b = scaled.at(t + e);
+      worst_fd = std::max({worst_fd, ((b.d_dot - a.d_dot) / (2 * e) - s.d_ddot).norm(),
+                           ((b.d - a.d) / (2 * e) - s.d_dot).norm() * 2.0 * kPi * 500.0});
+    }
+  }
+  std::printf("scaled random profile: derivatives within %.3g of the unscaled peak %.3g m/s^2\n", worst_fd / amplitude,
+              amplitude);
+  EXPECT_EQ(before_differs, 0);
+  EXPECT_EQ(after_differs, 0);
+  EXPECT_LT(worst_fd / amplitude, 1e-6);
+}
+
 }  // namespace
 }  // namespace imuemu::signal_chain

@@ -128,6 +128,13 @@ Vibration::Vibration(const VibrationSpec& spec, const std::string& device) : spe
   }
   if (!(r.resolution_hz > 0.0) || !std::isfinite(r.resolution_hz))
     throw std::invalid_argument("random vibration: resolution_hz must be > 0");
+  for (std::size_t i = 0; i < r.amplitude_scale.size(); ++i) {
+    const ScalePoint& p = r.amplitude_scale[i];
+    if (!std::isfinite(p.time_s) || !std::isfinite(p.scale) || !(p.scale >= 0.0) ||
+        (i > 0 && !(p.time_s > r.amplitude_scale[i - 1].time_s)))
+      throw std::invalid_argument("random vibration: amplitude_scale point " + std::to_string(i + 1) +
+                                  " must have a time after the previous one and a scale >= 0");
+  }
   if (!r.axis_scale.allFinite() || (r.axis_scale.array() < 0.0).any())
     throw std::invalid_argument("random vibration: axis_scale must be finite and >= 0");
   const double f0 = r.psd.front().frequency_hz, f1 = r.psd.back().frequency_hz;
@@ -269,13 +276,39 @@ VibrationState Vibration::at(double t) const {
   }
   if (comps_.empty()) return v;
   random_phasors(t);
+  Vec3 d = Vec3::Zero(), d_dot = Vec3::Zero(), d_ddot = Vec3::Zero();
   for (std::size_t i = 0; i < comps_.size(); ++i) {
     const Component& c = comps_[i];
     const double cs = phasor_[i].real(), sn = phasor_[i].imag();
-    v.d[c.axis] -= c.amplitude_over_w2 * cs;
-    v.d_dot[c.axis] += c.amplitude_over_w * sn;
-    v.d_ddot[c.axis] += c.amplitude_m_s2 * cs;
+    d[c.axis] -= c.amplitude_over_w2 * cs;
+    d_dot[c.axis] += c.amplitude_over_w * sn;
+    d_ddot[c.axis] += c.amplitude_m_s2 * cs;
   }
+  const std::vector<ScalePoint>& sc = spec_.random_linear->amplitude_scale;
+  if (sc.empty()) {
+    v.d += d;
+    v.d_dot += d_dot;
+    v.d_ddot += d_ddot;
+    return v;
+  }
+  // The scaled displacement s(t) d(t), differentiated exactly (product rule).
+  double s0, s1 = 0.0, s2 = 0.0;
+  const auto next = std::upper_bound(sc.begin(), sc.end(), t, [](double x, const ScalePoint& q) { return x < q.time_s; });
+  if (next == sc.begin()) {
+    s0 = sc.front().scale;
+  } else if (next == sc.end()) {
+    s0 = sc.back().scale;
+  } else {
+    const ScalePoint& a = *(next - 1);
+    const double span = next->time_s - a.time_s, u = (t - a.time_s) / span, ds = next->scale - a.scale;
+    // Smootherstep S(u) = 6u^5 - 15u^4 + 10u^3: S', S'' vanish at both ends.
+    s0 = a.scale + ds * u * u * u * (10.0 + u * (-15.0 + 6.0 * u));
+    s1 = ds / span * 30.0 * u * u * (1.0 - u) * (1.0 - u);
+    s2 = ds / (span * span) * 60.0 * u * (1.0 - u) * (1.0 - 2.0 * u);
+  }
+  v.d += s0 * d;
+  v.d_dot += s0 * d_dot + s1 * d;
+  v.d_ddot += s0 * d_ddot + 2.0 * s1 * d_dot + s2 * d;
   return v;
 }
 

@@ -16,7 +16,7 @@
 // engine harmonics: a shaft speed (constant or a piecewise-linear (time, rpm)
 // profile, plus a smooth seeded jitter), harmonic orders k with amplitude and
 // phase per axis; the shaft angle Phi(t) is the integral of the speed in
-// closed form. Shocks: half-sine or terminal-peak sawtooth acceleration
+// closed form; the random part optionally scaled over time. Shocks: half-sine or terminal-peak sawtooth acceleration
 // pulses (MIL-STD-810H Method 516.8 shapes) at given times, followed by a
 // smooth return of the mount (below).
 //
@@ -55,11 +55,26 @@ struct PsdPoint {
   double g2_per_hz = 0.0;  // one-sided acceleration PSD, g^2/Hz (g = 9.80665 m/s^2)
 };
 
+// A point of the random profile's scale over time.
+struct ScalePoint {
+  double time_s = 0.0;
+  double scale = 1.0;  // amplitude multiplier (the PSD scales by its square), >= 0
+};
+
 struct RandomVibration {
   std::vector<PsdPoint> psd;            // increasing frequencies, log-log interpolated between them
   Vec3 axis_scale = Vec3(1.0, 1.0, 1.0);  // PSD multiplier per body axis (0: none on that axis)
   double resolution_hz = 0.5;           // one component per bin of this width
   std::uint64_t seed = 0;
+  // Amplitude scale over time (empty: 1). Between points the scale follows a
+  // smootherstep (C2: its rate and curvature are zero at the points), not a
+  // straight line: the random displacement is s(t) d(t), differentiated
+  // exactly, and a kink in s would put a step into the mount's velocity. The
+  // acceleration is s d'' + 2 s' d' + s'' d; the last two terms are of
+  // relative size s' / (s w) and s'' / (s w^2), small for a ramp much slower
+  // than the profile's lowest frequency. Constant before the first point and
+  // after the last.
+  std::vector<ScalePoint> amplitude_scale;
 };
 
 // Rotor or engine harmonics. The shaft turns at Omega(t) = 2 pi rpm(t) / 60
