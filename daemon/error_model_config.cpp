@@ -105,19 +105,28 @@ void only_keys(const Where& w, const toml::table& t, const std::string& path, co
 //   [[...vibration.shock]]     time_s, shape = "half_sine" | "sawtooth",
 //                              peak_g = [x, y, z], duration_ms, return_ms
 // The lever arm and axes are the device's [imu.mounting].
-// linear_m_s2, angular_deg_s, phase_deg of a sinusoid or a rotor harmonic.
-void amplitudes_of(const Where& w, const toml::table& t, const std::string& path, Vec3& linear_m_s2,
-                   Vec3& angular_rad_s, Vec3& phase_rad) {
-  constexpr double kDeg = std::numbers::pi / 180.0;
-  if (const toml::node* x = t.get("linear_m_s2")) linear_m_s2 = vec3_of(w, *x, dotted(path, "linear_m_s2"), 1.0);
-  if (const toml::node* x = t.get("angular_deg_s")) angular_rad_s = vec3_of(w, *x, dotted(path, "angular_deg_s"), kDeg);
-  if (const toml::node* x = t.get("phase_deg")) phase_rad = vec3_of(w, *x, dotted(path, "phase_deg"), kDeg);
-}
-
 double one_number(const Where& w, const toml::node& n, const std::string& key, const char* expected) {
   const std::vector<double> v = numbers_of(w, n, key);
   if (v.size() != 1) w.fail(n.source(), key, expected);
   return v[0];
+}
+
+// A [[...sinusoid]] or [[...rotor.harmonic]] table: one number > 0 under key
+// (frequency_hz, order), returned, and linear_m_s2, angular_deg_s, phase_deg.
+double parse_oscillation(const Where& w, const toml::node& node, const std::string& path, const std::string& key,
+                         Vec3& linear_m_s2, Vec3& angular_rad_s, Vec3& phase_rad) {
+  const toml::table* t = node.as_table();
+  if (t == nullptr) w.fail(node.source(), path, "expected a table");
+  only_keys(w, *t, path, {key, "linear_m_s2", "angular_deg_s", "phase_deg"});
+  const toml::node* n = t->get(key);
+  if (n == nullptr) w.fail(t->source(), path, "missing '" + key + "'");
+  const double value = one_number(w, *n, dotted(path, key), "expected one number > 0");
+  if (!(value > 0.0)) w.fail(n->source(), dotted(path, key), "expected one number > 0");
+  constexpr double kDeg = std::numbers::pi / 180.0;
+  if (const toml::node* x = t->get("linear_m_s2")) linear_m_s2 = vec3_of(w, *x, dotted(path, "linear_m_s2"), 1.0);
+  if (const toml::node* x = t->get("angular_deg_s")) angular_rad_s = vec3_of(w, *x, dotted(path, "angular_deg_s"), kDeg);
+  if (const toml::node* x = t->get("phase_deg")) phase_rad = vec3_of(w, *x, dotted(path, "phase_deg"), kDeg);
+  return value;
 }
 
 signal_chain::Rotor parse_rotor(const Where& w, const toml::node& node, const std::string& rp) {
@@ -148,16 +157,9 @@ signal_chain::Rotor parse_rotor(const Where& w, const toml::node& node, const st
   const toml::array* ha = hn != nullptr ? hn->as_array() : nullptr;
   if (ha == nullptr) w.fail(hn != nullptr ? hn->source() : rt->source(), dotted(rp, "harmonic"), "expected [[...harmonic]] tables");
   for (std::size_t i = 0; i < ha->size(); ++i) {
-    const std::string hp = dotted(rp, "harmonic[" + std::to_string(i) + "]");
-    const toml::table* ht = (*ha)[i].as_table();
-    if (ht == nullptr) w.fail((*ha)[i].source(), hp, "expected a table");
-    only_keys(w, *ht, hp, {"order", "linear_m_s2", "angular_deg_s", "phase_deg"});
     signal_chain::RotorHarmonic h;
-    const toml::node* o = ht->get("order");
-    if (o == nullptr) w.fail(ht->source(), hp, "missing 'order'");
-    h.order = one_number(w, *o, dotted(hp, "order"), "expected one number > 0");
-    if (!(h.order > 0.0)) w.fail(o->source(), dotted(hp, "order"), "expected one number > 0");
-    amplitudes_of(w, *ht, hp, h.linear_m_s2, h.angular_rad_s, h.phase_rad);
+    h.order = parse_oscillation(w, (*ha)[i], dotted(rp, "harmonic[" + std::to_string(i) + "]"), "order", h.linear_m_s2,
+                                h.angular_rad_s, h.phase_rad);
     r.harmonics.push_back(h);
   }
   return r;
@@ -200,17 +202,9 @@ signal_chain::VibrationSpec parse_vibration_table(const Where& w, const toml::ta
     const toml::array* a = n->as_array();
     if (a == nullptr) w.fail(n->source(), dotted(path, "sinusoid"), "expected an array of tables ([[...sinusoid]])");
     for (std::size_t i = 0; i < a->size(); ++i) {
-      const std::string sp = dotted(path, "sinusoid[" + std::to_string(i) + "]");
-      const toml::table* st = (*a)[i].as_table();
-      if (st == nullptr) w.fail((*a)[i].source(), sp, "expected a table");
-      only_keys(w, *st, sp, {"frequency_hz", "linear_m_s2", "angular_deg_s", "phase_deg"});
       signal_chain::Sinusoid s;
-      const toml::node* f = st->get("frequency_hz");
-      if (f == nullptr) w.fail(st->source(), sp, "missing 'frequency_hz'");
-      const std::vector<double> fv = numbers_of(w, *f, dotted(sp, "frequency_hz"));
-      if (fv.size() != 1 || !(fv[0] > 0.0)) w.fail(f->source(), dotted(sp, "frequency_hz"), "expected one number > 0");
-      s.frequency_hz = fv[0];
-      amplitudes_of(w, *st, sp, s.linear_m_s2, s.angular_rad_s, s.phase_rad);
+      s.frequency_hz = parse_oscillation(w, (*a)[i], dotted(path, "sinusoid[" + std::to_string(i) + "]"), "frequency_hz",
+                                         s.linear_m_s2, s.angular_rad_s, s.phase_rad);
       v.sinusoids.push_back(s);
     }
   }
