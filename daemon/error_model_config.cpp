@@ -97,37 +97,127 @@ void only_keys(const Where& w, const toml::table& t, const std::string& path, co
 //   [[...vibration.sinusoid]]  frequency_hz, linear_m_s2 = [x, y, z],
 //                              angular_deg_s = [x, y, z], phase_deg = [x, y, z]
 //   [...vibration.random]      psd_g2_per_hz = [[f_hz, g2_per_hz], ...],
-//                              axis_scale = [x, y, z], resolution_hz, seed
+//                              axis_scale = [x, y, z], resolution_hz, seed,
+//                              amplitude_scale = [[time_s, scale], ...]
+//   [[...vibration.rotor]]     speed_rpm = 6000 or [[time_s, rpm], ...],
+//                              jitter_rpm, jitter_bandwidth_hz, seed,
+//     [[...rotor.harmonic]]    order, linear_m_s2, angular_deg_s, phase_deg
+//   [[...vibration.shock]]     time_s, shape = "half_sine" | "sawtooth",
+//                              peak_g = [x, y, z], duration_ms, return_ms
 // The lever arm and axes are the device's [imu.mounting].
+double one_number(const Where& w, const toml::node& n, const std::string& key, const char* expected) {
+  const std::vector<double> v = numbers_of(w, n, key);
+  if (v.size() != 1) w.fail(n.source(), key, expected);
+  return v[0];
+}
+
+// A [[...sinusoid]] or [[...rotor.harmonic]] table: one number > 0 under key
+// (frequency_hz, order), returned, and linear_m_s2, angular_deg_s, phase_deg.
+double parse_oscillation(const Where& w, const toml::node& node, const std::string& path, const std::string& key,
+                         Vec3& linear_m_s2, Vec3& angular_rad_s, Vec3& phase_rad) {
+  const toml::table* t = node.as_table();
+  if (t == nullptr) w.fail(node.source(), path, "expected a table");
+  only_keys(w, *t, path, {key, "linear_m_s2", "angular_deg_s", "phase_deg"});
+  const toml::node* n = t->get(key);
+  if (n == nullptr) w.fail(t->source(), path, "missing '" + key + "'");
+  const double value = one_number(w, *n, dotted(path, key), "expected one number > 0");
+  if (!(value > 0.0)) w.fail(n->source(), dotted(path, key), "expected one number > 0");
+  constexpr double kDeg = std::numbers::pi / 180.0;
+  if (const toml::node* x = t->get("linear_m_s2")) linear_m_s2 = vec3_of(w, *x, dotted(path, "linear_m_s2"), 1.0);
+  if (const toml::node* x = t->get("angular_deg_s")) angular_rad_s = vec3_of(w, *x, dotted(path, "angular_deg_s"), kDeg);
+  if (const toml::node* x = t->get("phase_deg")) phase_rad = vec3_of(w, *x, dotted(path, "phase_deg"), kDeg);
+  return value;
+}
+
+signal_chain::Rotor parse_rotor(const Where& w, const toml::node& node, const std::string& rp) {
+  const toml::table* rt = node.as_table();
+  if (rt == nullptr) w.fail(node.source(), rp, "expected a table");
+  only_keys(w, *rt, rp, {"speed_rpm", "jitter_rpm", "jitter_bandwidth_hz", "seed", "harmonic"});
+  signal_chain::Rotor r;
+  const toml::node* sp = rt->get("speed_rpm");
+  if (sp == nullptr) w.fail(rt->source(), rp, "missing 'speed_rpm' (a number, or [[time_s, rpm], ...])");
+  const std::string sk = dotted(rp, "speed_rpm");
+  if (const toml::array* pa = sp->as_array()) {
+    for (const toml::node& e : *pa) {
+      const std::vector<double> pt = numbers_of(w, e, sk);
+      if (pt.size() != 2) w.fail(e.source(), sk, "expected a pair [time_s, rpm]");
+      r.speed.push_back({pt[0], pt[1]});
+    }
+  } else {
+    r.speed.push_back({0.0, one_number(w, *sp, sk, "expected a number (rpm) or [[time_s, rpm], ...]")});
+  }
+  if (const toml::node* x = rt->get("jitter_rpm")) r.jitter_rpm = one_number(w, *x, dotted(rp, "jitter_rpm"), "expected one number");
+  if (const toml::node* x = rt->get("jitter_bandwidth_hz"))
+    r.jitter_bandwidth_hz = one_number(w, *x, dotted(rp, "jitter_bandwidth_hz"), "expected one number");
+  if (const toml::node* x = rt->get("seed")) {
+    if (!x->is_integer() || x->as_integer()->get() < 0) w.fail(x->source(), dotted(rp, "seed"), "expected an integer >= 0");
+    r.seed = static_cast<std::uint64_t>(x->as_integer()->get());
+  }
+  const toml::node* hn = rt->get("harmonic");
+  const toml::array* ha = hn != nullptr ? hn->as_array() : nullptr;
+  if (ha == nullptr) w.fail(hn != nullptr ? hn->source() : rt->source(), dotted(rp, "harmonic"), "expected [[...harmonic]] tables");
+  for (std::size_t i = 0; i < ha->size(); ++i) {
+    signal_chain::RotorHarmonic h;
+    h.order = parse_oscillation(w, (*ha)[i], dotted(rp, "harmonic[" + std::to_string(i) + "]"), "order", h.linear_m_s2,
+                                h.angular_rad_s, h.phase_rad);
+    r.harmonics.push_back(h);
+  }
+  return r;
+}
+
+signal_chain::Shock parse_shock(const Where& w, const toml::node& node, const std::string& sp) {
+  const toml::table* st = node.as_table();
+  if (st == nullptr) w.fail(node.source(), sp, "expected a table");
+  only_keys(w, *st, sp, {"time_s", "shape", "peak_g", "duration_ms", "return_ms"});
+  signal_chain::Shock k;
+  for (const char* required : {"time_s", "peak_g", "duration_ms"})
+    if (st->get(required) == nullptr) w.fail(st->source(), sp, std::string("missing '") + required + "'");
+  k.time_s = one_number(w, *st->get("time_s"), dotted(sp, "time_s"), "expected one number >= 0 (s since the start)");
+  constexpr double kG = 9.80665;  // standard gravity: test standards give shock peaks in g
+  k.peak_m_s2 = vec3_of(w, *st->get("peak_g"), dotted(sp, "peak_g"), kG);
+  k.duration_s = one_number(w, *st->get("duration_ms"), dotted(sp, "duration_ms"), "expected one number > 0") * 1e-3;
+  if (const toml::node* x = st->get("return_ms"))
+    k.return_s = one_number(w, *x, dotted(sp, "return_ms"), "expected one number > 0") * 1e-3;
+  if (const toml::node* x = st->get("shape")) {
+    const std::optional<std::string> shape = x->value<std::string>();
+    if (shape == "half_sine")
+      k.shape = signal_chain::ShockShape::half_sine;
+    else if (shape == "sawtooth")
+      k.shape = signal_chain::ShockShape::sawtooth;
+    else
+      w.fail(x->source(), dotted(sp, "shape"), "expected \"half_sine\" or \"sawtooth\" (terminal peak)");
+  }
+  return k;
+}
+
 signal_chain::VibrationSpec parse_vibration_table(const Where& w, const toml::table& t, const std::string& path) {
   signal_chain::VibrationSpec v;
-  only_keys(w, t, path, {"sinusoid", "random"});
-  constexpr double kDeg = std::numbers::pi / 180.0;
+  only_keys(w, t, path, {"sinusoid", "random", "rotor", "shock"});
+  if (const toml::node* n = t.get("shock")) {
+    const toml::array* a = n->as_array();
+    if (a == nullptr) w.fail(n->source(), dotted(path, "shock"), "expected an array of tables ([[...shock]])");
+    for (std::size_t i = 0; i < a->size(); ++i) v.shocks.push_back(parse_shock(w, (*a)[i], dotted(path, "shock[" + std::to_string(i) + "]")));
+  }
   if (const toml::node* n = t.get("sinusoid")) {
     const toml::array* a = n->as_array();
     if (a == nullptr) w.fail(n->source(), dotted(path, "sinusoid"), "expected an array of tables ([[...sinusoid]])");
     for (std::size_t i = 0; i < a->size(); ++i) {
-      const std::string sp = dotted(path, "sinusoid[" + std::to_string(i) + "]");
-      const toml::table* st = (*a)[i].as_table();
-      if (st == nullptr) w.fail((*a)[i].source(), sp, "expected a table");
-      only_keys(w, *st, sp, {"frequency_hz", "linear_m_s2", "angular_deg_s", "phase_deg"});
       signal_chain::Sinusoid s;
-      const toml::node* f = st->get("frequency_hz");
-      if (f == nullptr) w.fail(st->source(), sp, "missing 'frequency_hz'");
-      const std::vector<double> fv = numbers_of(w, *f, dotted(sp, "frequency_hz"));
-      if (fv.size() != 1 || !(fv[0] > 0.0)) w.fail(f->source(), dotted(sp, "frequency_hz"), "expected one number > 0");
-      s.frequency_hz = fv[0];
-      if (const toml::node* x = st->get("linear_m_s2")) s.linear_m_s2 = vec3_of(w, *x, dotted(sp, "linear_m_s2"), 1.0);
-      if (const toml::node* x = st->get("angular_deg_s")) s.angular_rad_s = vec3_of(w, *x, dotted(sp, "angular_deg_s"), kDeg);
-      if (const toml::node* x = st->get("phase_deg")) s.phase_rad = vec3_of(w, *x, dotted(sp, "phase_deg"), kDeg);
+      s.frequency_hz = parse_oscillation(w, (*a)[i], dotted(path, "sinusoid[" + std::to_string(i) + "]"), "frequency_hz",
+                                         s.linear_m_s2, s.angular_rad_s, s.phase_rad);
       v.sinusoids.push_back(s);
     }
+  }
+  if (const toml::node* n = t.get("rotor")) {
+    const toml::array* a = n->as_array();
+    if (a == nullptr) w.fail(n->source(), dotted(path, "rotor"), "expected an array of tables ([[...rotor]])");
+    for (std::size_t i = 0; i < a->size(); ++i) v.rotors.push_back(parse_rotor(w, (*a)[i], dotted(path, "rotor[" + std::to_string(i) + "]")));
   }
   if (const toml::node* n = t.get("random")) {
     const std::string rp = dotted(path, "random");
     const toml::table* rt = n->as_table();
     if (rt == nullptr) w.fail(n->source(), rp, "expected a table");
-    only_keys(w, *rt, rp, {"psd_g2_per_hz", "axis_scale", "resolution_hz", "seed"});
+    only_keys(w, *rt, rp, {"psd_g2_per_hz", "axis_scale", "resolution_hz", "seed", "amplitude_scale"});
     signal_chain::RandomVibration r;
     const toml::node* psd = rt->get("psd_g2_per_hz");
     const toml::array* pa = psd != nullptr ? psd->as_array() : nullptr;
@@ -136,6 +226,16 @@ signal_chain::VibrationSpec parse_vibration_table(const Where& w, const toml::ta
       const std::vector<double> pt = numbers_of(w, e, dotted(rp, "psd_g2_per_hz"));
       if (pt.size() != 2) w.fail(e.source(), dotted(rp, "psd_g2_per_hz"), "expected a pair [frequency_hz, g2_per_hz]");
       r.psd.push_back({pt[0], pt[1]});
+    }
+    if (const toml::node* x = rt->get("amplitude_scale")) {
+      const std::string ak = dotted(rp, "amplitude_scale");
+      const toml::array* aa = x->as_array();
+      if (aa == nullptr) w.fail(x->source(), ak, "expected [[time_s, scale], ...]");
+      for (const toml::node& e : *aa) {
+        const std::vector<double> pt = numbers_of(w, e, ak);
+        if (pt.size() != 2) w.fail(e.source(), ak, "expected a pair [time_s, scale]");
+        r.amplitude_scale.push_back({pt[0], pt[1]});
+      }
     }
     if (const toml::node* x = rt->get("axis_scale")) r.axis_scale = vec3_of(w, *x, dotted(rp, "axis_scale"), 1.0);
     if (const toml::node* x = rt->get("resolution_hz")) {

@@ -592,8 +592,29 @@ TEST(SignalChainConfig, RefusesUnknownKeysAndChainsTheRateCannotRunNamingFileLin
        "imu[0].error_model.signal_chain", "stage 1 (butterworth): frequency_hz 400", 12},
       {"stage kind", "[[imu.error_model.signal_chain.stage]]\nkind = \"kalman\"\n",
        "imu[0].error_model.signal_chain.stage[0].kind", "unknown filter kind 'kalman'", 14},
-      {"vibration key", "[imu.error_model.signal_chain.vibration]\nshock = 1\n",
-       "imu[0].error_model.signal_chain.vibration.shock", "unknown key 'shock'; allowed: sinusoid, random", 14},
+      {"vibration key", "[imu.error_model.signal_chain.vibration]\nbump = 1\n",
+       "imu[0].error_model.signal_chain.vibration.bump", "unknown key 'bump'; allowed: sinusoid, random, rotor, shock", 14},
+      {"shock shape", "[[imu.error_model.signal_chain.vibration.shock]]\ntime_s = 2\npeak_g = [0, 0, 20]\nduration_ms = 11\n"
+       "shape = \"square\"\n",
+       "imu[0].error_model.signal_chain.vibration.shock[0].shape", "expected \"half_sine\" or \"sawtooth\"", 17},
+      {"shock missing peak", "[[imu.error_model.signal_chain.vibration.shock]]\ntime_s = 2\nduration_ms = 11\n",
+       "imu[0].error_model.signal_chain.vibration.shock[0]", "missing 'peak_g'", 13},
+      {"amplitude scale order", "[imu.error_model.signal_chain.vibration.random]\npsd_g2_per_hz = [[20, 0.01], [500, 0.01]]\n"
+       "amplitude_scale = [[5, 1], [2, 3]]\n",
+       "imu[0].error_model.signal_chain.vibration", "amplitude_scale point 2 must have a time after the previous one", 13},
+      {"shock duration", "[[imu.error_model.signal_chain.vibration.shock]]\ntime_s = 2\npeak_g = [0, 0, 20]\nduration_ms = 0\n",
+       "imu[0].error_model.signal_chain.vibration", "shock 1: time_s must be >= 0, duration and return > 0", 13},
+      {"rotor speed order", "[[imu.error_model.signal_chain.vibration.rotor]]\nspeed_rpm = [[0, 3000], [0, 4000]]\n"
+       "[[imu.error_model.signal_chain.vibration.rotor.harmonic]]\norder = 1\n",
+       "imu[0].error_model.signal_chain.vibration", "rotor 1: speed point 2 must have a time after the previous one", 13},
+      {"rotor harmonic key", "[[imu.error_model.signal_chain.vibration.rotor]]\nspeed_rpm = 6000\n"
+       "[[imu.error_model.signal_chain.vibration.rotor.harmonic]]\norder = 2\namplitude = 1\n",
+       "imu[0].error_model.signal_chain.vibration.rotor[0].harmonic[0].amplitude", "unknown key 'amplitude'", 17},
+      {"rotor without harmonics", "[[imu.error_model.signal_chain.vibration.rotor]]\nspeed_rpm = 6000\n",
+       "imu[0].error_model.signal_chain.vibration.rotor[0].harmonic", "expected [[...harmonic]] tables", 13},
+      {"rotor jitter", "[[imu.error_model.signal_chain.vibration.rotor]]\nspeed_rpm = 600\njitter_rpm = 100\n"
+       "[[imu.error_model.signal_chain.vibration.rotor.harmonic]]\norder = 1\n",
+       "imu[0].error_model.signal_chain.vibration", "rotor 1: jitter_rpm 100", 13},
       {"psd order", "[imu.error_model.signal_chain.vibration.random]\npsd_g2_per_hz = [[100, 0.01], [50, 0.02]]\n",
        "imu[0].error_model.signal_chain.vibration", "PSD point 2 must have a frequency above the previous one", 13},
   };
@@ -614,7 +635,12 @@ TEST(SignalChainConfig, RefusesUnknownKeysAndChainsTheRateCannotRunNamingFileLin
       scene_head(400) + "[imu.mounting]\nlever_arm_m = [0.3, 0.0, -0.1]\n"
       "[[imu.error_model.signal_chain.vibration.sinusoid]]\nfrequency_hz = 120\nlinear_m_s2 = [0, 0, 3]\n"
       "angular_deg_s = [0, 2, 0]\n"
-      "[imu.error_model.signal_chain.vibration.random]\npsd_g2_per_hz = [[20, 0.01], [500, 0.01]]\nseed = 4\n";
+      "[imu.error_model.signal_chain.vibration.random]\npsd_g2_per_hz = [[20, 0.01], [500, 0.01]]\nseed = 4\n"
+      "amplitude_scale = [[10, 1], [20, 2]]\n"
+      "[[imu.error_model.signal_chain.vibration.rotor]]\nspeed_rpm = [[0, 3000], [10, 6000]]\njitter_rpm = 5\nseed = 3\n"
+      "[[imu.error_model.signal_chain.vibration.rotor.harmonic]]\norder = 2\nangular_deg_s = [1, 0, 0]\nphase_deg = [90, 0, 0]\n"
+      "[[imu.error_model.signal_chain.vibration.shock]]\ntime_s = 2.5\nshape = \"sawtooth\"\npeak_g = [0, 0, 20]\n"
+      "duration_ms = 11\nreturn_ms = 300\n";
   const scene::SceneConfig v = scene::parse_scene_text(shaken, "v.toml", ".");
   const signal_chain::VibrationSpec& vib = v.imus[0].error_model.chain.vibration;
   ASSERT_EQ(vib.sinusoids.size(), 1u);
@@ -622,6 +648,24 @@ TEST(SignalChainConfig, RefusesUnknownKeysAndChainsTheRateCannotRunNamingFileLin
   EXPECT_DOUBLE_EQ(vib.sinusoids[0].angular_rad_s.y(), 2.0 * std::numbers::pi / 180.0);
   ASSERT_TRUE(vib.random_linear.has_value());
   EXPECT_EQ(vib.random_linear->seed, 4u);
+  ASSERT_EQ(vib.random_linear->amplitude_scale.size(), 2u);
+  EXPECT_EQ(vib.random_linear->amplitude_scale[1].time_s, 20.0);
+  EXPECT_EQ(vib.random_linear->amplitude_scale[1].scale, 2.0);
+  ASSERT_EQ(vib.rotors.size(), 1u);
+  ASSERT_EQ(vib.rotors[0].speed.size(), 2u);
+  EXPECT_EQ(vib.rotors[0].speed[1].time_s, 10.0);
+  EXPECT_EQ(vib.rotors[0].speed[1].rpm, 6000.0);
+  EXPECT_EQ(vib.rotors[0].jitter_rpm, 5.0);
+  EXPECT_EQ(vib.rotors[0].seed, 3u);
+  ASSERT_EQ(vib.rotors[0].harmonics.size(), 1u);
+  EXPECT_EQ(vib.rotors[0].harmonics[0].order, 2.0);
+  EXPECT_DOUBLE_EQ(vib.rotors[0].harmonics[0].phase_rad.x(), std::numbers::pi / 2.0);
+  ASSERT_EQ(vib.shocks.size(), 1u);
+  EXPECT_EQ(vib.shocks[0].time_s, 2.5);
+  EXPECT_EQ(vib.shocks[0].shape, signal_chain::ShockShape::sawtooth);
+  EXPECT_DOUBLE_EQ(vib.shocks[0].peak_m_s2.z(), 20.0 * 9.80665);
+  EXPECT_DOUBLE_EQ(vib.shocks[0].duration_s, 0.011);
+  EXPECT_DOUBLE_EQ(vib.shocks[0].return_s, 0.3);
   EXPECT_EQ(vib.lever_arm_m, Vec3(0.3, 0.0, -0.1));
   EXPECT_FALSE(v.imus[0].error_model.ideal());
 }

@@ -606,5 +606,270 @@ TEST(SignalChain, StrapdownOfAVibratingTrajectoryKeepsTheNoVibrationAccuracy) {
   EXPECT_LE((T.velocity_m_s - v).norm(), 1e-6);
 }
 
+// Rotor harmonics at a constant 6000 rpm (100 Hz): order 1 along z (3 m/s^2,
+// phase 0.3 rad), order 2 about z (0.1 rad/s, phase -1 rad), order 3.5 along
+// z (0.5 m/s^2), on a static body (all on z, so the turn about z does not mix
+// the linear harmonics or gravity into other axes), ideal chain at 2 kHz, 5 s: every output
+// sample equals the sum of sinusoids at k rpm / 60 written here (to 1e-9 of
+// the amplitude), and the amplitudes at 100, 200 and 350 Hz are within 0.1 %.
+TEST(SignalChain, RotorHarmonicsAtAConstantSpeedAreSinusoidsAtTheirOrders) {
+  const SceneModel scene = flat_scene();
+  ChainSpec spec;
+  Rotor rotor;
+  rotor.speed = {{0.0, 6000.0}};
+  RotorHarmonic h1, h2, h3;
+  h1.order = 1.0;
+  h1.linear_m_s2 = Vec3(0.0, 0.0, 3.0);
+  h1.phase_rad = Vec3(0.0, 0.0, 0.3);
+  h2.order = 2.0;
+  h2.angular_rad_s = Vec3(0.0, 0.0, 0.1);
+  h2.phase_rad = Vec3(0.0, 0.0, -1.0);
+  h3.order = 3.5;
+  h3.linear_m_s2 = Vec3(0.0, 0.0, 0.5);
+  rotor.harmonics = {h1, h2, h3};
+  spec.vibration.rotors = {rotor};
+  DeviceChain chain(scene, std::nullopt, spec, 2000, "imu0");
+  std::vector<double> az, gz;
+  double worst = 0.0;
+  Kinematics rest;
+  const ImuSample still = imu_from_kinematics(scene, rest);
+  for (std::uint64_t k = 0; k < 10000; ++k) {
+    const double t = static_cast<double>(k) / 2000.0;
+    const ChainOutput o = chain.step(k, rest, still, k ? &rest : nullptr, std::nullopt);
+    const double w = 2.0 * kPi * 100.0;
+    worst = std::max({worst,
+                      std::abs(o.accel_m_s2.z() - still.accel_m_s2.z() - 3.0 * std::sin(w * t + 0.3) -
+                               0.5 * std::sin(3.5 * w * t)) / 3.0,
+                      std::abs(o.gyro_rad_s.z() - 0.1 * std::sin(2.0 * w * t - 1.0)) / 0.1});
+    az.push_back(o.accel_m_s2.z());
+    gz.push_back(o.gyro_rad_s.z());
+  }
+  std::printf("rotor at 6000 rpm: worst sample error %.3g of the amplitude\n", worst);
+  EXPECT_LT(worst, 1e-9);
+  EXPECT_NEAR(amplitude_at(az, 100.0, 2000.0) / 3.0, 1.0, 1e-3);
+  EXPECT_NEAR(amplitude_at(gz, 200.0, 2000.0) / 0.1, 1.0, 1e-3);
+  EXPECT_NEAR(amplitude_at(az, 350.0, 2000.0) / 0.5, 1.0, 1e-3);
+}
+
+// A linear ramp 3000 -> 9000 rpm over 4 s, then constant: the shaft angle is
+// the closed-form integral 2 pi / 60 (3000 t + 750 t^2) (then + 150 Hz turns),
+// and the gyro's order-2 harmonic (0.2 rad/s about x) follows sin(2 Phi(t))
+// within the documented envelope term B Omega' / (k Omega^2) (at most 8e-4
+// of B here; a phase taken as Omega(t) t instead of the integral is off by
+// radians within the first second).
+TEST(SignalChain, RotorOnASpeedRampFollowsTheClosedFormShaftAngle) {
+  const SceneModel scene = flat_scene();
+  ChainSpec spec;
+  Rotor rotor;
+  rotor.speed = {{0.0, 3000.0}, {4.0, 9000.0}};
+  RotorHarmonic h;
+  h.order = 2.0;
+  h.angular_rad_s = Vec3(0.2, 0.0, 0.0);
+  rotor.harmonics = {h};
+  spec.vibration.rotors = {rotor};
+  const Vibration vib(spec.vibration, "imu0");
+  const double c = 2.0 * kPi / 60.0;
+  auto phi = [&](double t) {
+    return t <= 4.0 ? c * (3000.0 * t + 750.0 * t * t) : c * (3000.0 * 4.0 + 750.0 * 16.0) + c * 9000.0 * (t - 4.0);
+  };
+  double worst_angle = 0.0;
+  for (double t = 0.0; t < 6.0; t += 0.01237) worst_angle = std::max(worst_angle, std::abs(vib.shaft(0, t).angle_rad - phi(t)));
+  std::printf("ramp: shaft angle within %.3g rad of the closed form over 6 s\n", worst_angle);
+  EXPECT_LT(worst_angle, 1e-9);
+  DeviceChain chain(scene, std::nullopt, spec, 1000, "imu0");
+  Kinematics rest;
+  double worst = 0.0;
+  for (std::uint64_t k = 0; k < 6000; ++k) {
+    const double t = static_cast<double>(k) / 1000.0;
+    const ChainOutput o = chain.step(k, rest, imu_from_kinematics(scene, rest), k ? &rest : nullptr, std::nullopt);
+    worst = std::max(worst, std::abs(o.gyro_rad_s.x() - 0.2 * std::sin(2.0 * phi(t))) / 0.2);
+  }
+  const double bound = (c * 1500.0) / (2.0 * std::pow(c * 3000.0, 2));
+  std::printf("ramp: gyro within %.3g of the amplitude (envelope bound %.3g)\n", worst, bound);
+  EXPECT_LT(worst, 1.001 * bound);
+}
+
+// With a ramp and a speed jitter, the rotor's motion is one consistent
+// trajectory: theta' and d'' are the derivatives of theta and d (central
+// differences, h = 1e-6 s), the raw increments are the integrals of the
+// chain's own gyro and specific force (Simpson over 64 panels per 1 ms
+// interval), and two runs with the same seed give the same bits while another
+// seed does not.
+TEST(SignalChain, RotorWithJitterIsConsistentAndReproducible) {
+  const SceneModel scene = flat_scene();
+  ChainSpec spec;
+  Rotor rotor;
+  rotor.speed = {{0.0, 4000.0}, {2.0, 5000.0}};
+  rotor.jitter_rpm = 40.0;
+  rotor.jitter_bandwidth_hz = 3.0;
+  rotor.seed = 9;
+  RotorHarmonic h;
+  h.order = 1.0;
+  h.linear_m_s2 = Vec3(1.0, 0.0, 2.0);
+  h.angular_rad_s = Vec3(0.0, 0.3, 0.05);
+  h.phase_rad = Vec3(0.1, 0.2, 0.3);
+  rotor.harmonics = {h};
+  spec.vibration.rotors = {rotor};
+  spec.vibration.lever_arm_m = Vec3(0.1, -0.05, 0.02);
+  const Vibration vib(spec.vibration, "imu0");
+  double worst_rate = 0.0, worst_acc = 0.0;
+  for (double t = 0.013; t < 3.0; t += 0.1013) {
+    const double e = 1e-6;
+    const VibrationState a = vib.at(t - e), b = vib.at(t + e), m = vib.at(t);
+    worst_rate = std::max(worst_rate, ((b.theta - a.theta) / (2 * e) - m.theta_dot).norm() / 0.3);
+    worst_acc = std::max(worst_acc, ((b.d_dot - a.d_dot) / (2 * e) - m.d_ddot).norm() / 2.0);
+    worst_rate = std::max(worst_rate, ((b.theta_dot - a.theta_dot) / (2 * e) - m.theta_ddot).norm() / (0.3 * 2 * kPi * 83));
+    worst_acc = std::max(worst_acc, ((b.d - a.d) / (2 * e) - m.d_dot).norm() / (2.0 / (2 * kPi * 66)));
+  }
+  std::printf("rotor with jitter: derivatives within %.3g (angular) and %.3g (linear) of the amplitude\n", worst_rate,
+              worst_acc);
+  EXPECT_LT(worst_rate, 1e-6);
+  EXPECT_LT(worst_acc, 1e-6);
+
+  Rotor other = rotor;
+  other.seed = 10;
+  VibrationSpec spec2 = spec.vibration;
+  spec2.rotors = {other};
+  const Vibration same(spec.vibration, "imu0"), different(spec2, "imu0");
+  EXPECT_EQ(vib.shaft(0, 1.234).angle_rad, same.shaft(0, 1.234).angle_rad);
+  EXPECT_EQ(vib.at(1.234).d_ddot, same.at(1.234).d_ddot);
+  EXPECT_NE(vib.shaft(0, 1.234).speed_rad_s, different.shaft(0, 1.234).speed_rad_s);
+
+  // Raw increments against Simpson over the chain's own sensed values.
+  DeviceChain chain(scene, std::nullopt, spec, 1000, "imu0");
+  Kinematics rest;
+  const ImuSample still = imu_from_kinematics(scene, rest);
+  double worst_dtheta = 0.0, worst_dv = 0.0;
+  for (std::uint64_t k = 0; k < 1500; ++k) {
+    const ChainOutput o = chain.step(k, rest, still, k ? &rest : nullptr, IncrementConvention::raw);
+    if (k < 1000) continue;
+    const double t0 = static_cast<double>(k - 1) / 1000.0, hs = 1e-3;
+    const int n = 64;
+    Vec3 gi = Vec3::Zero(), fi = Vec3::Zero();
+    for (int j = 0; j <= n; ++j) {
+      const double wgt = (j == 0 || j == n) ? 1.0 : (j % 2 ? 4.0 : 2.0);
+      const Kinematics kv = vib.apply(rest, Vec3::Zero(), t0 + hs * j / n);
+      const ImuSample s = imu_from_kinematics(scene, kv);
+      gi += wgt * s.gyro_rad_s;
+      fi += wgt * s.accel_m_s2;
+    }
+    gi *= hs / (3.0 * n);
+    fi *= hs / (3.0 * n);
+    worst_dtheta = std::max(worst_dtheta, (o.delta_theta_rad - gi).norm());
+    worst_dv = std::max(worst_dv, (o.delta_velocity_m_s - fi).norm());
+  }
+  std::printf("rotor with jitter: raw increments within %.3g rad and %.3g m/s of Simpson\n", worst_dtheta, worst_dv);
+  EXPECT_LT(worst_dtheta, 1e-12);
+  EXPECT_LT(worst_dv, 1e-10);
+}
+
+// Shocks (MIL-STD-810H Method 516.8 shapes): a half-sine (20 g along z,
+// 5 g along x, 11 ms) and a terminal-peak sawtooth (15 g along y, 6 ms) at
+// 0.100005 s (half a sample off the 100 kHz grid, so no sample sits on an
+// edge), on a static body, ideal chain at 100 kHz: during the pulse the sensed
+// specific force minus the no-shock one is the analytic pulse written here
+// (to 1e-9 of the peak) and its largest sample is within 0.1 % of the peak;
+// outside [time_s, time_s + T + return_s] every sample is bit-identical to
+// the no-shock run; the mount is back at rest where it started at the end of
+// the return (displacement and velocity below 1e-12) and its velocity and
+// displacement are continuous where the pulse ends.
+TEST(SignalChain, ShockPulsesAreTheAnalyticPulseAndLeaveTheTrajectoryUnchangedOutsideTheEvent) {
+  const SceneModel scene = flat_scene();
+  const double g = 9.80665;
+  for (const ShockShape shape : {ShockShape::half_sine, ShockShape::sawtooth}) {
+    const bool hs = shape == ShockShape::half_sine;
+    SCOPED_TRACE(hs ? "half-sine" : "sawtooth");
+    Shock shock;
+    shock.time_s = 0.100005;
+    shock.shape = shape;
+    shock.duration_s = hs ? 0.011 : 0.006;
+    shock.return_s = 0.2;
+    shock.peak_m_s2 = hs ? Vec3(5.0 * g, 0.0, 20.0 * g) : Vec3(0.0, 15.0 * g, 0.0);
+    ChainSpec spec;
+    spec.vibration.shocks = {shock};
+    const std::int64_t rate = 100'000;
+    DeviceChain chain(scene, std::nullopt, spec, rate, "imu0");
+    DeviceChain plain(scene, std::nullopt, ChainSpec{}, rate, "imu0");
+    Kinematics rest;
+    const ImuSample still = imu_from_kinematics(scene, rest);
+    const double T = shock.duration_s, end = shock.time_s + T + shock.return_s;
+    double worst_pulse = 0.0, largest = 0.0;
+    int outside_differs = 0, in_pulse = 0;
+    for (std::uint64_t k = 0; k < 40'000; ++k) {
+      const double t = static_cast<double>(k) / static_cast<double>(rate);
+      const ChainOutput o = chain.step(k, rest, still, k ? &rest : nullptr, std::nullopt);
+      const ChainOutput p = plain.step(k, rest, still, k ? &rest : nullptr, std::nullopt);
+      const double tau = t - shock.time_s;
+      if (tau < 0.0 || t >= end) {
+        if (o.accel_m_s2 != p.accel_m_s2 || o.gyro_rad_s != p.gyro_rad_s) ++outside_differs;
+        continue;
+      }
+      if (tau >= T) continue;
+      ++in_pulse;
+      const double unit = hs ? std::sin(kPi * tau / T) : tau / T;
+      const Vec3 sensed = o.accel_m_s2 - p.accel_m_s2;
+      worst_pulse = std::max(worst_pulse, (sensed - unit * shock.peak_m_s2).norm() / shock.peak_m_s2.norm());
+      largest = std::max(largest, sensed.norm());
+    }
+    std::printf("%s: %d samples in the pulse, worst %.3g of the peak, largest sample %.6f of the peak\n",
+                hs ? "half-sine" : "sawtooth", in_pulse, worst_pulse, largest / shock.peak_m_s2.norm());
+    EXPECT_EQ(in_pulse, hs ? 1100 : 600);
+    EXPECT_EQ(outside_differs, 0);
+    EXPECT_LT(worst_pulse, 1e-9);
+    EXPECT_NEAR(largest / shock.peak_m_s2.norm(), 1.0, 1e-3);
+    // Back at rest in place, continuous at the pulse's end.
+    const Vibration vib(spec.vibration, "imu0");
+    const VibrationState last = vib.at(end - 1e-9);
+    std::printf("  at the return's end: |d| %.3g m, |d'| %.3g m/s\n", last.d.norm(), last.d_dot.norm());
+    EXPECT_LT(last.d.norm(), 1e-12);
+    EXPECT_LT(last.d_dot.norm(), 1e-12);
+    const VibrationState a = vib.at(shock.time_s + T - 1e-12), b = vib.at(shock.time_s + T + 1e-12);
+    EXPECT_LT((b.d - a.d - 2e-12 * a.d_dot).norm(), 1e-14);  // moved by v dt across the 2e-12 s
+    EXPECT_LT((a.d_dot - b.d_dot).norm(), 1e-9);
+    // The velocity at the pulse's end is the pulse's integral.
+    const double dv = hs ? 2.0 * T / kPi : 0.5 * T;
+    EXPECT_NEAR(b.d_dot.norm(), dv * shock.peak_m_s2.norm(), 1e-9);
+  }
+}
+
+// The random profile scaled over time (amplitude 1 until 1 s, 3 from 2 s,
+// smootherstep between): before the ramp every state is bit-identical to the
+// unscaled profile's (same seed), after it exactly 3 times it, and across the
+// ramp the scaled motion is still one trajectory (d' and d'' within 1e-6 of
+// the peak of the central differences of d and d', h = 1e-7 s); scaling d, d'
+// and d'' by s(t) alone would be off by 2 s' d' (about 1 % here).
+TEST(SignalChain, RandomVibrationScaledOverTimeIsTheProfileTimesTheScaleAndStaysRigid) {
+  VibrationSpec plain_spec;
+  RandomVibration r;
+  r.psd = {{20.0, 0.01}, {500.0, 0.01}};
+  r.axis_scale = Vec3(1.0, 0.0, 0.5);
+  r.resolution_hz = 2.0;
+  r.seed = 3;
+  plain_spec.random_linear = r;
+  VibrationSpec scaled_spec = plain_spec;
+  scaled_spec.random_linear->amplitude_scale = {{1.0, 1.0}, {2.0, 3.0}};
+  const Vibration plain(plain_spec, "imu0"), scaled(scaled_spec, "imu0");
+  int before_differs = 0, after_differs = 0;
+  double worst_fd = 0.0, amplitude = 0.0;
+  for (int j = 0; j < 12000; ++j) {
+    const double t = j / 4000.0 + 1e-4;
+    const VibrationState p = plain.at(t), s = scaled.at(t);
+    amplitude = std::max(amplitude, p.d_ddot.norm());
+    if (t < 1.0 && (s.d != p.d || s.d_dot != p.d_dot || s.d_ddot != p.d_ddot)) ++before_differs;
+    if (t > 2.0 && (s.d != 3.0 * p.d || s.d_dot != 3.0 * p.d_dot || s.d_ddot != 3.0 * p.d_ddot)) ++after_differs;
+    if (t > 0.9 && t < 2.1 && j % 10 == 0) {
+      const double e = 1e-7;  // truncation (e w)^2 / 6 ~ 2e-8 at 500 Hz
+      const VibrationState a = scaled.at(t - e), b = scaled.at(t + e);
+      worst_fd = std::max({worst_fd, ((b.d_dot - a.d_dot) / (2 * e) - s.d_ddot).norm(),
+                           ((b.d - a.d) / (2 * e) - s.d_dot).norm() * 2.0 * kPi * 500.0});
+    }
+  }
+  std::printf("scaled random profile: derivatives within %.3g of the unscaled peak %.3g m/s^2\n", worst_fd / amplitude,
+              amplitude);
+  EXPECT_EQ(before_differs, 0);
+  EXPECT_EQ(after_differs, 0);
+  EXPECT_LT(worst_fd / amplitude, 1e-6);
+}
+
 }  // namespace
 }  // namespace imuemu::signal_chain

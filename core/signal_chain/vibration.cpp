@@ -17,6 +17,40 @@ constexpr double kG_m_s2 = 9.80665;
 // The random vibration's noise stream: its own "sensor" index in the keys of
 // core/sensor (0 gyro, 1 accel), so no sensor-model stream is shared.
 constexpr unsigned kVibrationStream = 7;
+// The rotors' speed jitter: stream 8, axis = the rotor's index.
+constexpr unsigned kRotorJitterStream = 8;
+constexpr double kRpmToRad_s = kTwoPi / 60.0;
+
+void check_rotor(const Rotor& r, std::size_t index) {
+  const std::string where = "rotor " + std::to_string(index + 1) + ": ";
+  if (r.speed.empty()) throw std::invalid_argument(where + "the speed profile needs at least one (time_s, rpm) point");
+  double min_rpm = r.speed.front().rpm;
+  for (std::size_t i = 0; i < r.speed.size(); ++i) {
+    const RpmPoint& p = r.speed[i];
+    if (!std::isfinite(p.time_s) || !std::isfinite(p.rpm) || !(p.rpm > 0.0) ||
+        (i > 0 && !(p.time_s > r.speed[i - 1].time_s)))
+      throw std::invalid_argument(where + "speed point " + std::to_string(i + 1) +
+                                  " must have a time after the previous one and an rpm > 0");
+    min_rpm = std::min(min_rpm, p.rpm);
+  }
+  for (std::size_t i = 0; i < r.harmonics.size(); ++i) {
+    const RotorHarmonic& h = r.harmonics[i];
+    if (!(h.order > 0.0) || !std::isfinite(h.order) || !h.linear_m_s2.allFinite() || !h.angular_rad_s.allFinite() ||
+        !h.phase_rad.allFinite())
+      throw std::invalid_argument(where + "harmonic " + std::to_string(i + 1) +
+                                  ": order must be > 0 and every amplitude and phase finite");
+  }
+  if (!(r.jitter_rpm >= 0.0) || !std::isfinite(r.jitter_rpm) || !(r.jitter_bandwidth_hz > 0.0) ||
+      !std::isfinite(r.jitter_bandwidth_hz))
+    throw std::invalid_argument(where + "jitter_rpm must be >= 0 and jitter_bandwidth_hz > 0");
+  // The jitter's peak (every component in phase) stays below half the lowest
+  // speed, so the shaft never stops and 1/Omega stays bounded.
+  const double peak = r.jitter_rpm * std::sqrt(2.0 * Vibration::kJitterComponents);
+  if (!(peak < 0.5 * min_rpm))
+    throw std::invalid_argument(where + "jitter_rpm " + std::to_string(r.jitter_rpm) + " may reach " +
+                                std::to_string(peak) + " rpm; it must stay below half the lowest speed (" +
+                                std::to_string(min_rpm) + " rpm)");
+}
 
 }  // namespace
 
@@ -42,6 +76,47 @@ Vibration::Vibration(const VibrationSpec& spec, const std::string& device) : spe
       throw std::invalid_argument("vibration sinusoid " + std::to_string(i + 1) +
                                   ": frequency_hz must be > 0 and every amplitude and phase finite");
   }
+  const std::uint64_t dev = sensor::device_hash(device);
+  for (std::size_t i = 0; i < spec.rotors.size(); ++i) {
+    const Rotor& r = spec.rotors[i];
+    check_rotor(r, i);
+    RotorState st;
+    // Phi at each profile point: Omega_0 t before the first, trapezoids
+    // (exact: the speed is linear) between points.
+    st.angle_at_point_rad.push_back(r.speed[0].rpm * kRpmToRad_s * r.speed[0].time_s);
+    for (std::size_t j = 1; j < r.speed.size(); ++j)
+      st.angle_at_point_rad.push_back(st.angle_at_point_rad.back() + 0.5 * (r.speed[j - 1].rpm + r.speed[j].rpm) *
+                                                                        kRpmToRad_s *
+                                                                        (r.speed[j].time_s - r.speed[j - 1].time_s));
+    if (r.jitter_rpm > 0.0) {
+      sensor::Stream stream;
+      stream.state = sensor::stream_key(r.seed, dev, kRotorJitterStream, static_cast<unsigned>(i), 0, 0);
+      // Sum of a^2 / 2 over the components = jitter_rpm^2.
+      const double a = r.jitter_rpm * kRpmToRad_s * std::sqrt(2.0 / kJitterComponents);
+      for (int c = 0; c < kJitterComponents; ++c) {
+        const double f = (1.0 - stream.uniform()) * r.jitter_bandwidth_hz;  // (0, bandwidth]
+        st.jitter.push_back({kTwoPi * f, a, kTwoPi * stream.uniform()});
+      }
+    }
+    rotors_.push_back(std::move(st));
+  }
+  for (std::size_t i = 0; i < spec.shocks.size(); ++i) {
+    const Shock& k = spec.shocks[i];
+    if (!std::isfinite(k.time_s) || !(k.time_s >= 0.0) || !(k.duration_s > 0.0) || !std::isfinite(k.duration_s) ||
+        !(k.return_s > 0.0) || !std::isfinite(k.return_s) || !k.peak_m_s2.allFinite())
+      throw std::invalid_argument("shock " + std::to_string(i + 1) +
+                                  ": time_s must be >= 0, duration and return > 0 and the peak finite");
+    const double T = k.duration_s, R = k.return_s;
+    // The unit pulse's velocity and displacement at its end.
+    const double v_end = k.shape == ShockShape::half_sine ? 2.0 * T / std::numbers::pi : 0.5 * T;
+    const double d_end = k.shape == ShockShape::half_sine ? T * T / std::numbers::pi : T * T / 6.0;
+    // Return: v_end + R (c1/30 + c2/60) = 0 and
+    // d_end + v_end R + R^2 (c1/60 + c2/140) = 0 (the moments of
+    // x^2 (1-x)^2 and x^3 (1-x)^2 and of (1 - x) times them over [0, 1]).
+    const double b1 = -v_end / R, b2 = -(d_end + v_end * R) / (R * R);
+    const double det = (1.0 / 30.0) * (1.0 / 140.0) - (1.0 / 60.0) * (1.0 / 60.0);
+    shocks_.push_back({v_end, d_end, (b1 / 140.0 - b2 / 60.0) / det, (b2 / 30.0 - b1 / 60.0) / det});
+  }
   if (!spec.random_linear) return;
   const RandomVibration& r = *spec.random_linear;
   if (r.psd.size() < 2) throw std::invalid_argument("random vibration: the PSD table needs at least two points");
@@ -53,6 +128,13 @@ Vibration::Vibration(const VibrationSpec& spec, const std::string& device) : spe
   }
   if (!(r.resolution_hz > 0.0) || !std::isfinite(r.resolution_hz))
     throw std::invalid_argument("random vibration: resolution_hz must be > 0");
+  for (std::size_t i = 0; i < r.amplitude_scale.size(); ++i) {
+    const ScalePoint& p = r.amplitude_scale[i];
+    if (!std::isfinite(p.time_s) || !std::isfinite(p.scale) || !(p.scale >= 0.0) ||
+        (i > 0 && !(p.time_s > r.amplitude_scale[i - 1].time_s)))
+      throw std::invalid_argument("random vibration: amplitude_scale point " + std::to_string(i + 1) +
+                                  " must have a time after the previous one and a scale >= 0");
+  }
   if (!r.axis_scale.allFinite() || (r.axis_scale.array() < 0.0).any())
     throw std::invalid_argument("random vibration: axis_scale must be finite and >= 0");
   const double f0 = r.psd.front().frequency_hz, f1 = r.psd.back().frequency_hz;
@@ -61,7 +143,6 @@ Vibration::Vibration(const VibrationSpec& spec, const std::string& device) : spe
     throw std::invalid_argument("random vibration: " + std::to_string(bins) + " bins per axis of " +
                                 std::to_string(r.resolution_hz) + " Hz; at most " +
                                 std::to_string(kMaxComponents / 3) + " (raise resolution_hz)");
-  const std::uint64_t dev = sensor::device_hash(device);
   for (int axis = 0; axis < 3; ++axis) {
     if (r.axis_scale[axis] == 0.0) continue;
     sensor::Stream stream;
@@ -79,8 +160,105 @@ Vibration::Vibration(const VibrationSpec& spec, const std::string& device) : spe
   }
 }
 
+ShaftState Vibration::shaft(std::size_t index, double t) const {
+  const Rotor& r = spec_.rotors[index];
+  const RotorState& st = rotors_[index];
+  ShaftState s;
+  const std::vector<RpmPoint>& p = r.speed;
+  // The first point after t: before the first point and after the last the
+  // speed is constant.
+  const auto next = std::upper_bound(p.begin(), p.end(), t, [](double x, const RpmPoint& q) { return x < q.time_s; });
+  if (next == p.begin()) {
+    s.speed_rad_s = p.front().rpm * kRpmToRad_s;
+    s.angle_rad = s.speed_rad_s * t;
+  } else {
+    const std::size_t j = static_cast<std::size_t>(next - p.begin()) - 1;
+    const double tau = t - p[j].time_s, w0 = p[j].rpm * kRpmToRad_s;
+    const double slope = next == p.end() ? 0.0 : (next->rpm - p[j].rpm) * kRpmToRad_s / (next->time_s - p[j].time_s);
+    // Phi = Phi_j + Omega_j tau + slope tau^2 / 2: the integral of a linear speed.
+    s.angle_rad = st.angle_at_point_rad[j] + w0 * tau + 0.5 * slope * tau * tau;
+    s.speed_rad_s = w0 + slope * tau;
+    s.accel_rad_s2 = slope;
+  }
+  for (const JitterComponent& c : st.jitter) {
+    const double ph = c.w_rad_s * t + c.phase_rad, sn = std::sin(ph), cs = std::cos(ph);
+    // d Omega = a sin(ph), integrated from t = 0.
+    s.angle_rad -= c.amplitude_rad_s / c.w_rad_s * (cs - std::cos(c.phase_rad));
+    s.speed_rad_s += c.amplitude_rad_s * sn;
+    s.accel_rad_s2 += c.amplitude_rad_s * c.w_rad_s * cs;
+    s.jerk_rad_s3 -= c.amplitude_rad_s * c.w_rad_s * c.w_rad_s * sn;
+  }
+  return s;
+}
+
+void Vibration::add_shock(double t, VibrationState& v) const {
+  for (std::size_t i = 0; i < shocks_.size(); ++i) {
+    const Shock& k = spec_.shocks[i];
+    const ShockState& st = shocks_[i];
+    const double tau = t - k.time_s, T = k.duration_s, R = k.return_s;
+    if (!(tau >= 0.0) || !(tau < T + R)) continue;  // outside the event: nothing
+    double a, vel, d;  // per unit peak
+    if (tau < T) {
+      if (k.shape == ShockShape::half_sine) {
+        const double w = std::numbers::pi / T;
+        a = std::sin(w * tau);
+        vel = (1.0 - std::cos(w * tau)) / w;
+        d = (tau - std::sin(w * tau) / w) / w;
+      } else {
+        a = tau / T;
+        vel = tau * tau / (2.0 * T);
+        d = tau * tau * tau / (6.0 * T);
+      }
+    } else {
+      // The return's polynomial in x and its integrals (R x^{n+1}/(n+1), R^2 x^{n+2}/((n+1)(n+2))).
+      const double x = (tau - T) / R, x2 = x * x, x3 = x2 * x, x4 = x3 * x, x5 = x4 * x, x6 = x5 * x, x7 = x6 * x;
+      const double c1 = st.c1, c2 = st.c2;
+      // c1 (x^2 - 2x^3 + x^4) + c2 (x^3 - 2x^4 + x^5)
+      a = c1 * (x2 - 2.0 * x3 + x4) + c2 * (x3 - 2.0 * x4 + x5);
+      vel = st.v_end + R * (c1 * (x3 / 3.0 - x4 / 2.0 + x5 / 5.0) + c2 * (x4 / 4.0 - 2.0 * x5 / 5.0 + x6 / 6.0));
+      d = st.d_end + st.v_end * (tau - T) +
+          R * R * (c1 * (x4 / 12.0 - x5 / 10.0 + x6 / 30.0) + c2 * (x5 / 20.0 - x6 / 15.0 + x7 / 42.0));
+    }
+    v.d += d * k.peak_m_s2;
+    v.d_dot += vel * k.peak_m_s2;
+    v.d_ddot += a * k.peak_m_s2;
+  }
+}
+
 VibrationState Vibration::at(double t) const {
   VibrationState v;
+  add_shock(t, v);
+  for (std::size_t r = 0; r < spec_.rotors.size(); ++r) {
+    const ShaftState sh = shaft(r, t);
+    const double W = sh.speed_rad_s, W1 = sh.accel_rad_s2, W2 = sh.jerk_rad_s3;
+    for (const RotorHarmonic& h : spec_.rotors[r].harmonics) {
+      const double k = h.order, kW = k * W;
+      for (int i = 0; i < 3; ++i) {
+        const double psi = k * sh.angle_rad + h.phase_rad[i];
+        const double sn = std::sin(psi), cs = std::cos(psi);
+        // d = u sin(psi), u = -A / (k Omega)^2; psi' = k Omega, psi'' = k Omega'.
+        const double A = h.linear_m_s2[i];
+        if (A != 0.0) {
+          const double u = -A / (kW * kW);
+          const double u1 = 2.0 * A * W1 / (k * k * W * W * W);
+          const double u2 = 2.0 * A / (k * k) * (W2 / (W * W * W) - 3.0 * W1 * W1 / (W * W * W * W));
+          v.d[i] += u * sn;
+          v.d_dot[i] += u1 * sn + u * kW * cs;
+          v.d_ddot[i] += u2 * sn + 2.0 * u1 * kW * cs + u * k * W1 * cs - u * kW * kW * sn;
+        }
+        // theta = q cos(psi), q = -B / (k Omega).
+        const double B = h.angular_rad_s[i];
+        if (B != 0.0) {
+          const double q = -B / kW;
+          const double q1 = B * W1 / (k * W * W);
+          const double q2 = B / k * (W2 / (W * W) - 2.0 * W1 * W1 / (W * W * W));
+          v.theta[i] += q * cs;
+          v.theta_dot[i] += q1 * cs - q * kW * sn;
+          v.theta_ddot[i] += q2 * cs - 2.0 * q1 * kW * sn - q * k * W1 * sn - q * kW * kW * cs;
+        }
+      }
+    }
+  }
   for (const Sinusoid& s : spec_.sinusoids) {
     const double w = kTwoPi * s.frequency_hz;
     for (int i = 0; i < 3; ++i) {
@@ -98,13 +276,39 @@ VibrationState Vibration::at(double t) const {
   }
   if (comps_.empty()) return v;
   random_phasors(t);
+  Vec3 d = Vec3::Zero(), d_dot = Vec3::Zero(), d_ddot = Vec3::Zero();
   for (std::size_t i = 0; i < comps_.size(); ++i) {
     const Component& c = comps_[i];
     const double cs = phasor_[i].real(), sn = phasor_[i].imag();
-    v.d[c.axis] -= c.amplitude_over_w2 * cs;
-    v.d_dot[c.axis] += c.amplitude_over_w * sn;
-    v.d_ddot[c.axis] += c.amplitude_m_s2 * cs;
+    d[c.axis] -= c.amplitude_over_w2 * cs;
+    d_dot[c.axis] += c.amplitude_over_w * sn;
+    d_ddot[c.axis] += c.amplitude_m_s2 * cs;
   }
+  const std::vector<ScalePoint>& sc = spec_.random_linear->amplitude_scale;
+  if (sc.empty()) {
+    v.d += d;
+    v.d_dot += d_dot;
+    v.d_ddot += d_ddot;
+    return v;
+  }
+  // The scaled displacement s(t) d(t), differentiated exactly (product rule).
+  double s0, s1 = 0.0, s2 = 0.0;
+  const auto next = std::upper_bound(sc.begin(), sc.end(), t, [](double x, const ScalePoint& q) { return x < q.time_s; });
+  if (next == sc.begin()) {
+    s0 = sc.front().scale;
+  } else if (next == sc.end()) {
+    s0 = sc.back().scale;
+  } else {
+    const ScalePoint& a = *(next - 1);
+    const double span = next->time_s - a.time_s, u = (t - a.time_s) / span, ds = next->scale - a.scale;
+    // Smootherstep S(u) = 6u^5 - 15u^4 + 10u^3: S', S'' vanish at both ends.
+    s0 = a.scale + ds * u * u * u * (10.0 + u * (-15.0 + 6.0 * u));
+    s1 = ds / span * 30.0 * u * u * (1.0 - u) * (1.0 - u);
+    s2 = ds / (span * span) * 60.0 * u * (1.0 - u) * (1.0 - 2.0 * u);
+  }
+  v.d += s0 * d;
+  v.d_dot += s0 * d_dot + s1 * d;
+  v.d_ddot += s0 * d_ddot + 2.0 * s1 * d_dot + s2 * d;
   return v;
 }
 

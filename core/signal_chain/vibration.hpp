@@ -12,8 +12,13 @@
 // bin at a frequency drawn uniformly inside the bin (incommensurate: the
 // signal never repeats) and a uniform phase, its amplitude^2 / 2 the bin's
 // power S(f) df, so that its PSD is the table's; Gaussian by the central
-// limit theorem over the hundreds of components a profile spans. Rotor harmonics and shocks are
-// not yet here.
+// limit theorem over the hundreds of components a profile spans. Rotor or
+// engine harmonics: a shaft speed (constant or a piecewise-linear (time, rpm)
+// profile, plus a smooth seeded jitter), harmonic orders k with amplitude and
+// phase per axis; the shaft angle Phi(t) is the integral of the speed in
+// closed form; the random part optionally scaled over time. Shocks: half-sine or terminal-peak sawtooth acceleration
+// pulses (MIL-STD-810H Method 516.8 shapes) at given times, followed by a
+// smooth return of the mount (below).
 //
 // Motion: the vibration displaces the body by d(t) and turns it by exp([th(t)])
 // about the reference point (th, d in body axes, closed form with their first
@@ -50,25 +55,103 @@ struct PsdPoint {
   double g2_per_hz = 0.0;  // one-sided acceleration PSD, g^2/Hz (g = 9.80665 m/s^2)
 };
 
+// A point of the random profile's scale over time.
+struct ScalePoint {
+  double time_s = 0.0;
+  double scale = 1.0;  // amplitude multiplier (the PSD scales by its square), >= 0
+};
+
 struct RandomVibration {
   std::vector<PsdPoint> psd;            // increasing frequencies, log-log interpolated between them
   Vec3 axis_scale = Vec3(1.0, 1.0, 1.0);  // PSD multiplier per body axis (0: none on that axis)
   double resolution_hz = 0.5;           // one component per bin of this width
   std::uint64_t seed = 0;
+  // Amplitude scale over time (empty: 1). Between points the scale follows a
+  // smootherstep (C2: its rate and curvature are zero at the points), not a
+  // straight line: the random displacement is s(t) d(t), differentiated
+  // exactly, and a kink in s would put a step into the mount's velocity. The
+  // acceleration is s d'' + 2 s' d' + s'' d; the last two terms are of
+  // relative size s' / (s w) and s'' / (s w^2), small for a ramp much slower
+  // than the profile's lowest frequency. Constant before the first point and
+  // after the last.
+  std::vector<ScalePoint> amplitude_scale;
+};
+
+// Rotor or engine harmonics. The shaft turns at Omega(t) = 2 pi rpm(t) / 60
+// (rpm(t): linear between the profile's points, constant before the first and
+// after the last; one point is a constant speed) plus a jitter: a sum of
+// kJitterComponents sinusoids at frequencies drawn uniformly in
+// (0, jitter_bandwidth_hz] with random phases, of total rms jitter_rpm (its
+// own SplitMix64 stream from seed and the device name, so a run is
+// reproducible bit for bit). The shaft angle Phi(t) = integral of Omega is in
+// closed form (a quadratic per profile segment plus the jitter's sines).
+// Harmonic k drives psi_k = k Phi + phase: angle theta = -A cos(psi)/(k Omega)
+// and displacement d = -A sin(psi)/(k Omega)^2, differentiated exactly (with
+// Omega' and Omega''), so theta' = A sin(psi) and d'' = A sin(psi) exactly at
+// a constant speed, and up to terms of relative size Omega'/(k Omega^2) while
+// the speed changes: the motion stays rigid and consistent (gyro, accel and
+// increments are derivatives of one trajectory) and the amplitude is the
+// datasheet's at the instantaneous speed.
+struct RpmPoint {
+  double time_s = 0.0;  // since the start of the run
+  double rpm = 0.0;     // > 0
+};
+
+struct RotorHarmonic {
+  double order = 1.0;                 // k: frequency k rpm / 60 Hz
+  Vec3 linear_m_s2 = Vec3::Zero();    // acceleration amplitude per body axis
+  Vec3 angular_rad_s = Vec3::Zero();  // angular-rate amplitude per body axis
+  Vec3 phase_rad = Vec3::Zero();      // per axis: A sin(k Phi(t) + phase)
+};
+
+struct Rotor {
+  std::vector<RpmPoint> speed;  // increasing times; one point: constant speed
+  std::vector<RotorHarmonic> harmonics;
+  double jitter_rpm = 0.0;            // rms of the speed jitter
+  double jitter_bandwidth_hz = 1.0;   // the jitter's components lie in (0, this]
+  std::uint64_t seed = 0;
+};
+
+// A shock: a linear acceleration pulse per body axis starting at time_s,
+// peak_m_s2 [x, y, z] and duration T (one shape for the three axes):
+//   half_sine:  a(tau) = P sin(pi tau / T), 0 <= tau < T
+//   sawtooth:   a(tau) = P tau / T (terminal peak, then back to 0 at tau = T).
+// As rigid-body motion the pulse leaves the mount with a velocity
+// (2 P T / pi or P T / 2) and a displacement (P T^2 / pi or P T^2 / 6). The
+// mount then returns over return_s: an acceleration R(x) = c1 x^2 (1 - x)^2 +
+// c2 x^3 (1 - x)^2 (x = (tau - T) / return_s) with c1, c2 so that velocity and
+// displacement are zero at the return's end (starting and ending at zero
+// acceleration and jerk). Outside [time_s, time_s + T + return_s] the shock
+// contributes nothing: the trajectory is the one without it.
+enum class ShockShape { half_sine, sawtooth };
+
+struct Shock {
+  double time_s = 0.0;
+  ShockShape shape = ShockShape::half_sine;
+  Vec3 peak_m_s2 = Vec3::Zero();
+  double duration_s = 0.011;
+  double return_s = 0.2;
 };
 
 struct VibrationSpec {
   std::vector<Sinusoid> sinusoids;
+  std::vector<Shock> shocks;
   std::optional<RandomVibration> random_linear;
+  std::vector<Rotor> rotors;
   Vec3 lever_arm_m = Vec3::Zero();   // the sensor relative to the vibration's reference point, body axes
   Mat3 sensor_to_body = Mat3::Identity();
-  bool empty() const { return sinusoids.empty() && !random_linear; }
+  bool empty() const { return sinusoids.empty() && !random_linear && rotors.empty() && shocks.empty(); }
 };
 
 // th, d and their derivatives at one instant, body axes.
 struct VibrationState {
   Vec3 theta = Vec3::Zero(), theta_dot = Vec3::Zero(), theta_ddot = Vec3::Zero();
   Vec3 d = Vec3::Zero(), d_dot = Vec3::Zero(), d_ddot = Vec3::Zero();
+};
+
+// A rotor's shaft: angle, speed and its derivatives at one instant.
+struct ShaftState {
+  double angle_rad = 0.0, speed_rad_s = 0.0, accel_rad_s2 = 0.0, jerk_rad_s3 = 0.0;
 };
 
 // One-sided PSD table value at f (log-log interpolation; 0 outside the table).
@@ -92,6 +175,10 @@ class Vibration {
   // The kinematics of the vibrating sensor on top of the smoothed ones.
   Kinematics apply(const Kinematics& base, const Vec3& base_angular_acceleration_rad_s2, double t_s) const;
   std::size_t random_components() const { return comps_.size(); }
+  // Rotor r's shaft at t_s (for the tests and check-config).
+  ShaftState shaft(std::size_t r, double t_s) const;
+
+  static constexpr int kJitterComponents = 16;
 
   static constexpr std::size_t kMaxComponents = 200'000;
 
@@ -104,8 +191,23 @@ class Vibration {
   // e^{i phase} of every random component at t_cached_s (valid) and the
   // per-step rotation e^{i w step}.
   void random_phasors(double t_s) const;
+  struct JitterComponent {
+    double w_rad_s, amplitude_rad_s, phase_rad;
+  };
+  struct RotorState {
+    std::vector<double> angle_at_point_rad;  // Phi at each profile point (without jitter)
+    std::vector<JitterComponent> jitter;
+  };
   VibrationSpec spec_;
   std::vector<Component> comps_;
+  std::vector<RotorState> rotors_;
+  // Per shock, per unit peak: the pulse's end velocity and displacement and
+  // the return's coefficients c1, c2.
+  struct ShockState {
+    double v_end, d_end, c1, c2;
+  };
+  std::vector<ShockState> shocks_;
+  void add_shock(double t, VibrationState& v) const;
   double step_s_ = 0.0;
   std::vector<std::complex<double>> rotation_;
   mutable std::vector<std::complex<double>> phasor_;
