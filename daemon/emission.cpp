@@ -242,6 +242,17 @@ struct EmissionEngine::Impl {
   std::atomic<bool> input_without_poses{false};
   std::vector<io::SourcedPose> pose_batch;  // producer only
   std::atomic<std::uint64_t> poses_pushed{0}, poses_refused{0};
+  // The newest refusal's reason, for the daemon's rate-limited log line
+  // (producer thread writes, stats() reads; never the emission thread).
+  mutable std::mutex refusal_mutex;
+  std::string last_refusal;
+  void note_refusal(const char* why) noexcept {
+    try {
+      std::lock_guard lock(refusal_mutex);
+      last_refusal = why;
+    } catch (...) {  // no memory for the text: the count still says it
+    }
+  }
   LatenessHistogram lateness;
   std::atomic<std::uint64_t> deadline_misses{0};
   std::atomic<TimeNs> emission_cpu_ns{0}, producer_cpu_ns{0}, emission_wall_ns{0};
@@ -459,7 +470,8 @@ void EmissionEngine::Impl::take_live_input() {
     // refusal (counted), never the end of the producer thread.
     try {
       take_live_pose(p);
-    } catch (const std::exception&) {
+    } catch (const std::exception& e) {
+      note_refusal(e.what());
       pose_faults.fetch_add(1, std::memory_order_relaxed);
       poses_refused.fetch_add(1, std::memory_order_relaxed);
     }
@@ -484,8 +496,9 @@ void EmissionEngine::Impl::take_live_pose(const io::SourcedPose& p) {
           d->pose_marks.emplace_back(previous_ns, p.receive_ns);
           if (d->pose_marks.size() > kMaxPoseMarks) d->pose_marks.pop_front();
         }
-      } catch (const std::exception&) {
+      } catch (const std::exception& e) {
         refused = true;  // counted, never fatal (as `imuemu stream`)
+        note_refusal(e.what());
       }
     }
     if (refused) poses_refused.fetch_add(1, std::memory_order_relaxed);
@@ -521,7 +534,8 @@ void EmissionEngine::Impl::take_live_end() {
       }
       try {
         d->engine->finish();
-      } catch (const std::exception&) {
+      } catch (const std::exception& e) {
+        note_refusal(e.what());
         poses_refused.fetch_add(1, std::memory_order_relaxed);
       }
       // The grid ends at the last pose: known now, so the emission thread
@@ -935,6 +949,10 @@ EngineStats EmissionEngine::stats() const {
   s.emit_delay_ns = m.options.emit_delay_ns;
   s.poses_pushed = m.poses_pushed.load(std::memory_order_relaxed);
   s.poses_refused = m.poses_refused.load(std::memory_order_relaxed);
+  {
+    std::lock_guard lock(m.refusal_mutex);
+    s.last_pose_refusal = m.last_refusal;
+  }
   if (m.live_input()) {
     const io::PoseSourceCounters c = m.options.source->counters();
     PoseSourceStats& p = s.pose_source.emplace();
@@ -1054,6 +1072,7 @@ nlohmann::json to_json(const EngineStats& s) {
                    {"emit_delay_ns", s.emit_delay_ns},
                    {"poses_pushed", s.poses_pushed},
                    {"poses_refused", s.poses_refused},
+                   {"last_pose_refusal", s.last_pose_refusal},
                    {"realtime_priority", s.realtime_priority},
                    {"memory_locked", s.memory_locked},
                    {"realtime_note", s.realtime_note},

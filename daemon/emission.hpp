@@ -182,6 +182,7 @@ struct EngineStats {
   TimeNs emit_delay_ns = 0;          // live input: how far behind the poses ticks go out
   std::uint64_t poses_pushed = 0;
   std::uint64_t poses_refused = 0;   // poses the method refused (counted, not fatal)
+  std::string last_pose_refusal;     // the method's reason for the newest one (empty: none)
   std::optional<PoseSourceStats> pose_source;  // live input only
   bool realtime_priority = false;    // SCHED_FIFO granted
   bool memory_locked = false;

@@ -91,6 +91,7 @@ constexpr auto kBuildJoinLimit = std::chrono::milliseconds(500);
 // when no watchdog interval is known (status only).
 constexpr TimeNs kAliveWithinNs = kNsPerSecond;
 constexpr auto kSummaryLogPeriod = std::chrono::seconds(60);
+constexpr auto kRefusalLogPeriod = std::chrono::seconds(10);
 
 TimeNs seconds_ns(double s) { return static_cast<TimeNs>(std::llround(s * 1e9)); }
 
@@ -117,6 +118,7 @@ std::string summary_line(const sc::SceneConfig& scene, const imuemu::emission::E
     if (s.pose_source->rejected > 0) out << ", " << s.pose_source->rejected << " rejected";
     if (s.pose_source->accepted == 0) out << " (waiting for the first pose)";
   }
+  if (s.poses_refused > 0) out << "; " << s.poses_refused << " poses refused by the method";
   if (!alive) out << "; EMITTER STALLED";
   return out.str();
 }
@@ -509,6 +511,7 @@ class Daemon {
       return;
     }
     const auto now = std::chrono::steady_clock::now();
+    log_new_refusals(s, now);
     const bool alive = built_.engine->healthy(monotonic_now_ns(), kAliveWithinNs);
     if (now - last_status_ >= status_period) {
       last_status_ = now;
@@ -521,6 +524,21 @@ class Daemon {
         svc::log_debug(line);
       }
     }
+  }
+
+  // Poses the method refused (counted by the engine, which never logs): a
+  // warning with the newest reason, at most one per kRefusalLogPeriod, so a
+  // stream whose every pose is refused says why within a second and then
+  // stays quiet but counted.
+  void log_new_refusals(const imuemu::emission::EngineStats& s, std::chrono::steady_clock::time_point now) {
+    if (s.poses_refused < refusals_logged_) refusals_logged_ = 0;  // a new engine (restart, reload)
+    if (s.poses_refused <= refusals_logged_) return;
+    if (refusals_logged_ > 0 && now - last_refusal_log_ < kRefusalLogPeriod) return;
+    svc::log_warning(std::to_string(s.poses_refused - refusals_logged_) + " poses refused by the method (" +
+                     std::to_string(s.poses_refused) + " in all); the newest: " +
+                     (s.last_pose_refusal.empty() ? std::string("no reason recorded") : s.last_pose_refusal));
+    refusals_logged_ = s.poses_refused;
+    last_refusal_log_ = now;
   }
 
   nlohmann::json status_json() const {
@@ -579,7 +597,8 @@ class Daemon {
   int exit_code_ = kExitOk;
   std::function<void()> on_stopped_;
   std::optional<imuemu::emission::EngineStats> final_stats_;
-  std::chrono::steady_clock::time_point last_status_{}, last_summary_{};
+  std::chrono::steady_clock::time_point last_status_{}, last_summary_{}, last_refusal_log_{};
+  std::uint64_t refusals_logged_ = 0;  // of the running engine's poses_refused
   TimeNs started_ns_ = monotonic_now_ns();
 };
 

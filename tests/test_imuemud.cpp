@@ -167,8 +167,9 @@ int source_port(const nlohmann::json& status) {
   return std::stoi(name.substr(name.rfind(':') + 1));
 }
 
-// One pose datagram (at the origin, level) to 127.0.0.1:port.
-void send_still_pose(int fd, int port, std::uint64_t sequence, std::int64_t t_ns) {
+// One pose datagram (at the origin, level unless `q_wxyz` says otherwise) to 127.0.0.1:port.
+void send_still_pose(int fd, int port, std::uint64_t sequence, std::int64_t t_ns,
+                     const Eigen::Vector4d& q_wxyz = Eigen::Vector4d(1, 0, 0, 0)) {
   sockaddr_in to{};
   to.sin_family = AF_INET;
   to.sin_port = htons(static_cast<std::uint16_t>(port));
@@ -178,7 +179,7 @@ void send_still_pose(int fd, int port, std::uint64_t sequence, std::int64_t t_ns
   d.record.t_ns = t_ns;
   d.record.position_kind = imuemu::io::PositionKind::local_ned;
   d.record.attitude_kind = imuemu::io::AttitudeKind::quaternion;
-  d.record.attitude = Eigen::Vector4d(1, 0, 0, 0);
+  d.record.attitude = q_wxyz;
   const auto bytes = imuemu::io::encode_pose_datagram(d);
   (void)::sendto(fd, bytes.data(), bytes.size(), 0, reinterpret_cast<const sockaddr*>(&to), sizeof to);
 }
@@ -431,6 +432,43 @@ TEST_F(Imuemud, ADatagramNearTheInt64LimitIsRefusedAndTheStreamGoesOn) {
   ASSERT_TRUE(rc) << c.output();
   EXPECT_EQ(*rc, 0) << c.output();
   EXPECT_EQ(c.output().find("terminate called"), std::string::npos) << c.output();
+}
+
+// Poses the method refuses (here: from pose 20 on a spin of 2.5 rad per
+// pose, which the pose source admits, each step being below pi, but whose
+// smoothing window spans more rotation than a chart holds) are dropped and counted by the engine, which
+// never logs; imuemud says so in its log with the method's reason, once and
+// then at most every 10 s, and in the status JSON. Before, the count was in
+// the JSON only: a stream whose every pose was refused emitted nothing and
+// the log stayed silent.
+TEST_F(Imuemud, PosesTheMethodRefusesAreLoggedWithTheReason) {
+  Child c = spawn_udp_daemon();
+  ReapOnExit reap_c{c.pid};
+  int port = 0, fd = -1;
+  ASSERT_NO_FATAL_FAILURE(udp_daemon_up(c, port, fd));
+  const std::int64_t base_ns = 1'000'000'000'000;
+  for (int i = 0; i < 60; ++i) {  // 1.2 s at 50 Hz: level, then spinning about x at 2.5 rad per pose
+    const double angle_rad = 2.5 * std::max(0, i - 19);
+    const Eigen::Vector4d q(std::cos(angle_rad / 2), std::sin(angle_rad / 2), 0, 0);
+    send_still_pose(fd, port, static_cast<std::uint64_t>(i), base_ns + std::int64_t{i} * 20'000'000, q);
+    std::this_thread::sleep_for(20ms);
+  }
+  ::close(fd);
+  const auto after = status_when(dir_ / "c.sock", [](const nlohmann::json& s) {
+    return s["engine"]["poses_refused"].get<std::uint64_t>() >= 10u;
+  });
+  ASSERT_TRUE(after) << c.output();
+  EXPECT_FALSE((*after)["engine"]["last_pose_refusal"].get<std::string>().empty()) << after->dump();
+  std::this_thread::sleep_for(1500ms);  // a status tick or two
+  ASSERT_EQ(::kill(c.pid, SIGTERM), 0);
+  const std::optional<int> rc = wait_exit_within(c, 20s);
+  ASSERT_TRUE(rc) << c.output();
+  EXPECT_EQ(*rc, 0) << c.output();
+  const std::string log = c.output();
+  const std::size_t line = log.find("poses refused by the method (");
+  ASSERT_NE(line, std::string::npos) << log;
+  EXPECT_EQ(log.rfind("<4>", line), log.rfind('\n', line) + 1) << "a warning line\n" << log;
+  EXPECT_NE(log.find("the newest: ", line), std::string::npos) << log;
 }
 
 // Issue 13 (left open): after a sender restart the re-acquired stream was
