@@ -643,7 +643,7 @@ void EmissionEngine::Impl::emit_tick(Device& d, std::uint64_t k, bool drop) {
     if (!d.options.transport->write_frame(std::as_bytes(std::span<const std::uint8_t>(d.bytes))))
       d.write_errors.fetch_add(1, std::memory_order_relaxed);
     else if (slot->pose_receive_ns > 0)
-      d.pose_latency.record(monotonic_now_ns() - slot->pose_receive_ns);
+      d.pose_latency.record(saturating_sub_ns(monotonic_now_ns(), slot->pose_receive_ns));
   } else {
     d.can_frames.clear();
     d.options.can_encoder->encode(frame, d.can_frames);

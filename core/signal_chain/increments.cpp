@@ -6,6 +6,7 @@
 
 #include "core/earth.hpp"
 #include "core/so3.hpp"
+#include "core/time_arith.hpp"
 
 namespace imuemu::signal_chain {
 
@@ -65,7 +66,7 @@ HermiteInterval::HermiteInterval(const Kinematics& a, const Kinematics& b, doubl
 Kinematics HermiteInterval::at(double s) const {
   const double t = s * h_s_;
   Kinematics k;
-  k.t_ns = a_.t_ns + static_cast<TimeNs>(std::llround(t * 1e9));
+  k.t_ns = saturating_add_ns(a_.t_ns, static_cast<TimeNs>(std::llround(t * 1e9)));  // core/time_arith.hpp
   k.position_m = position_at(s);
   k.velocity_m_s = a_.velocity_m_s + t * (a_.acceleration_m_s2 + t * (3.0 * c3_ + t * (4.0 * c4_ + t * 5.0 * c5_)));
   k.acceleration_m_s2 = a_.acceleration_m_s2 + t * (6.0 * c3_ + t * (12.0 * c4_ + t * 20.0 * c5_));
