@@ -102,8 +102,12 @@ void only_keys(const Where& w, const toml::table& t, const std::string& path, co
 //   [[...vibration.rotor]]     speed_rpm = 6000 or [[time_s, rpm], ...],
 //                              jitter_rpm, jitter_bandwidth_hz, seed,
 //     [[...rotor.harmonic]]    order, linear_m_s2, angular_deg_s, phase_deg
+//   [...vibration.random_angular] psd_rad2_s4_per_hz = [[f_hz, (rad/s^2)^2/Hz], ...]
+//                              (angular acceleration), and the same
+//                              axis_scale, resolution_hz, seed, amplitude_scale
 //   [[...vibration.shock]]     time_s, shape = "half_sine" | "sawtooth",
-//                              peak_g = [x, y, z], duration_ms, return_ms
+//                              peak_g = [x, y, z] and/or
+//                              angular_peak_deg_s2 = [x, y, z], duration_ms, return_ms
 // The lever arm and axes are the device's [imu.mounting].
 double one_number(const Where& w, const toml::node& n, const std::string& key, const char* expected) {
   const std::vector<double> v = numbers_of(w, n, key);
@@ -168,13 +172,17 @@ signal_chain::Rotor parse_rotor(const Where& w, const toml::node& node, const st
 signal_chain::Shock parse_shock(const Where& w, const toml::node& node, const std::string& sp) {
   const toml::table* st = node.as_table();
   if (st == nullptr) w.fail(node.source(), sp, "expected a table");
-  only_keys(w, *st, sp, {"time_s", "shape", "peak_g", "duration_ms", "return_ms"});
+  only_keys(w, *st, sp, {"time_s", "shape", "peak_g", "angular_peak_deg_s2", "duration_ms", "return_ms"});
   signal_chain::Shock k;
-  for (const char* required : {"time_s", "peak_g", "duration_ms"})
+  for (const char* required : {"time_s", "duration_ms"})
     if (st->get(required) == nullptr) w.fail(st->source(), sp, std::string("missing '") + required + "'");
+  if (st->get("peak_g") == nullptr && st->get("angular_peak_deg_s2") == nullptr)
+    w.fail(st->source(), sp, "missing 'peak_g' (linear) or 'angular_peak_deg_s2' (angular): a shock needs a peak");
   k.time_s = one_number(w, *st->get("time_s"), dotted(sp, "time_s"), "expected one number >= 0 (s since the start)");
   constexpr double kG = 9.80665;  // standard gravity: test standards give shock peaks in g
-  k.peak_m_s2 = vec3_of(w, *st->get("peak_g"), dotted(sp, "peak_g"), kG);
+  if (const toml::node* x = st->get("peak_g")) k.peak_m_s2 = vec3_of(w, *x, dotted(sp, "peak_g"), kG);
+  if (const toml::node* x = st->get("angular_peak_deg_s2"))
+    k.angular_peak_rad_s2 = vec3_of(w, *x, dotted(sp, "angular_peak_deg_s2"), std::numbers::pi / 180.0);
   k.duration_s = one_number(w, *st->get("duration_ms"), dotted(sp, "duration_ms"), "expected one number > 0") * 1e-3;
   if (const toml::node* x = st->get("return_ms"))
     k.return_s = one_number(w, *x, dotted(sp, "return_ms"), "expected one number > 0") * 1e-3;
@@ -192,7 +200,7 @@ signal_chain::Shock parse_shock(const Where& w, const toml::node& node, const st
 
 signal_chain::VibrationSpec parse_vibration_table(const Where& w, const toml::table& t, const std::string& path) {
   signal_chain::VibrationSpec v;
-  only_keys(w, t, path, {"sinusoid", "random", "rotor", "shock"});
+  only_keys(w, t, path, {"sinusoid", "random", "random_angular", "rotor", "shock"});
   if (const toml::node* n = t.get("shock")) {
     const toml::array* a = n->as_array();
     if (a == nullptr) w.fail(n->source(), dotted(path, "shock"), "expected an array of tables ([[...shock]])");
@@ -213,19 +221,21 @@ signal_chain::VibrationSpec parse_vibration_table(const Where& w, const toml::ta
     if (a == nullptr) w.fail(n->source(), dotted(path, "rotor"), "expected an array of tables ([[...rotor]])");
     for (std::size_t i = 0; i < a->size(); ++i) v.rotors.push_back(parse_rotor(w, (*a)[i], dotted(path, "rotor[" + std::to_string(i) + "]")));
   }
-  if (const toml::node* n = t.get("random")) {
-    const std::string rp = dotted(path, "random");
-    const toml::table* rt = n->as_table();
-    if (rt == nullptr) w.fail(n->source(), rp, "expected a table");
-    only_keys(w, *rt, rp, {"psd_g2_per_hz", "axis_scale", "resolution_hz", "seed", "amplitude_scale"});
-    signal_chain::RandomVibration r;
-    const toml::node* psd = rt->get("psd_g2_per_hz");
-    const toml::array* pa = psd != nullptr ? psd->as_array() : nullptr;
-    if (pa == nullptr) w.fail(rt->source(), dotted(rp, "psd_g2_per_hz"), "expected [[frequency_hz, g2_per_hz], ...]");
+  // [random] (linear, g^2/Hz) and [random_angular] ((rad/s^2)^2/Hz): the
+  // same table, scale and seed keys.
+  auto parse_random = [&](const toml::node& n, const std::string& rp, const char* psd_key, const char* psd_pair,
+                          std::vector<signal_chain::PsdPoint>& psd, Vec3& axis_scale, double& resolution_hz,
+                          std::uint64_t& seed, std::vector<signal_chain::ScalePoint>& amplitude_scale) {
+    const toml::table* rt = n.as_table();
+    if (rt == nullptr) w.fail(n.source(), rp, "expected a table");
+    only_keys(w, *rt, rp, {psd_key, "axis_scale", "resolution_hz", "seed", "amplitude_scale"});
+    const toml::node* psd_node = rt->get(psd_key);
+    const toml::array* pa = psd_node != nullptr ? psd_node->as_array() : nullptr;
+    if (pa == nullptr) w.fail(rt->source(), dotted(rp, psd_key), std::string("expected [") + psd_pair + ", ...]");
     for (const toml::node& e : *pa) {
-      const std::vector<double> pt = numbers_of(w, e, dotted(rp, "psd_g2_per_hz"));
-      if (pt.size() != 2) w.fail(e.source(), dotted(rp, "psd_g2_per_hz"), "expected a pair [frequency_hz, g2_per_hz]");
-      r.psd.push_back({pt[0], pt[1]});
+      const std::vector<double> pt = numbers_of(w, e, dotted(rp, psd_key));
+      if (pt.size() != 2) w.fail(e.source(), dotted(rp, psd_key), std::string("expected a pair ") + psd_pair);
+      psd.push_back({pt[0], pt[1]});
     }
     if (const toml::node* x = rt->get("amplitude_scale")) {
       const std::string ak = dotted(rp, "amplitude_scale");
@@ -234,20 +244,33 @@ signal_chain::VibrationSpec parse_vibration_table(const Where& w, const toml::ta
       for (const toml::node& e : *aa) {
         const std::vector<double> pt = numbers_of(w, e, ak);
         if (pt.size() != 2) w.fail(e.source(), ak, "expected a pair [time_s, scale]");
-        r.amplitude_scale.push_back({pt[0], pt[1]});
+        amplitude_scale.push_back({pt[0], pt[1]});
       }
     }
-    if (const toml::node* x = rt->get("axis_scale")) r.axis_scale = vec3_of(w, *x, dotted(rp, "axis_scale"), 1.0);
+    if (const toml::node* x = rt->get("axis_scale")) axis_scale = vec3_of(w, *x, dotted(rp, "axis_scale"), 1.0);
     if (const toml::node* x = rt->get("resolution_hz")) {
       const std::vector<double> rv = numbers_of(w, *x, dotted(rp, "resolution_hz"));
       if (rv.size() != 1) w.fail(x->source(), dotted(rp, "resolution_hz"), "expected one number");
-      r.resolution_hz = rv[0];
+      resolution_hz = rv[0];
     }
     if (const toml::node* x = rt->get("seed")) {
       if (!x->is_integer() || x->as_integer()->get() < 0) w.fail(x->source(), dotted(rp, "seed"), "expected an integer >= 0");
-      r.seed = static_cast<std::uint64_t>(x->as_integer()->get());
+      seed = static_cast<std::uint64_t>(x->as_integer()->get());
     }
+  };
+  if (const toml::node* n = t.get("random")) {
+    signal_chain::RandomVibration r;
+    parse_random(*n, dotted(path, "random"), "psd_g2_per_hz", "[frequency_hz, g2_per_hz]", r.psd, r.axis_scale,
+                 r.resolution_hz, r.seed, r.amplitude_scale);
     v.random_linear = r;
+  }
+  if (const toml::node* n = t.get("random_angular")) {
+    signal_chain::RandomAngularVibration r;
+    std::vector<signal_chain::PsdPoint> psd;
+    parse_random(*n, dotted(path, "random_angular"), "psd_rad2_s4_per_hz", "[frequency_hz, rad2_s4_per_hz]", psd,
+                 r.axis_scale, r.resolution_hz, r.seed, r.amplitude_scale);
+    for (const signal_chain::PsdPoint& p : psd) r.psd.push_back({p.frequency_hz, p.g2_per_hz});
+    v.random_angular = r;
   }
   try {
     (void)signal_chain::Vibration(v, "check");

@@ -25,6 +25,7 @@ set(IMUEMU_HEAVY_TESTS
   SignalChain.ConingCompensatedIncrementsReproduceTheAttitudeAfterOneHour
   SignalChain.ScullingCompensatedIncrementsReproduceTheVelocityAfterOneHour
   SignalChain.RandomVibrationPsdMatchesItsProfileWithinOneDecibel
+  SignalChain.RandomAngularVibrationPsdMatchesItsProfileWithinOneDecibel
 )
 if(NOT IMUEMU_HEAVY_LIST_ONLY)
   set_tests_properties(${IMUEMU_HEAVY_TESTS} PROPERTIES LABELS heavy)

@@ -527,8 +527,16 @@ TEST_F(Imuemud, ASenderRestartResumesOutputAfterTheScenesGapLimit) {
   const nlohmann::json& live = (*final_status)["engine"]["devices"][0]["live"];
   std::cout << "emitter gap ticks at 200 Hz: " << live.value("gap", 0u) << " (" << live.value("gap_events", 0u)
             << " gap event(s))\n";
+  // A tick whose deadline passed before the producer reached it (a host
+  // that woke the producer late: ASan, a loaded CI machine) is skipped
+  // without the emitter seeing it, and counted by the emission thread as
+  // producer_late (status "underruns"): so the gap's 200 ticks are gap + (some of) producer_late.
+  // The intermittent CI failure of this test (ASan, 524/525) was the gap
+  // counted below 190 that way.
+  const nlohmann::json& device = (*final_status)["engine"]["devices"][0];
+  const std::uint64_t late_ticks = device.value("underruns", 0u);
   EXPECT_EQ(live.value("gap_events", 0u), 1u) << live.dump();
-  EXPECT_GE(live.value("gap", 0u), 190u) << live.dump();
+  EXPECT_GE(live.value("gap", 0u) + late_ticks, 190u) << live.dump() << "\nproducer_late " << late_ticks;
   EXPECT_LE(live.value("gap", 0u), 210u) << live.dump();
   const nlohmann::json& source = (*final_status)["engine"]["pose_source"];
   EXPECT_EQ(source.value("resyncs", 99u), 1u) << source.dump();

@@ -593,12 +593,14 @@ TEST(SignalChainConfig, RefusesUnknownKeysAndChainsTheRateCannotRunNamingFileLin
       {"stage kind", "[[imu.error_model.signal_chain.stage]]\nkind = \"kalman\"\n",
        "imu[0].error_model.signal_chain.stage[0].kind", "unknown filter kind 'kalman'", 14},
       {"vibration key", "[imu.error_model.signal_chain.vibration]\nbump = 1\n",
-       "imu[0].error_model.signal_chain.vibration.bump", "unknown key 'bump'; allowed: sinusoid, random, rotor, shock", 14},
+       "imu[0].error_model.signal_chain.vibration.bump", "unknown key 'bump'; allowed: sinusoid, random, random_angular, rotor, shock", 14},
       {"shock shape", "[[imu.error_model.signal_chain.vibration.shock]]\ntime_s = 2\npeak_g = [0, 0, 20]\nduration_ms = 11\n"
        "shape = \"square\"\n",
        "imu[0].error_model.signal_chain.vibration.shock[0].shape", "expected \"half_sine\" or \"sawtooth\"", 17},
       {"shock missing peak", "[[imu.error_model.signal_chain.vibration.shock]]\ntime_s = 2\nduration_ms = 11\n",
-       "imu[0].error_model.signal_chain.vibration.shock[0]", "missing 'peak_g'", 13},
+       "imu[0].error_model.signal_chain.vibration.shock[0]", "missing 'peak_g' (linear) or 'angular_peak_deg_s2'", 13},
+      {"angular psd key", "[imu.error_model.signal_chain.vibration.random_angular]\npsd_g2_per_hz = [[20, 0.01], [500, 0.01]]\n",
+       "imu[0].error_model.signal_chain.vibration.random_angular.psd_g2_per_hz", "unknown key 'psd_g2_per_hz'", 14},
       {"amplitude scale order", "[imu.error_model.signal_chain.vibration.random]\npsd_g2_per_hz = [[20, 0.01], [500, 0.01]]\n"
        "amplitude_scale = [[5, 1], [2, 3]]\n",
        "imu[0].error_model.signal_chain.vibration", "amplitude_scale point 2 must have a time after the previous one", 13},
@@ -640,7 +642,10 @@ TEST(SignalChainConfig, RefusesUnknownKeysAndChainsTheRateCannotRunNamingFileLin
       "[[imu.error_model.signal_chain.vibration.rotor]]\nspeed_rpm = [[0, 3000], [10, 6000]]\njitter_rpm = 5\nseed = 3\n"
       "[[imu.error_model.signal_chain.vibration.rotor.harmonic]]\norder = 2\nangular_deg_s = [1, 0, 0]\nphase_deg = [90, 0, 0]\n"
       "[[imu.error_model.signal_chain.vibration.shock]]\ntime_s = 2.5\nshape = \"sawtooth\"\npeak_g = [0, 0, 20]\n"
-      "duration_ms = 11\nreturn_ms = 300\n";
+      "duration_ms = 11\nreturn_ms = 300\n"
+      "[[imu.error_model.signal_chain.vibration.shock]]\ntime_s = 4\nangular_peak_deg_s2 = [0, 0, 9000]\nduration_ms = 5\n"
+      "[imu.error_model.signal_chain.vibration.random_angular]\npsd_rad2_s4_per_hz = [[20, 0.5], [300, 2]]\n"
+      "axis_scale = [1, 0, 0]\nseed = 8\n";
   const scene::SceneConfig v = scene::parse_scene_text(shaken, "v.toml", ".");
   const signal_chain::VibrationSpec& vib = v.imus[0].error_model.chain.vibration;
   ASSERT_EQ(vib.sinusoids.size(), 1u);
@@ -660,12 +665,21 @@ TEST(SignalChainConfig, RefusesUnknownKeysAndChainsTheRateCannotRunNamingFileLin
   ASSERT_EQ(vib.rotors[0].harmonics.size(), 1u);
   EXPECT_EQ(vib.rotors[0].harmonics[0].order, 2.0);
   EXPECT_DOUBLE_EQ(vib.rotors[0].harmonics[0].phase_rad.x(), std::numbers::pi / 2.0);
-  ASSERT_EQ(vib.shocks.size(), 1u);
+  ASSERT_GE(vib.shocks.size(), 1u);
   EXPECT_EQ(vib.shocks[0].time_s, 2.5);
   EXPECT_EQ(vib.shocks[0].shape, signal_chain::ShockShape::sawtooth);
   EXPECT_DOUBLE_EQ(vib.shocks[0].peak_m_s2.z(), 20.0 * 9.80665);
   EXPECT_DOUBLE_EQ(vib.shocks[0].duration_s, 0.011);
   EXPECT_DOUBLE_EQ(vib.shocks[0].return_s, 0.3);
+  ASSERT_EQ(vib.shocks.size(), 2u);
+  EXPECT_EQ(vib.shocks[1].peak_m_s2, Vec3::Zero());
+  EXPECT_DOUBLE_EQ(vib.shocks[1].angular_peak_rad_s2.z(), 9000.0 * std::numbers::pi / 180.0);
+  ASSERT_TRUE(vib.random_angular.has_value());
+  ASSERT_EQ(vib.random_angular->psd.size(), 2u);
+  EXPECT_EQ(vib.random_angular->psd[1].frequency_hz, 300.0);
+  EXPECT_EQ(vib.random_angular->psd[1].rad2_s4_per_hz, 2.0);
+  EXPECT_EQ(vib.random_angular->axis_scale, Vec3(1.0, 0.0, 0.0));
+  EXPECT_EQ(vib.random_angular->seed, 8u);
   EXPECT_EQ(vib.lever_arm_m, Vec3(0.3, 0.0, -0.1));
   EXPECT_FALSE(v.imus[0].error_model.ideal());
 }

@@ -39,8 +39,11 @@ Preset preset_for(const std::string& name, std::int64_t r) {
     // the 258 Hz row, DELT = 6, is taken here) and the UI low-pass filter of
     // order 1-3 (GYRO_UI_FILT_ORD) whose bandwidth index 1 (the reset value)
     // is max(400 Hz, ODR)/4 (GYRO_ACCEL_CONFIG0). The datasheet gives order and
-    // -3 dB bandwidth, not the pole positions: Butterworth poles are assumed,
-    // order 2 taken.
+    // -3 dB bandwidth, not the pole positions: Butterworth poles are assumed.
+    // Order 2 and index 1 are the reset values (GYRO_CONFIG1 = 0x16: bits 3:2
+    // GYRO_UI_FILT_ORD = 01, 2nd order; GYRO_ACCEL_CONFIG0 = 0x11: bits 3:0
+    // GYRO_UI_FILT_BW = 1), as independent register maps of the part state;
+    // the AAF row is a configured choice, not the reset value.
     p.oversampling = oversampling_for(r);
     p.stages.push_back({.kind = StageKind::anti_alias, .frequency_hz = 258.0});
     p.stages.push_back({.kind = StageKind::low_pass, .frequency_hz = std::max(400.0, rate) / 4.0, .order = 2});
@@ -51,7 +54,10 @@ Preset preset_for(const std::string& name, std::int64_t r) {
     // registers): sampled at 2000 SPS, a Bartlett window FIR filter of two
     // averaging stages of 2^N taps each (FILT_CTRL = N; N = 2 taken here), then
     // the decimation filter, which averages DEC_RATE + 1 samples and outputs
-    // every (DEC_RATE + 1)-th: 2000 / rate.
+    // every (DEC_RATE + 1)-th: 2000 / rate. FILT_CTRL resets to 0 (no
+    // Bartlett stage); N = 2 is a configured choice, -3 dB at 164 Hz, which
+    // matches the Linux IIO driver's table for the family (adis16475.c:
+    // 360/164/80/40 Hz for N = 1..4; AdisBartlettBandwidthsMatchTheIndependentTable).
     if (r > 2000 || 2000 % r != 0)
       throw std::invalid_argument("signal chain preset adis16470 samples at 2000 Hz and decimates by an integer "
                                   "(DEC_RATE + 1): the output rate " +

@@ -19,6 +19,32 @@ constexpr double kG_m_s2 = 9.80665;
 constexpr unsigned kVibrationStream = 7;
 // The rotors' speed jitter: stream 8, axis = the rotor's index.
 constexpr unsigned kRotorJitterStream = 8;
+// The random angular vibration: stream 9.
+constexpr unsigned kAngularVibrationStream = 9;
+
+// The smootherstep amplitude scale s(t) of a random profile and its first
+// two derivatives (RandomVibration::amplitude_scale).
+struct Scale {
+  double s0 = 1.0, s1 = 0.0, s2 = 0.0;
+};
+Scale scale_at(const std::vector<ScalePoint>& sc, double t) {
+  Scale s;
+  if (sc.empty()) return s;
+  const auto next = std::upper_bound(sc.begin(), sc.end(), t, [](double x, const ScalePoint& q) { return x < q.time_s; });
+  if (next == sc.begin()) {
+    s.s0 = sc.front().scale;
+  } else if (next == sc.end()) {
+    s.s0 = sc.back().scale;
+  } else {
+    const ScalePoint& a = *(next - 1);
+    const double span = next->time_s - a.time_s, u = (t - a.time_s) / span, ds = next->scale - a.scale;
+    // Smootherstep S(u) = 6u^5 - 15u^4 + 10u^3: S', S'' vanish at both ends.
+    s.s0 = a.scale + ds * u * u * u * (10.0 + u * (-15.0 + 6.0 * u));
+    s.s1 = ds / span * 30.0 * u * u * (1.0 - u) * (1.0 - u);
+    s.s2 = ds / (span * span) * 60.0 * u * (1.0 - u) * (1.0 - 2.0 * u);
+  }
+  return s;
+}
 constexpr double kRpmToRad_s = kTwoPi / 60.0;
 
 void check_rotor(const Rotor& r, std::size_t index) {
@@ -103,9 +129,10 @@ Vibration::Vibration(const VibrationSpec& spec, const std::string& device) : spe
   for (std::size_t i = 0; i < spec.shocks.size(); ++i) {
     const Shock& k = spec.shocks[i];
     if (!std::isfinite(k.time_s) || !(k.time_s >= 0.0) || !(k.duration_s > 0.0) || !std::isfinite(k.duration_s) ||
-        !(k.return_s > 0.0) || !std::isfinite(k.return_s) || !k.peak_m_s2.allFinite())
+        !(k.return_s > 0.0) || !std::isfinite(k.return_s) || !k.peak_m_s2.allFinite() ||
+        !k.angular_peak_rad_s2.allFinite())
       throw std::invalid_argument("shock " + std::to_string(i + 1) +
-                                  ": time_s must be >= 0, duration and return > 0 and the peak finite");
+                                  ": time_s must be >= 0, duration and return > 0 and the peaks finite");
     const double T = k.duration_s, R = k.return_s;
     // The unit pulse's velocity and displacement at its end.
     const double v_end = k.shape == ShockShape::half_sine ? 2.0 * T / std::numbers::pi : 0.5 * T;
@@ -117,45 +144,61 @@ Vibration::Vibration(const VibrationSpec& spec, const std::string& device) : spe
     const double det = (1.0 / 30.0) * (1.0 / 140.0) - (1.0 / 60.0) * (1.0 / 60.0);
     shocks_.push_back({v_end, d_end, (b1 / 140.0 - b2 / 60.0) / det, (b2 / 30.0 - b1 / 60.0) / det});
   }
-  if (!spec.random_linear) return;
-  const RandomVibration& r = *spec.random_linear;
-  if (r.psd.size() < 2) throw std::invalid_argument("random vibration: the PSD table needs at least two points");
-  for (std::size_t i = 0; i < r.psd.size(); ++i) {
-    if (!(r.psd[i].frequency_hz > 0.0) || !(r.psd[i].g2_per_hz > 0.0) || !std::isfinite(r.psd[i].g2_per_hz) ||
-        (i > 0 && !(r.psd[i].frequency_hz > r.psd[i - 1].frequency_hz)))
-      throw std::invalid_argument("random vibration: PSD point " + std::to_string(i + 1) +
-                                  " must have a frequency above the previous one and a positive g^2/Hz");
+  if (spec.random_linear) {
+    const RandomVibration& r = *spec.random_linear;
+    add_random("random vibration", r.psd, kG_m_s2, r.axis_scale, r.resolution_hz, r.amplitude_scale, r.seed,
+               dev, kVibrationStream, false);
   }
-  if (!(r.resolution_hz > 0.0) || !std::isfinite(r.resolution_hz))
-    throw std::invalid_argument("random vibration: resolution_hz must be > 0");
-  for (std::size_t i = 0; i < r.amplitude_scale.size(); ++i) {
-    const ScalePoint& p = r.amplitude_scale[i];
+  if (spec.random_angular) {
+    const RandomAngularVibration& r = *spec.random_angular;
+    std::vector<PsdPoint> psd;  // the same log-log table, its values in (rad/s^2)^2/Hz
+    for (const AngularPsdPoint& p : r.psd) psd.push_back({p.frequency_hz, p.rad2_s4_per_hz});
+    add_random("random angular vibration", psd, 1.0, r.axis_scale, r.resolution_hz, r.amplitude_scale, r.seed, dev,
+               kAngularVibrationStream, true);
+  }
+}
+
+void Vibration::add_random(const std::string& label, const std::vector<PsdPoint>& psd, double unit_si,
+                           const Vec3& axis_scale,
+                           double resolution_hz, const std::vector<ScalePoint>& amplitude_scale, std::uint64_t seed,
+                           std::uint64_t dev, unsigned stream_index, bool angular) {
+  if (psd.size() < 2) throw std::invalid_argument(label + ": the PSD table needs at least two points");
+  for (std::size_t i = 0; i < psd.size(); ++i) {
+    if (!(psd[i].frequency_hz > 0.0) || !(psd[i].g2_per_hz > 0.0) || !std::isfinite(psd[i].g2_per_hz) ||
+        !std::isfinite(psd[i].frequency_hz) || (i > 0 && !(psd[i].frequency_hz > psd[i - 1].frequency_hz)))
+      throw std::invalid_argument(label + ": PSD point " + std::to_string(i + 1) +
+                                  " must have a frequency above the previous one and a positive, finite density");
+  }
+  if (!(resolution_hz > 0.0) || !std::isfinite(resolution_hz))
+    throw std::invalid_argument(label + ": resolution_hz must be > 0");
+  for (std::size_t i = 0; i < amplitude_scale.size(); ++i) {
+    const ScalePoint& p = amplitude_scale[i];
     if (!std::isfinite(p.time_s) || !std::isfinite(p.scale) || !(p.scale >= 0.0) ||
-        (i > 0 && !(p.time_s > r.amplitude_scale[i - 1].time_s)))
-      throw std::invalid_argument("random vibration: amplitude_scale point " + std::to_string(i + 1) +
+        (i > 0 && !(p.time_s > amplitude_scale[i - 1].time_s)))
+      throw std::invalid_argument(label + ": amplitude_scale point " + std::to_string(i + 1) +
                                   " must have a time after the previous one and a scale >= 0");
   }
-  if (!r.axis_scale.allFinite() || (r.axis_scale.array() < 0.0).any())
-    throw std::invalid_argument("random vibration: axis_scale must be finite and >= 0");
-  const double f0 = r.psd.front().frequency_hz, f1 = r.psd.back().frequency_hz;
-  const std::size_t bins = static_cast<std::size_t>(std::ceil((f1 - f0) / r.resolution_hz));
-  if (bins * 3 > kMaxComponents)
-    throw std::invalid_argument("random vibration: " + std::to_string(bins) + " bins per axis of " +
-                                std::to_string(r.resolution_hz) + " Hz; at most " +
-                                std::to_string(kMaxComponents / 3) + " (raise resolution_hz)");
+  if (!axis_scale.allFinite() || (axis_scale.array() < 0.0).any())
+    throw std::invalid_argument(label + ": axis_scale must be finite and >= 0");
+  const double f0 = psd.front().frequency_hz, f1 = psd.back().frequency_hz;
+  const std::size_t bins = static_cast<std::size_t>(std::ceil((f1 - f0) / resolution_hz));
+  if (comps_.size() + bins * 3 > kMaxComponents)
+    throw std::invalid_argument(label + ": " + std::to_string(bins) + " bins per axis of " +
+                                std::to_string(resolution_hz) + " Hz; at most " +
+                                std::to_string((kMaxComponents - comps_.size()) / 3) + " (raise resolution_hz)");
   for (int axis = 0; axis < 3; ++axis) {
-    if (r.axis_scale[axis] == 0.0) continue;
+    if (axis_scale[axis] == 0.0) continue;
     sensor::Stream stream;
-    stream.state = sensor::stream_key(r.seed, dev, kVibrationStream, static_cast<unsigned>(axis), 0, 0);
+    stream.state = sensor::stream_key(seed, dev, stream_index, static_cast<unsigned>(axis), 0, 0);
     for (std::size_t b = 0; b < bins; ++b) {
-      const double lo = f0 + static_cast<double>(b) * r.resolution_hz;
-      const double width = std::min(r.resolution_hz, f1 - lo);
+      const double lo = f0 + static_cast<double>(b) * resolution_hz;
+      const double width = std::min(resolution_hz, f1 - lo);
       const double f = lo + stream.uniform() * width;
       const double phase = kTwoPi * stream.uniform();
-      // The bin's power S(f) df (m/s^2)^2 as a sinusoid's amplitude^2 / 2.
-      const double power = psd_at(r.psd, f) * r.axis_scale[axis] * kG_m_s2 * kG_m_s2 * width;
+      // The bin's power S(f) df as a sinusoid's amplitude^2 / 2.
+      const double power = psd_at(psd, f) * axis_scale[axis] * unit_si * unit_si * width;
       const double w = kTwoPi * f, a = std::sqrt(2.0 * power);
-      comps_.push_back({w, a, phase, axis, a / w, a / (w * w)});
+      comps_.push_back({w, a, phase, axis, angular, a / w, a / (w * w)});
     }
   }
 }
@@ -222,6 +265,9 @@ void Vibration::add_shock(double t, VibrationState& v) const {
     v.d += d * k.peak_m_s2;
     v.d_dot += vel * k.peak_m_s2;
     v.d_ddot += a * k.peak_m_s2;
+    v.theta += d * k.angular_peak_rad_s2;
+    v.theta_dot += vel * k.angular_peak_rad_s2;
+    v.theta_ddot += a * k.angular_peak_rad_s2;
   }
 }
 
@@ -276,39 +322,26 @@ VibrationState Vibration::at(double t) const {
   }
   if (comps_.empty()) return v;
   random_phasors(t);
-  Vec3 d = Vec3::Zero(), d_dot = Vec3::Zero(), d_ddot = Vec3::Zero();
+  // Linear (d) and angular (theta) sums, each with its profile's scale.
+  Vec3 x[2] = {Vec3::Zero(), Vec3::Zero()}, x_dot[2] = {Vec3::Zero(), Vec3::Zero()},
+       x_ddot[2] = {Vec3::Zero(), Vec3::Zero()};
   for (std::size_t i = 0; i < comps_.size(); ++i) {
     const Component& c = comps_[i];
     const double cs = phasor_[i].real(), sn = phasor_[i].imag();
-    d[c.axis] -= c.amplitude_over_w2 * cs;
-    d_dot[c.axis] += c.amplitude_over_w * sn;
-    d_ddot[c.axis] += c.amplitude_m_s2 * cs;
+    const int j = c.angular ? 1 : 0;
+    x[j][c.axis] -= c.amplitude_over_w2 * cs;
+    x_dot[j][c.axis] += c.amplitude_over_w * sn;
+    x_ddot[j][c.axis] += c.amplitude_m_s2 * cs;
   }
-  const std::vector<ScalePoint>& sc = spec_.random_linear->amplitude_scale;
-  if (sc.empty()) {
-    v.d += d;
-    v.d_dot += d_dot;
-    v.d_ddot += d_ddot;
-    return v;
-  }
-  // The scaled displacement s(t) d(t), differentiated exactly (product rule).
-  double s0, s1 = 0.0, s2 = 0.0;
-  const auto next = std::upper_bound(sc.begin(), sc.end(), t, [](double x, const ScalePoint& q) { return x < q.time_s; });
-  if (next == sc.begin()) {
-    s0 = sc.front().scale;
-  } else if (next == sc.end()) {
-    s0 = sc.back().scale;
-  } else {
-    const ScalePoint& a = *(next - 1);
-    const double span = next->time_s - a.time_s, u = (t - a.time_s) / span, ds = next->scale - a.scale;
-    // Smootherstep S(u) = 6u^5 - 15u^4 + 10u^3: S', S'' vanish at both ends.
-    s0 = a.scale + ds * u * u * u * (10.0 + u * (-15.0 + 6.0 * u));
-    s1 = ds / span * 30.0 * u * u * (1.0 - u) * (1.0 - u);
-    s2 = ds / (span * span) * 60.0 * u * (1.0 - u) * (1.0 - 2.0 * u);
-  }
-  v.d += s0 * d;
-  v.d_dot += s0 * d_dot + s1 * d;
-  v.d_ddot += s0 * d_ddot + 2.0 * s1 * d_dot + s2 * d;
+  // The scaled motion s(t) x(t), differentiated exactly (product rule).
+  const Scale sl = spec_.random_linear ? scale_at(spec_.random_linear->amplitude_scale, t) : Scale{};
+  const Scale sa = spec_.random_angular ? scale_at(spec_.random_angular->amplitude_scale, t) : Scale{};
+  v.d += sl.s0 * x[0];
+  v.d_dot += sl.s0 * x_dot[0] + sl.s1 * x[0];
+  v.d_ddot += sl.s0 * x_ddot[0] + 2.0 * sl.s1 * x_dot[0] + sl.s2 * x[0];
+  v.theta += sa.s0 * x[1];
+  v.theta_dot += sa.s0 * x_dot[1] + sa.s1 * x[1];
+  v.theta_ddot += sa.s0 * x_ddot[1] + 2.0 * sa.s1 * x_dot[1] + sa.s2 * x[1];
   return v;
 }
 

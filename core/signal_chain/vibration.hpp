@@ -16,8 +16,10 @@
 // engine harmonics: a shaft speed (constant or a piecewise-linear (time, rpm)
 // profile, plus a smooth seeded jitter), harmonic orders k with amplitude and
 // phase per axis; the shaft angle Phi(t) is the integral of the speed in
-// closed form; the random part optionally scaled over time. Shocks: half-sine or terminal-peak sawtooth acceleration
-// pulses (MIL-STD-810H Method 516.8 shapes) at given times, followed by a
+// closed form; the random part optionally scaled over time. Random angular
+// vibration likewise, from a one-sided angular-acceleration PSD. Shocks:
+// half-sine or terminal-peak sawtooth acceleration pulses (MIL-STD-810H
+// Method 516.8 shapes), linear and/or angular, at given times, followed by a
 // smooth return of the mount (below).
 //
 // Motion: the vibration displaces the body by d(t) and turns it by exp([th(t)])
@@ -55,6 +57,17 @@ struct PsdPoint {
   double g2_per_hz = 0.0;  // one-sided acceleration PSD, g^2/Hz (g = 9.80665 m/s^2)
 };
 
+// Random angular vibration: the same random-phase multisine, from a
+// one-sided PSD of angular acceleration ((rad/s^2)^2/Hz against Hz, log-log
+// between points); each component turns the mount by
+// theta = -(a / w^2) cos(w t + phase) about its axis, so the gyro sees
+// theta' (Eq. 3.59 through W(theta)) and the lever arm carries it into the
+// accelerometer.
+struct AngularPsdPoint {
+  double frequency_hz = 0.0;
+  double rad2_s4_per_hz = 0.0;
+};
+
 // A point of the random profile's scale over time.
 struct ScalePoint {
   double time_s = 0.0;
@@ -75,6 +88,14 @@ struct RandomVibration {
   // than the profile's lowest frequency. Constant before the first point and
   // after the last.
   std::vector<ScalePoint> amplitude_scale;
+};
+
+struct RandomAngularVibration {
+  std::vector<AngularPsdPoint> psd;     // increasing frequencies
+  Vec3 axis_scale = Vec3(1.0, 1.0, 1.0);  // PSD multiplier per body axis
+  double resolution_hz = 0.5;
+  std::uint64_t seed = 0;
+  std::vector<ScalePoint> amplitude_scale;  // as RandomVibration's
 };
 
 // Rotor or engine harmonics. The shaft turns at Omega(t) = 2 pi rpm(t) / 60
@@ -125,10 +146,15 @@ struct Rotor {
 // contributes nothing: the trajectory is the one without it.
 enum class ShockShape { half_sine, sawtooth };
 
+// An angular shock is the same pulse (and return) as an angular
+// acceleration per body axis, angular_peak_rad_s2: the mount turns by the
+// pulse's double integral and turns back over the return, so outside the
+// event the attitude is the one without it.
 struct Shock {
   double time_s = 0.0;
   ShockShape shape = ShockShape::half_sine;
   Vec3 peak_m_s2 = Vec3::Zero();
+  Vec3 angular_peak_rad_s2 = Vec3::Zero();
   double duration_s = 0.011;
   double return_s = 0.2;
 };
@@ -137,10 +163,13 @@ struct VibrationSpec {
   std::vector<Sinusoid> sinusoids;
   std::vector<Shock> shocks;
   std::optional<RandomVibration> random_linear;
+  std::optional<RandomAngularVibration> random_angular;
   std::vector<Rotor> rotors;
   Vec3 lever_arm_m = Vec3::Zero();   // the sensor relative to the vibration's reference point, body axes
   Mat3 sensor_to_body = Mat3::Identity();
-  bool empty() const { return sinusoids.empty() && !random_linear && rotors.empty() && shocks.empty(); }
+  bool empty() const {
+    return sinusoids.empty() && !random_linear && !random_angular && rotors.empty() && shocks.empty();
+  }
 };
 
 // th, d and their derivatives at one instant, body axes.
@@ -184,13 +213,20 @@ class Vibration {
 
  private:
   struct Component {
-    double w_rad_s, amplitude_m_s2, phase_rad;
+    double w_rad_s, amplitude_m_s2, phase_rad;  // amplitude: m/s^2, or rad/s^2 when angular
     int axis;
+    bool angular;
     double amplitude_over_w, amplitude_over_w2;  // velocity and displacement amplitudes
   };
   // e^{i phase} of every random component at t_cached_s (valid) and the
   // per-step rotation e^{i w step}.
   void random_phasors(double t_s) const;
+  // Validates one random profile (its PSD table times unit_si^2 is in SI
+  // units squared per Hz) and adds its components; label names it in errors.
+  void add_random(const std::string& label, const std::vector<PsdPoint>& psd, double unit_si,
+                  const Vec3& axis_scale,
+                  double resolution_hz, const std::vector<ScalePoint>& amplitude_scale, std::uint64_t seed,
+                  std::uint64_t device_hash, unsigned stream, bool angular);
   struct JitterComponent {
     double w_rad_s, amplitude_rad_s, phase_rad;
   };
