@@ -12,6 +12,7 @@
 
 #include "core/limits.hpp"
 #include "core/mounting.hpp"
+#include "core/signal_chain/signal_chain.hpp"
 #include "core/stream.hpp"
 #include "daemon/scene_runner.hpp"
 
@@ -173,7 +174,18 @@ SceneCheck check_scene(const SceneConfig& scene) {
                                  " Hz poses: below 100 Hz it needs the poses' own rates (pose datagram v2, MAVLink) "
                                  "to be accurate (docs/streaming.md \"Low-latency live input\")");
     }
-    c.cpu_fraction = static_cast<double>(imu.rate_hz) * kCpuSecondsPerSample;
+    double seconds_per_sample = kCpuSecondsPerSample;
+    if (!imu.error_model.chain.is_ideal()) {
+      // The parser resolved this chain at this rate already: it does not throw here.
+      const signal_chain::ResolvedChain chain = signal_chain::resolve(imu.error_model.chain, imu.rate_hz);
+      c.oversampling = chain.oversampling;
+      if (!imu.error_model.chain.vibration.empty())
+        c.vibration_components = signal_chain::Vibration(imu.error_model.chain.vibration, imu.name).random_components();
+      seconds_per_sample += chain.oversampling * (kCpuSecondsPerInternalSample +
+                                                  static_cast<double>(c.vibration_components) *
+                                                      kCpuSecondsPerVibrationComponentSample);
+    }
+    c.cpu_fraction = static_cast<double>(imu.rate_hz) * seconds_per_sample;
     const auto rate = static_cast<double>(imu.rate_hz);
     if (is_can_protocol(imu.protocol)) {
       const auto encoder = drivers::make_can_encoder(imu.protocol, imu.can_options);
@@ -254,7 +266,10 @@ std::string to_text(const SceneCheck& c) {
           << "): " << d.link->message << "\n";
     else
       out << "    link: no line rate (" << d.transport.substr(0, d.transport.find(' ')) << ")\n";
-    out << "    cpu ~" << fixed(100.0 * d.cpu_fraction, 2) << " % of one core\n";
+    out << "    cpu ~" << fixed(100.0 * d.cpu_fraction, 2) << " % of one core";
+    if (d.oversampling > 1 || d.vibration_components > 0)
+      out << " (signal chain at " << d.oversampling << "x, " << d.vibration_components << " random vibration components)";
+    out << "\n";
     for (std::size_t i = 0; i < d.error_model.size(); ++i)
       out << (i == 0 ? "    sensor model: " : "      ") << d.error_model[i] << "\n";
   }
@@ -264,7 +279,10 @@ std::string to_text(const SceneCheck& c) {
     out << ": " << fixed(100.0 * s.budget.load_fraction, 1) << " % (" << drivers::to_string(s.budget.verdict) << ")\n";
   }
   out << "  total: cpu ~" << fixed(100.0 * c.total_cpu_fraction, 2) << " % of one core (estimate: "
-      << kCpuSecondsPerSample * 1e6 << " us per sample per device, measured by bench/bench_stream); "
+      << kCpuSecondsPerSample * 1e6 << " us per sample per device, measured by bench/bench_stream, plus "
+      << kCpuSecondsPerInternalSample * 1e6 << " us per internal sample of a signal chain and "
+      << kCpuSecondsPerVibrationComponentSample * 1e9 << " ns per random vibration component per internal sample, "
+      << "bench/bench_signal_chain); "
       << "largest emission delay " << seconds_text(c.max_emission_delay_ns) << "\n";
   for (const std::string& w : c.warnings) out << "  warning: " << w << "\n";
   out << (c.refused ? "REFUSED: a link cannot carry its traffic\n" : "OK\n");
@@ -301,7 +319,9 @@ std::string to_json(const SceneCheck& c) {
            {"arrival_slack_ns", d.arrival_slack_ns},
            {"accel_error_1hz_with_rates", d.accel_error_1hz_with_rates},
            {"accel_error_1hz_estimated", d.accel_error_1hz_estimated},
-           {"cpu_fraction", d.cpu_fraction}};
+           {"cpu_fraction", d.cpu_fraction},
+           {"oversampling", d.oversampling},
+           {"vibration_components", d.vibration_components}};
     e["bytes_per_second"] = d.bytes_per_second ? json(*d.bytes_per_second) : json(nullptr);
     e["can_frames_per_second"] = d.can_frames_per_second ? json(*d.can_frames_per_second) : json(nullptr);
     e["link"] = d.link ? budget_json(*d.link) : json(nullptr);
@@ -312,7 +332,11 @@ std::string to_json(const SceneCheck& c) {
   for (const SceneCheck::SharedLink& s : c.shared_links)
     j["shared_links"].push_back(json{{"link", s.link}, {"devices", s.devices}, {"budget", budget_json(s.budget)}});
   j["total_cpu_fraction"] = c.total_cpu_fraction;
-  j["cpu_basis"] = "rate_hz x " + std::to_string(kCpuSecondsPerSample) + " s per sample per device (bench/bench_stream)";
+  j["cpu_basis"] = "rate_hz x (" + std::to_string(kCpuSecondsPerSample) +
+                   " s per sample per device (bench/bench_stream) + oversampling x (" +
+                   std::to_string(kCpuSecondsPerInternalSample) + " s + components x " +
+                   std::to_string(kCpuSecondsPerVibrationComponentSample) +
+                   " s) for a signal chain (bench/bench_signal_chain))";
   j["max_emission_delay_ns"] = c.max_emission_delay_ns;
   j["refused"] = c.refused;
   j["warnings"] = c.warnings;

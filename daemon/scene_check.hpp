@@ -19,6 +19,13 @@ namespace imuemu::scene {
 // sample at the default window. An estimate, not a guarantee: a wider window
 // or finite-difference derivatives cost more.
 inline constexpr double kCpuSecondsPerSample = 1e-6;
+// The signal chain's share (bench/bench_signal_chain.cpp, docs/signal-chain.md
+// "Cost"): per internal sample of a non-ideal chain (the icm42688p chain at
+// 8x: 2546 ns per output sample, / 8), and per random-vibration component per
+// internal sample (2883 components at 8x: 142 us per output sample). Without
+// them a vibrating 8 kHz chain was estimated at the ideal chain's 1 us.
+inline constexpr double kCpuSecondsPerInternalSample = 0.32e-6;
+inline constexpr double kCpuSecondsPerVibrationComponentSample = 6.2e-9;
 
 struct ImuCheck {
   std::string name;
@@ -40,7 +47,9 @@ struct ImuCheck {
   std::optional<double> bytes_per_second;     // byte-stream protocols: max_bytes_per_sample x rate
   std::optional<double> can_frames_per_second;
   std::optional<drivers::LinkBudget> link;    // serial and can transports (pty and null have no line rate)
-  double cpu_fraction = 0.0;             // of one core: rate x kCpuSecondsPerSample
+  double cpu_fraction = 0.0;             // of one core: rate x (kCpuSecondsPerSample + the chain's share)
+  int oversampling = 1;                  // the signal chain's internal rate / rate_hz
+  std::size_t vibration_components = 0;  // random vibration components (linear and angular)
   std::vector<std::string> error_model;  // each term with its discrete sigma at rate_hz (daemon/error_model_config.hpp)
 };
 

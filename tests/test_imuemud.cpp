@@ -220,7 +220,7 @@ class Imuemud : public ::testing::Test {
 const std::string kConfigDir = std::string(IMUEMU_SOURCE_DIR) + "/config/";
 
 TEST_F(Imuemud, CheckConfigPrintsTheDerivedFiguresOfEveryExampleScene) {
-  for (const char* scene : {"default", "bench-static", "car-urban", "aircraft-ecef-4h", "live-udp"}) {
+  for (const char* scene : {"default", "bench-static", "car-urban", "aircraft-ecef-4h", "live-udp", "multirotor-vibration"}) {
     const ProcessResult r = run_imuemud("--check-config " + kConfigDir + scene + ".toml");
     EXPECT_EQ(r.exit_code, 0) << scene << "\n" << r.output;
     EXPECT_NE(r.output.find(std::string("scene ") + scene), std::string::npos) << r.output;
