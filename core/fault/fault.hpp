@@ -34,7 +34,7 @@ enum class Kind : std::uint8_t {
   spikes,          // isolated spikes at a rate, of an amplitude
   saturation,      // forced to the range's limit (sign of the true value), saturated status
   slow,            // a lower output rate: the value changes only every `divisor`-th sample
-  intermittent,    // on/off pattern (on_ns, off_ns): the wrapped sensor fault, or `dead` when none
+  intermittent,    // on/off pattern (on_ns, off_ns) from the start: dead while on, untouched while off
   delayed,         // the value of delay_ns earlier (bounded history)
   plausible_drift, // a slowly growing bias below usual detection thresholds
   // Link and protocol faults: act on the encoder and the transport.
@@ -46,11 +46,11 @@ enum class Kind : std::uint8_t {
   bad_length,       // the length field disagrees with the payload
   sequence_jump,    // the protocol's counter jumps by sequence_step once
   sequence_reset,   // the protocol's counter restarts at 0
-  time_jump,        // the protocol's time field jumps by time_step_ns (and stays shifted)
-  time_freeze,      // the protocol's time field frozen
+  time_jump,        // the protocol's time field jumps by time_step_ns (stays shifted while the fault acts)
+  time_freeze,      // the protocol's time field frozen at the fault's first sample's
   babble,           // babble_factor frames per tick instead of one (bursts faster than the rate)
   silence,          // nothing sent (device off)
-  restart,          // device restart: silence for duration, then the start-up sequence, counters reset
+  restart,          // device restart: silence for duration, then the start-up sequence, counters reset (duration > 0)
   can_wrong_id,     // CAN: frames under a wrong identifier (can_id)
   can_missing_frame // CAN: one frame of a multi-frame transfer missing
 };
@@ -108,8 +108,42 @@ struct FaultSpec {
   std::string source = "scene";       // scene | random | control (ground truth says where it came from)
 };
 
+// The longest `delayed` fault any device takes (the history ring is sized
+// from it at construction: ceil(kMaxDelayNs x rate) samples, at most
+// kMaxDelaySamples; a faster device takes a proportionally shorter delay).
+inline constexpr TimeNs kMaxDelayNs = kNsPerSecond;
+inline constexpr std::uint32_t kMaxDelaySamples = 65'536;
+// Bounds validate() enforces (each keeps the per-sample cost bounded).
+inline constexpr std::uint32_t kMaxBurstSamples = 1000;   // drop bursts
+inline constexpr std::uint32_t kMaxBabbleFactor = 16;     // frames per tick
+inline constexpr std::uint32_t kMaxDivisor = 1'000'000;   // slow
+inline constexpr double kMaxNoiseFactor = 1000.0;         // noise_gain
+inline constexpr double kMaxSpikeRateHz = 1e6;
+
+// "plausible but wrong" defaults: a bias growing over 100 s to a value far
+// below what common autopilots flag. PX4's defaults (v1.14 parameter
+// reference): EKF2_GYR_B_LIM 0.15 rad/s and EKF2_ABL_LIM 0.4 m/s^2 (the
+// estimator's bias limits), COM_ARM_IMU_GYR 0.25 rad/s and COM_ARM_IMU_ACC
+// 0.7 m/s^2 (the inconsistency between IMUs that blocks arming). Here:
+// 0.5 deg/s (0.0087 rad/s, 17x below the smallest) and 20 mg (0.196 m/s^2,
+// 2x below), reached at 0.005 deg/s per s and 0.2 mg/s.
+inline constexpr double kPlausibleGyroBiasRadS = 0.5 * 3.14159265358979323846 / 180.0;
+inline constexpr double kPlausibleGyroRampRadS2 = 0.005 * 3.14159265358979323846 / 180.0;
+inline constexpr double kPlausibleAccelBiasMS2 = 0.020 * 9.80665;
+inline constexpr double kPlausibleAccelRampMS3 = 0.0002 * 9.80665;
+
+// A spec of `kind` with that kind's defaults filled in (what the scene and
+// the control socket start from before their keys override): probability 1
+// for the per-packet link faults (every packet of the fault's interval),
+// the plausible_drift numbers above, divisor 2, noise_factor 1, babble 2.
+FaultSpec default_spec(Kind kind);
+
 // Throws std::invalid_argument naming the field and what was expected.
 void validate(const FaultSpec& spec);
+
+// One line per fault for check-config, `imuemu fault list` and logs:
+// "bias_step gyro xyz at 10 s since start for 5 s: bias 0.01745 rad/s ...".
+std::string describe(const FaultSpec& spec);
 
 // The ground truth: a fault's first and last affected sample. Written as one
 // JSON line per event by the daemon (docs/faults.md).
