@@ -23,11 +23,18 @@
 #include <bit>
 #include <cmath>
 #include <cstdint>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
 #include <functional>
 #include <map>
 #include <set>
 #include <span>
 #include <vector>
+
+#include <unistd.h>
+
+#include <nlohmann/json.hpp>
 
 #include "drivers/link_fault.hpp"
 #include "drivers/protocols/dronecan.hpp"
@@ -328,8 +335,10 @@ TEST(LinkFaults, OutputNeverReallocatesOnceReserved) {
 // ============================================================== native
 
 class NativeFaults : public ::testing::Test {
- protected:
+ public:
   static constexpr std::array<std::uint8_t, 2> kSync{native::kSync0, native::kSync1};
+
+ protected:
   std::vector<Bytes> ref = run_stream_plain(native::Encoder(true));
   std::vector<Bytes> faulted(const ActionsOf& a) { return run_stream(native::Encoder(true), a); }
   Trace decode(const std::vector<Bytes>& ticks) {
@@ -499,8 +508,10 @@ TEST_F(NativeFaults, DropSilenceDuplicateAndBabble) {
 // ============================================================== MAVLink 2
 
 class MavlinkFaults : public ::testing::Test {
- protected:
+ public:
   static constexpr std::array<std::uint8_t, 1> kSync{mavlink2::kMagic};
+
+ protected:
   StreamEncoderOptions options = mavlink_options();
   std::vector<Bytes> ref = run_stream_plain(mavlink2::Encoder(options));
   std::vector<Bytes> faulted(const ActionsOf& a) { return run_stream(mavlink2::Encoder(options), a); }
@@ -615,11 +626,37 @@ TEST_F(MavlinkFaults, DropKeepsTheHeartbeatBabbleCountsOnDuplicateRepeats) {
                               {230, {0, 0, 0, 0, 0}}, {231, {0, 0, 0, 0, 0}}, {232, {1, 0, 0, 2, 0}}});
 }
 
+TEST_F(MavlinkFaults, EveryPacketOfTheSampleIsCorruptedWithHighresImuAlongside) {
+  StreamEncoderOptions both = mavlink_options();
+  both.mavlink_highres_imu = true;
+  both.mavlink_heartbeat = false;
+  mavlink2::Encoder enc(both);
+  Bytes out;
+  LinkActions a;
+  a.corrupt_checksum = true;
+  a.bad_length = true;
+  encode_with_link_faults(a, enc, sample_at(1), out);
+  mavlink2::Encoder plain(both);
+  Bytes ref_bytes;
+  plain.encode(sample_at(1), ref_bytes);
+  ASSERT_EQ(out.size(), ref_bytes.size());
+  const std::size_t first = mavlink_frame_bytes(ref_bytes, 0);
+  for (const std::size_t at : {std::size_t{0}, first}) {
+    const std::size_t n = mavlink_frame_bytes(ref_bytes, at);
+    EXPECT_EQ(out[at + 1], ref_bytes[at + 1] + 1) << at;
+    EXPECT_EQ(out[at + n - 2], static_cast<std::uint8_t>(~ref_bytes[at + n - 2])) << at;
+    EXPECT_EQ(out[at + n - 1], static_cast<std::uint8_t>(~ref_bytes[at + n - 1])) << at;
+    EXPECT_EQ(slice(out, at + 2, n - 4), slice(ref_bytes, at + 2, n - 4)) << at;
+  }
+}
+
 // ============================================================== MIP
 
 class MipFaults : public ::testing::Test {
- protected:
+ public:
   static constexpr std::array<std::uint8_t, 2> kSync{mip::kSync1, mip::kSync2};
+
+ protected:
   StreamEncoderOptions options{};
   std::vector<Bytes> ref = run_stream_plain(mip::Encoder(options));
   std::vector<Bytes> faulted(const ActionsOf& a) { return run_stream(mip::Encoder(options), a); }
@@ -665,6 +702,92 @@ TEST_F(MipFaults, RestartAndSequenceActionsChangeNothingOnTheWire) {
   });
   EXPECT_EQ(out, ref);
   EXPECT_FALSE(link_fault_support(mip::Encoder(options)).sequence);
+}
+
+// ============================================================== reference receiver
+
+// tests/support/protocol_reference.py's receiver (written from the specs)
+// over a whole stream, as JSON.
+nlohmann::json python_reference_decode(const std::string& protocol, const Bytes& stream) {
+  const std::filesystem::path file = std::filesystem::temp_directory_path() /
+                                     ("imuemu_link_faults_" + protocol + "_" + std::to_string(::getpid()) + ".bin");
+  {
+    std::ofstream f(file, std::ios::binary);
+    f.write(reinterpret_cast<const char*>(stream.data()), static_cast<std::streamsize>(stream.size()));
+  }
+  const std::string command = "/usr/bin/python3 " + std::string(IMUEMU_SOURCE_DIR) +
+                              "/tests/support/protocol_reference.py decode " + protocol + " " + file.string();
+  std::string text;
+  if (FILE* pipe = ::popen(command.c_str(), "r")) {
+    char buffer[4096];
+    std::size_t n = 0;
+    while ((n = std::fread(buffer, 1, sizeof buffer, pipe)) > 0) text.append(buffer, n);
+    EXPECT_EQ(::pclose(pipe), 0) << command;
+  }
+  std::filesystem::remove(file);
+  return nlohmann::json::parse(text);
+}
+
+// Every stream action at once on sync-free ticks (bit flips anywhere): the
+// project's decoder and the reference receiver must count the same.
+template <class Encoder>
+void expect_reference_receiver_agrees(const std::string& protocol, const Encoder& encoder,
+                                      std::span<const std::uint8_t> sync, StreamDecoder& decoder) {
+  const std::vector<Bytes> ref = run_stream_plain(encoder);
+  std::map<int, LinkActions> plan;
+  const std::vector<std::function<void(LinkActions&)>> faults = {
+      [](LinkActions& a) { a.corrupt_checksum = true; },  [](LinkActions& a) { a.bad_length = true; },
+      [](LinkActions& a) { a.truncate_bytes = 4; },       [](LinkActions& a) { a.drop = true; },
+      [](LinkActions& a) { a.copies = 2; },               [](LinkActions& a) { a.copies = 3; },
+      [](LinkActions& a) { a.silence = true; },           [](LinkActions& a) { a.sequence_step = 3; },
+      [](LinkActions& a) { a.sequence_reset = true; },    [](LinkActions& a) { a.restart = true; },
+      [](LinkActions& a) { a.bit_flips = 3; a.bit_error_seed = 77; },
+      [](LinkActions& a) { a.bit_flips = 1; a.bit_error_seed = 78; }};
+  int k = 3;
+  for (const auto& fault : faults) {
+    k = pick_tick(k, [&](int i) {
+      return !heartbeat_tick(i) && !heartbeat_tick(i + 1) && sync_free(ref[i], sync) && sync_free(ref[i + 1], sync);
+    });
+    fault(plan[k]);
+    k += 3;
+  }
+  ASSERT_EQ(plan.size(), faults.size());
+  const auto ticks = run_stream(encoder, [&](int i) {
+    const auto it = plan.find(i);
+    return it == plan.end() ? LinkActions{} : it->second;
+  });
+  Bytes stream;
+  for (const Bytes& t : ticks) stream.insert(stream.end(), t.begin(), t.end());
+  std::uint64_t samples = 0;
+  decoder.feed(stream, [&](const DecodedSample&) { ++samples; });
+  const DecoderCounters& c = decoder.counters();
+  const nlohmann::json reference = python_reference_decode(protocol, stream);
+  const nlohmann::json& rc = reference.at("counters");
+  EXPECT_EQ(rc.at("samples").get<std::uint64_t>(), samples) << protocol;
+  EXPECT_EQ(rc.at("frames").get<std::uint64_t>(), c.frames) << protocol;
+  EXPECT_EQ(rc.at("checksum_errors").get<std::uint64_t>(), c.checksum_errors) << protocol;
+  EXPECT_EQ(rc.at("other_errors").get<std::uint64_t>(), c.other_errors) << protocol;
+  EXPECT_EQ(rc.at("resync_bytes").get<std::uint64_t>(), c.resync_bytes) << protocol;
+  EXPECT_EQ(rc.at("sequence_gaps").get<std::uint64_t>(), c.sequence_gaps) << protocol;
+  // The faults did show: at least the checksum, length and truncation
+  // losses, and two extra samples from duplicate and babble.
+  EXPECT_GE(c.checksum_errors + c.other_errors, 3u) << protocol;
+  EXPECT_GT(c.resync_bytes, 0u) << protocol;
+}
+
+TEST(LinkFaults, ReferenceReceiverFromTheSpecsCountsWhatTheDecodersCount) {
+  {
+    native::Decoder d;
+    expect_reference_receiver_agrees("native", native::Encoder(true), NativeFaults::kSync, d);
+  }
+  {
+    mavlink2::Decoder d(mavlink_options());
+    expect_reference_receiver_agrees("mavlink2", mavlink2::Encoder(mavlink_options()), MavlinkFaults::kSync, d);
+  }
+  {
+    mip::Decoder d(StreamEncoderOptions{});
+    expect_reference_receiver_agrees("mip", mip::Encoder(StreamEncoderOptions{}), MipFaults::kSync, d);
+  }
 }
 
 // ============================================================== DroneCAN
@@ -855,6 +978,42 @@ TEST_F(DroneCanFaults, ChecksumFaultCoversEverySampleTransferButNotNodeStatus) {
   dronecan::DroneCanDecoder d(options);
   for (const CanFrame& f : many) d.feed(f, nullptr);
   EXPECT_EQ(d.counters().checksum_errors, 3u);
+}
+
+// A tail-byte transport whose sample is a single-frame transfer (no
+// transfer CRC): corrupt_checksum sets the toggle bit, which a first frame
+// must have clear (DroneCAN spec 4.1).
+class SingleFrameTailEncoder final : public CanEncoder {
+ public:
+  std::string name() const override { return "single-frame"; }
+  void encode(const ImuFrameInput&, std::vector<CanFrame>& out) override {
+    CanFrame f;
+    f.id = dronecan::message_can_id(24, dronecan::kNodeStatusDataTypeId, 42);
+    f.extended = true;
+    f.len = 8;
+    f.data[7] = static_cast<std::uint8_t>(0xC0 | (transfer_id_++ & 0x1F));
+    out.push_back(f);
+  }
+  bool frames_have_tail_byte() const override { return true; }
+
+ private:
+  std::uint8_t transfer_id_ = 0;
+};
+
+TEST(LinkFaults, SingleFrameTransferChecksumFaultSetsTheToggleBit) {
+  SingleFrameTailEncoder enc;
+  Frames out;
+  encode_with_link_faults(LinkActions{}, enc, sample_at(0), out);
+  LinkActions a;
+  a.corrupt_checksum = true;
+  encode_with_link_faults(a, enc, sample_at(1), out);
+  ASSERT_EQ(out.size(), 2u);
+  EXPECT_EQ(out[0].data[7], 0xC0);
+  EXPECT_EQ(out[1].data[7], 0xE1);  // start, end, toggle, transfer id 1
+  dronecan::DroneCanDecoder d;
+  for (const CanFrame& f : out) d.feed(f, nullptr);
+  EXPECT_EQ(d.detail().bad_toggle, 1u);
+  EXPECT_EQ(d.counters().frames, 1u);
 }
 
 // ============================================================== J1939
