@@ -24,10 +24,12 @@
 #include <cmath>
 #include <cstdint>
 #include <cstdio>
+#include <cstdlib>
 #include <filesystem>
 #include <fstream>
 #include <functional>
 #include <map>
+#include <new>
 #include <set>
 #include <span>
 #include <vector>
@@ -43,6 +45,27 @@
 #include "drivers/protocols/mip.hpp"
 #include "drivers/protocols/native.hpp"
 #include "drivers/protocols/stream_protocols.hpp"
+
+// The replaced operator new / delete below pair malloc with free; GCC
+// cannot see that through the replacement and warns where it inlines them.
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
+#endif
+
+// Heap allocations of this thread while counting (the emission thread must
+// not allocate: encode_with_link_faults is checked with it below).
+namespace {
+thread_local bool g_count_allocations = false;
+thread_local std::size_t g_allocations = 0;
+}  // namespace
+
+void* operator new(std::size_t bytes) {
+  if (g_count_allocations) ++g_allocations;
+  if (void* p = std::malloc(bytes == 0 ? 1 : bytes)) return p;
+  throw std::bad_alloc();
+}
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
 
 using namespace imuemu;
 using namespace imuemu::drivers;
@@ -330,6 +353,65 @@ TEST(LinkFaults, OutputNeverReallocatesOnceReserved) {
     encode_with_link_faults(a, can, sample_at(k), frames);
   }
   EXPECT_EQ(frames.data(), fdata);
+}
+
+// Every action, varied tick by tick, after a warm-up that grew the output:
+// no heap allocation at all, for every protocol.
+LinkActions varied_actions(int k) {
+  LinkActions a;
+  a.copies = static_cast<std::uint8_t>(k % 7);
+  a.restart = k % 37 == 0;
+  a.drop = k % 11 == 0;
+  a.silence = k % 13 == 0;
+  a.corrupt_checksum = k % 3 == 0;
+  a.bad_length = k % 5 == 0;
+  a.truncate_bytes = static_cast<std::uint32_t>(k % 4);
+  a.bit_flips = static_cast<std::uint32_t>(k % 6);
+  a.bit_error_seed = static_cast<std::uint64_t>(k);
+  a.sequence_step = k % 17 == 0 ? 3 : 0;
+  a.sequence_reset = k % 19 == 0;
+  a.can_wrong_id = k % 23 == 0;
+  a.can_id = 0x321;
+  a.can_missing_frame = k % 29 == 0;
+  return a;
+}
+
+template <class Encoder, class Out>
+std::size_t allocations_after_warm_up(Encoder encoder, Out& out) {
+  for (int k = 0; k < kTicks; ++k) {
+    out.clear();
+    encode_with_link_faults(varied_actions(k), encoder, sample_at(k), out);
+  }
+  g_allocations = 0;
+  g_count_allocations = true;
+  for (int k = kTicks; k < 2 * kTicks; ++k) {
+    out.clear();
+    encode_with_link_faults(varied_actions(k), encoder, sample_at(k), out);
+  }
+  g_count_allocations = false;
+  return g_allocations;
+}
+
+TEST(LinkFaults, NoHeapAllocationOnTheEmissionPathAfterWarmUp) {
+  StreamEncoderOptions both = mavlink_options();
+  both.mavlink_highres_imu = true;
+  Bytes bytes;
+  bytes.reserve(link_fault_reserve(mavlink2::Encoder(both), 6));
+  EXPECT_EQ(allocations_after_warm_up(native::Encoder(true), bytes), 0u);
+  EXPECT_EQ(allocations_after_warm_up(mavlink2::Encoder(both), bytes), 0u);
+  EXPECT_EQ(allocations_after_warm_up(mip::Encoder(StreamEncoderOptions{}), bytes), 0u);
+  Frames frames;
+  frames.reserve(link_fault_reserve_can_frames(6));
+  EXPECT_EQ(allocations_after_warm_up(dronecan::DroneCanEncoder(), frames), 0u);
+  j1939::J1939Options jo;
+  jo.send_slope = true;
+  EXPECT_EQ(allocations_after_warm_up(j1939::J1939Encoder(jo), frames), 0u);
+  // The counter does count: a vector that grows is seen.
+  g_allocations = 0;
+  g_count_allocations = true;
+  { std::vector<int> grows(100); (void)grows; }
+  g_count_allocations = false;
+  EXPECT_EQ(g_allocations, 1u);
 }
 
 // ============================================================== native
