@@ -247,8 +247,9 @@ std::size_t link_fault_reserve(const StreamEncoder& encoder, std::uint32_t max_c
 }
 
 std::size_t link_fault_reserve_can_frames(std::uint32_t max_copies) {
-  // DroneCAN: a RawIMU transfer is at most 7 frames at 47 bytes (16 with a
-  // full covariance), NodeStatus 1; J1939: 3 frames + 1 address claim.
+  // DroneCAN: the RawIMU transfer the encoder sends is 7 frames (47 bytes,
+  // no covariance), NodeStatus 1; J1939: 3 frames, Address Claimed 1. 16
+  // frames per copy leaves room for both.
   constexpr std::size_t kFramesPerSampleMax = 16;
   const std::size_t copies = std::max<std::uint32_t>(max_copies, 2);
   return (copies + 2) * kFramesPerSampleMax;
