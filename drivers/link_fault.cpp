@@ -16,8 +16,7 @@ namespace {
 constexpr std::uint64_t kGoldenGamma = 0x9E3779B97F4A7C15ULL;
 constexpr std::uint32_t kStandardIdMax = 0x7FF;
 constexpr std::uint32_t kExtendedIdMask = 0x1FFFFFFFu;
-// DroneCAN tail byte (specification 4.1): start, end, toggle, transfer id.
-constexpr std::uint8_t kTailStart = 0x80;
+// DroneCAN tail byte (specification 4.1): start 0x80, end, toggle, transfer id.
 constexpr std::uint8_t kTailEnd = 0x40;
 constexpr std::uint8_t kTailToggle = 0x20;
 
