@@ -1133,8 +1133,11 @@ TEST_F(J1939Faults, TruncationWrongIdRestartAndUnsupportedActions) {
     a.restart = i == 70;
     a.corrupt_checksum = i == 80;   // J1939 frames carry no checksum: nothing
     a.sequence_step = i == 90 ? 4 : 0;  // nor a counter
+    a.bit_flips = i == 95 ? 7 : 0;      // the controller's CRC and retransmission hide bit errors
+    a.bit_error_seed = 3;
     return a;
   });
+  EXPECT_TRUE(same_frames(out[95], ref[95]));
   for (const CanFrame& f : out[50]) EXPECT_EQ(f.len, 6);
   for (const CanFrame& f : out[60]) {
     EXPECT_EQ(f.id, 0x7FFu);
