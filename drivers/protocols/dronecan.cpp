@@ -8,6 +8,8 @@
 #include <limits>
 #include <stdexcept>
 
+#include "core/time_arith.hpp"
+
 namespace imuemu::drivers::dronecan {
 
 namespace {
@@ -26,6 +28,9 @@ constexpr std::size_t kRawImuMaxPayloadBytes = kRawImuPayloadBytes + 2 * kRawImu
 // DSDL bit-level serialisation as libcanard's canardEncodeScalar does it: the
 // value's little-endian bytes, the bits of a trailing partial byte moved to
 // the top of that byte, copied into the stream most significant bit first.
+// Into a fixed buffer (the largest payload here, RawIMU with a full
+// covariance): the encoder runs on the emission thread, which never
+// allocates.
 class BitWriter {
  public:
   void put(std::uint64_t value, unsigned bit_length) {
@@ -37,15 +42,16 @@ class BitWriter {
     for (unsigned i = 0; i < bit_length; ++i) put_bit(((le[i / 8] >> (7 - i % 8)) & 1u) != 0);
   }
   void put_float32(float value) { put(std::bit_cast<std::uint32_t>(value), 32); }
-  std::vector<std::uint8_t> take() { return std::move(bytes_); }
+  std::span<const std::uint8_t> bytes() const { return {bytes_.data(), (bit_count_ + 7) / 8}; }
 
  private:
   void put_bit(bool bit) {
-    if (bit_count_ % 8 == 0) bytes_.push_back(0);
-    if (bit) bytes_.back() = static_cast<std::uint8_t>(bytes_.back() | (0x80u >> (bit_count_ % 8)));
+    if (bit_count_ >= bytes_.size() * 8) return;  // never: every message here fits
+    if (bit_count_ % 8 == 0) bytes_[bit_count_ / 8] = 0;
+    if (bit) bytes_[bit_count_ / 8] = static_cast<std::uint8_t>(bytes_[bit_count_ / 8] | (0x80u >> (bit_count_ % 8)));
     ++bit_count_;
   }
-  std::vector<std::uint8_t> bytes_;
+  std::array<std::uint8_t, kRawImuMaxPayloadBytes> bytes_{};
   std::size_t bit_count_ = 0;
 };
 
@@ -104,11 +110,14 @@ void append_transfer(std::vector<CanFrame>& out, std::uint32_t can_id, std::uint
     return;
   }
   const std::uint16_t crc = transfer_crc(signature, payload);
-  std::vector<std::uint8_t> stream;
-  stream.reserve(payload.size() + 2);
-  stream.push_back(static_cast<std::uint8_t>(crc & 0xFF));  // CRC little-endian, first frame
-  stream.push_back(static_cast<std::uint8_t>(crc >> 8));
-  stream.insert(stream.end(), payload.begin(), payload.end());
+  // CRC little-endian in the first frame, then the payload (a fixed buffer:
+  // no allocation on the emission thread).
+  std::array<std::uint8_t, 2 + kRawImuMaxPayloadBytes> buffer{};
+  const std::size_t stream_bytes = std::min(buffer.size(), payload.size() + 2);
+  buffer[0] = static_cast<std::uint8_t>(crc & 0xFF);
+  buffer[1] = static_cast<std::uint8_t>(crc >> 8);
+  std::copy_n(payload.begin(), stream_bytes - 2, buffer.begin() + 2);
+  const std::span<const std::uint8_t> stream(buffer.data(), stream_bytes);
   bool toggle = false;  // DroneCAN (v0): 0 in the first frame
   for (std::size_t offset = 0; offset < stream.size();) {
     const std::size_t n = std::min(kFramePayloadBytes, stream.size() - offset);
@@ -257,13 +266,19 @@ std::uint64_t raw_imu_timestamp_usec(TimeNs t_ns, TimeNs timestamp_offset_ns) {
   return std::max<std::uint64_t>(usec & ((std::uint64_t{1} << 56) - 1), kRawImuEarliestKnownUsec);
 }
 
-RawImuPayload serialize_raw_imu(const ImuFrameInput& sample, const DroneCanOptions& options) {
-  RawImuPayload result;
+namespace {
+
+struct ClipCounts {
+  unsigned saturated_values = 0;
+  unsigned non_finite_values = 0;
+};
+
+ClipCounts write_raw_imu(BitWriter& writer, const ImuFrameInput& sample, const DroneCanOptions& options) {
+  ClipCounts result;
   auto count = [&result](WireClip clip) {
     if (clip == WireClip::kSaturated) ++result.saturated_values;
     if (clip == WireClip::kNotFinite) ++result.non_finite_values;
   };
-  BitWriter writer;
 
   // uavcan.Timestamp: truncated uint56 usec, where 0 is UNKNOWN (Timestamp
   // DSDL "uint56 UNKNOWN = 0"). The sample time is always known, so it is
@@ -304,7 +319,18 @@ RawImuPayload serialize_raw_imu(const ImuFrameInput& sample, const DroneCanOptio
   put_float32_vector(sample.delta_velocity_m_s);
   // float16[<=36] covariance: empty, and as the last field of the top-level
   // type it has no length prefix (tail array optimisation): nothing to write.
-  result.bytes = writer.take();
+  return result;
+}
+
+}  // namespace
+
+RawImuPayload serialize_raw_imu(const ImuFrameInput& sample, const DroneCanOptions& options) {
+  BitWriter writer;
+  const ClipCounts counts = write_raw_imu(writer, sample, options);
+  RawImuPayload result;
+  result.bytes.assign(writer.bytes().begin(), writer.bytes().end());
+  result.saturated_values = counts.saturated_values;
+  result.non_finite_values = counts.non_finite_values;
   return result;
 }
 
@@ -319,7 +345,8 @@ void DroneCanEncoder::note_time(TimeNs t_ns) {
 
 void DroneCanEncoder::encode(const ImuFrameInput& sample, std::vector<CanFrame>& out) {
   note_time(sample.t_ns);
-  const RawImuPayload payload = serialize_raw_imu(sample, options_);
+  BitWriter writer;
+  const ClipCounts payload = write_raw_imu(writer, sample, options_);
   saturated_values_ += payload.saturated_values;
   non_finite_values_ += payload.non_finite_values;
   status_since_node_status_ |= sample.status;
@@ -327,7 +354,7 @@ void DroneCanEncoder::encode(const ImuFrameInput& sample, std::vector<CanFrame>&
   if (payload.non_finite_values > 0 || (sample.status & kStatusFault) != 0) fault_since_node_status_ = true;
 
   append_transfer(out, message_can_id(options_.raw_imu_priority, kRawImuDataTypeId, options_.node_id),
-                  kRawImuSignature, payload.bytes, raw_imu_transfer_id_);
+                  kRawImuSignature, writer.bytes(), raw_imu_transfer_id_);
   raw_imu_transfer_id_ = static_cast<std::uint8_t>((raw_imu_transfer_id_ + 1) & kTransferIdMask);
 }
 
@@ -335,7 +362,28 @@ void DroneCanEncoder::periodic(TimeNs now_ns, std::vector<CanFrame>& out) {
   note_time(now_ns);
   if (now_ns < next_node_status_ns_) return;
 
-  const TimeNs uptime_ns = now_ns - start_ns_;
+  append_node_status(now_ns, NodeMode::kOperational, out);
+
+  // Next due: the first whole period after start that is later than now (a
+  // long pause sends one NodeStatus, not a burst of missed ones).
+  const TimeNs periods = saturating_sub_ns(now_ns, start_ns_) / options_.node_status_period_ns + 1;
+  next_node_status_ns_ = saturating_add_ns(start_ns_, saturating_mul_ns(options_.node_status_period_ns, periods));
+}
+
+void DroneCanEncoder::restart(TimeNs now_ns, std::vector<CanFrame>& out) {
+  raw_imu_transfer_id_ = 0;
+  node_status_transfer_id_ = 0;
+  started_ = true;
+  start_ns_ = now_ns;
+  status_since_node_status_ = 0;
+  saturated_since_node_status_ = false;
+  fault_since_node_status_ = false;
+  append_node_status(now_ns, NodeMode::kInitialization, out);
+  next_node_status_ns_ = saturating_add_ns(now_ns, options_.node_status_period_ns);
+}
+
+void DroneCanEncoder::append_node_status(TimeNs now_ns, NodeMode mode, std::vector<CanFrame>& out) {
+  const TimeNs uptime_ns = std::max<TimeNs>(0, saturating_sub_ns(now_ns, start_ns_));
   const auto uptime_sec = static_cast<std::uint64_t>(uptime_ns / kNsPerSecond);
   NodeHealth health = NodeHealth::kOk;
   if (saturated_since_node_status_) health = NodeHealth::kWarning;
@@ -344,18 +392,13 @@ void DroneCanEncoder::periodic(TimeNs now_ns, std::vector<CanFrame>& out) {
   BitWriter writer;
   writer.put(std::min<std::uint64_t>(uptime_sec, std::numeric_limits<std::uint32_t>::max()), 32);
   writer.put(static_cast<std::uint64_t>(health), 2);
-  writer.put(static_cast<std::uint64_t>(NodeMode::kOperational), 3);
+  writer.put(static_cast<std::uint64_t>(mode), 3);
   writer.put(0, 3);  // sub_mode: "keep zero when publishing"
   writer.put(status_since_node_status_ & 0xFFFFu, 16);
-  const std::vector<std::uint8_t> payload = writer.take();
+  const std::span<const std::uint8_t> payload = writer.bytes();
   append_transfer(out, message_can_id(options_.node_status_priority, kNodeStatusDataTypeId, options_.node_id),
                   kNodeStatusSignature, payload, node_status_transfer_id_);
   node_status_transfer_id_ = static_cast<std::uint8_t>((node_status_transfer_id_ + 1) & kTransferIdMask);
-
-  // Next due: the first whole period after start that is later than now (a
-  // long pause sends one NodeStatus, not a burst of missed ones).
-  const TimeNs periods = uptime_ns / options_.node_status_period_ns + 1;
-  next_node_status_ns_ = start_ns_ + periods * options_.node_status_period_ns;
   status_since_node_status_ = 0;
   saturated_since_node_status_ = false;
   fault_since_node_status_ = false;

@@ -8,6 +8,11 @@ manual section 6.4 states it. Run it to re-derive every constant the C++ test
 hard-codes:
 
     python3 tests/support/protocol_reference.py
+
+and, as a reference receiver of a captured stream (counters as JSON; used by
+tests/test_link_faults.cpp to check link faults):
+
+    python3 tests/support/protocol_reference.py decode native|mavlink2|mip FILE
 """
 import struct
 
@@ -104,6 +109,141 @@ def mavlink2_frame(seq, sysid, compid, msgid, payload: bytes, extra: int) -> byt
 def hexs(b: bytes) -> str:
     return " ".join(f"{x:02X}" for x in b)
 
+
+# ---------------------------------------------------------------- receiving
+#
+# A reference receiver for the three byte-stream protocols, to check what
+# link faults (docs/faults.md) put on the wire. The resynchronisation rule is
+# the one docs/native-protocol.md section 6 states (search the start-of-frame
+# pattern, count skipped bytes; a rejected candidate gives up only its first
+# byte), applied to all three; the frame checks are each protocol's own:
+#  native  (docs/native-protocol.md 1, 2, 6): version 1, no reserved flag,
+#          payload_length 68 or 116 else malformed; CRC-32C; sequence gaps
+#          modulo 2^64, a step back re-bases without counting;
+#  mavlink2 (guide "Packet Serialization"): magic 0xFD, incompat_flags 0 or
+#          SIGNED, a message whose CRC_EXTRA is known (derived above) else
+#          malformed, X.25 CRC over bytes 1.. plus CRC_EXTRA; seq gaps modulo
+#          256 per (sysid, compid), a repeated seq is no gap;
+#  mip     (3DM-GX5 DCP 6.3, 6.4): 0x75 0x65, descriptor set, payload length,
+#          Fletcher checksum; no counter.
+# A sample is a native frame, a MAVLink HIL_SENSOR (or `sample_msgid`), a
+# MIP packet of set 0x80 with a scaled accel or gyro field.
+
+_MAVLINK_EXTRA = {0: crc_extra("HEARTBEAT", HEARTBEAT), 105: crc_extra("HIGHRES_IMU", HIGHRES_IMU),
+                  107: crc_extra("HIL_SENSOR", HIL_SENSOR)}
+
+
+def _judge_native(c, state):
+    if len(c) < 6:
+        return "more", 0
+    length = c[4] | c[5] << 8
+    if c[2] != 1 or (c[3] & ~1) != 0 or length != (116 if c[3] & 1 else 68):
+        return "malformed", 0
+    total = 6 + length + 4
+    if len(c) < total:
+        return "more", 0
+    if crc32c(bytes(c[:6 + length])) != struct.unpack_from("<I", c, 6 + length)[0]:
+        return "checksum", 0
+    seq, t_ns = struct.unpack_from("<Qq", c, 6)
+    last = state.get("last")
+    if last is not None:
+        step = (seq - last) % (1 << 64)
+        if 1 <= step < (1 << 63):
+            state["counters"]["sequence_gaps"] += step - 1
+    state["last"] = seq
+    state["samples"].append({"sequence": seq, "t_ns": t_ns})
+    return "accepted", total
+
+
+def _judge_mavlink(c, state):
+    if len(c) < 10:
+        return "more", 0
+    incompat = c[2]
+    msgid = c[7] | c[8] << 8 | c[9] << 16
+    if incompat & ~1 or msgid not in _MAVLINK_EXTRA:
+        return "malformed", 0
+    total = 10 + c[1] + 2 + (13 if incompat & 1 else 0)
+    if len(c) < total:
+        return "more", 0
+    if crc16_mcrf4xx(bytes(c[1:10 + c[1]]) + bytes([_MAVLINK_EXTRA[msgid]])) != \
+            struct.unpack_from("<H", c, 10 + c[1])[0]:
+        return "checksum", 0
+    key = (c[5], c[6])
+    last = state.setdefault("last", {}).get(key)
+    if last is not None:
+        step = (c[4] - last) % 256
+        if step:
+            state["counters"]["sequence_gaps"] += step - 1
+    state["last"][key] = c[4]
+    if msgid == state.get("sample_msgid", 107):
+        payload = bytes(c[10:10 + c[1]]) + bytes(64)  # zero-extend a truncated payload
+        state["samples"].append({"sequence": c[4], "t_ns": struct.unpack_from("<Q", payload, 0)[0] * 1000})
+    return "accepted", total
+
+
+def _judge_mip(c, state):
+    if len(c) < 4:
+        return "more", 0
+    total = 4 + c[3] + 2
+    if len(c) < total:
+        return "more", 0
+    if mip_fletcher(bytes(c[:4 + c[3]])) != struct.unpack_from(">H", c, 4 + c[3])[0]:
+        return "checksum", 0
+    if c[2] == 0x80:
+        at, fields = 4, set()
+        while at + 1 < 4 + c[3] and c[at] >= 2:
+            fields.add(c[at + 1])
+            at += c[at]
+        if fields & {0x04, 0x05}:
+            state["samples"].append({"sequence": None, "t_ns": None})
+    return "accepted", total
+
+
+_RECEIVERS = {"native": (b"\xA5\x5A", _judge_native), "mavlink2": (b"\xFD", _judge_mavlink),
+              "mip": (b"\x75\x65", _judge_mip)}
+
+
+def reference_decode(protocol: str, data: bytes, sample_msgid: int = 107):
+    """Counters (frames, samples, checksum_errors, resync_bytes,
+    sequence_gaps, other_errors) and the accepted samples of a whole stream;
+    bytes of an incomplete frame at the end are left out of every count."""
+    sync, judge = _RECEIVERS[protocol]
+    counters = dict(frames=0, samples=0, checksum_errors=0, resync_bytes=0, sequence_gaps=0, other_errors=0)
+    state = {"counters": counters, "samples": [], "sample_msgid": sample_msgid}
+    pos, n = 0, len(data)
+    while pos < n:
+        start = pos
+        while start < n and not sync.startswith(data[start:start + len(sync)]):
+            start += 1
+        counters["resync_bytes"] += start - pos
+        pos = start
+        if pos >= n:
+            break
+        verdict, length = judge(memoryview(data)[pos:], state)
+        if verdict == "more":
+            break
+        if verdict == "accepted":
+            counters["frames"] += 1
+            pos += length
+            continue
+        counters["checksum_errors" if verdict == "checksum" else "other_errors"] += 1
+        counters["resync_bytes"] += 1
+        pos += 1
+    counters["samples"] = len(state["samples"])
+    return counters, state["samples"]
+
+
+if __name__ == "__main__" and len(__import__("sys").argv) > 1:
+    # protocol_reference.py decode PROTOCOL FILE [SAMPLE_MSGID]: the receiver
+    # above over a captured stream, as JSON.
+    import json
+    import sys
+    if len(sys.argv) < 4 or sys.argv[1] != "decode":
+        sys.exit("usage: protocol_reference.py [decode native|mavlink2|mip FILE [SAMPLE_MSGID]]")
+    with open(sys.argv[3], "rb") as f:
+        counters, samples = reference_decode(sys.argv[2], f.read(), int(sys.argv[4]) if len(sys.argv) > 4 else 107)
+    print(json.dumps({"counters": counters, "samples": samples}))
+    sys.exit(0)
 
 if __name__ == "__main__":
     print(f"CRC-16/MCRF4XX('123456789') = 0x{crc16_mcrf4xx(b'123456789'):04X}")
