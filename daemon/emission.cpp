@@ -27,6 +27,7 @@
 #include "core/earth.hpp"
 #include "core/stream.hpp"
 #include "core/time_arith.hpp"
+#include "drivers/queued_writer.hpp"
 #include "drivers/socketcan.hpp"
 #include "io/pose_source.hpp"
 
@@ -567,6 +568,11 @@ void EmissionEngine::Impl::record_fault(const char* thread, const char* what) no
 // closing its devices): it is recorded, both threads stop, and the daemon
 // stops the scene with the message and a failure exit code.
 void EmissionEngine::Impl::run_producer() noexcept {
+  if (live_input() && options.realtime.priority > 1) {  // see start(); refused: the emission thread's note says why
+    sched_param sp{};
+    sp.sched_priority = options.realtime.priority - 1;
+    (void)pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp);
+  }
   try {
     producer_loop();
   } catch (const std::exception& e) {
@@ -835,6 +841,10 @@ void EmissionEngine::start() {
       m.memory_locked = true;
     }
   }
+  // The transports' writer threads one step below the emission thread
+  // (issue 17: under load, a normal-priority writer delayed bytes the
+  // emission thread had queued on time); 0 restores normal scheduling.
+  drivers::set_writer_threads_realtime_priority(m.options.realtime.priority > 1 ? m.options.realtime.priority - 1 : 0);
   if (!m.live_input()) {
     // Every pose is here: fill the rings before the clock starts, so the
     // first tick can be due right away (start_lead_ns).
@@ -848,6 +858,15 @@ void EmissionEngine::start() {
     m.mapping_ready.store(true, std::memory_order_release);
   } else {
     m.options.source->start();
+    // Live input with SCHED_FIFO: the pose source's thread and the producer
+    // (run_producer) one step below the emission thread, so that under load
+    // a pose is read, taken and computed into its ticks when it arrives
+    // (issue 17); the emission thread, microseconds per tick, stays first.
+    if (m.options.realtime.priority > 1) {
+      const std::string refused = m.options.source->set_realtime_priority(m.options.realtime.priority - 1);
+      if (!refused.empty())
+        m.realtime_note += (m.realtime_note.empty() ? "" : "; ") + std::string("pose source SCHED_FIFO refused: ") + refused;
+    }
   }
   std::promise<std::string> setup;
   auto setup_result = setup.get_future();

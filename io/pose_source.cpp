@@ -2,10 +2,13 @@
 // counters, pacing and backpressure; and the file replay source.
 #include "io/pose_source.hpp"
 
+#include <pthread.h>
+#include <sched.h>
 #include <time.h>
 
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <limits>
 #include <numeric>
 #include <stdexcept>
@@ -185,6 +188,14 @@ void PoseSource::mark_finished() noexcept {
     queue_.wake_consumer();
   } catch (...) {  // std::system_error from the mutex: the consumer's own deadline still comes
   }
+}
+
+std::string PoseSource::set_realtime_priority(int priority) {
+  if (!thread_.joinable()) return "the source is not started";
+  sched_param sp{};
+  sp.sched_priority = priority;
+  const int rc = pthread_setschedparam(thread_.native_handle(), SCHED_FIFO, &sp);
+  return rc == 0 ? std::string() : std::string(std::strerror(rc));
 }
 
 std::string PoseSource::failure() const {

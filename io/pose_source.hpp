@@ -190,6 +190,11 @@ class PoseSource {
 
   void start();  // once
   void stop();   // idempotent; joins the thread, then logs suppressed counts
+  // After start(): runs the source's thread under SCHED_FIFO at this
+  // priority (1..99), so a pose is read and queued when it arrives however
+  // busy the host (issue 17). "" when granted, else why not (the thread
+  // keeps its scheduling).
+  std::string set_realtime_priority(int priority);
 
   PoseQueue& queue() noexcept { return queue_; }
   PoseSourceCounters counters() const;

@@ -30,6 +30,8 @@
 #include <fcntl.h>
 #include <netinet/in.h>
 #include <poll.h>
+#include <pthread.h>
+#include <sched.h>
 #include <signal.h>
 #include <sys/socket.h>
 #include <sys/wait.h>
@@ -149,6 +151,13 @@ class Daemon {
     }
   }
   bool ok() const { return fd_ >= 0; }
+  // The reader thread under SCHED_FIFO (the bench's RT rows: the measuring
+  // side wakes as promptly as imuemud's threads). True when granted.
+  bool set_reader_priority(int priority) {
+    sched_param sp{};
+    sp.sched_priority = priority;
+    return reader_.joinable() && ::pthread_setschedparam(reader_.native_handle(), SCHED_FIFO, &sp) == 0;
+  }
   std::string log() const {
     std::ifstream in(dir_ / "log");
     std::stringstream s;
@@ -465,6 +474,16 @@ int run_latency(const char* imuemud, double pose_hz, std::int64_t rate_hz, doubl
     return 1;
   }
   Sender sender(port);
+  // RT rows: the simulator's sending thread (this one) and the pty reader
+  // under SCHED_FIFO as well, so the instrument's own wake-ups do not add a
+  // loaded host's delays to what is measured. Restored before returning.
+  bool bench_realtime = false;
+  if (realtime_priority > 0) {
+    sched_param sp{};
+    sp.sched_priority = realtime_priority;
+    bench_realtime = ::pthread_setschedparam(::pthread_self(), SCHED_FIFO, &sp) == 0 &&
+                     daemon.set_reader_priority(realtime_priority);
+  }
   const auto h_ns = static_cast<TimeNs>(std::llround(1e9 / pose_hz));
   const std::uint64_t base_us = 1'000'000;
   std::vector<TimeNs> pose_t, sent;
@@ -482,6 +501,10 @@ int run_latency(const char* imuemud, double pose_hz, std::int64_t rate_hz, doubl
     pose_t.push_back(t_ns);
   }
   std::this_thread::sleep_for(std::chrono::milliseconds(static_cast<int>(budget_ms) + 100));
+  if (realtime_priority > 0) {
+    sched_param normal{};
+    ::pthread_setschedparam(::pthread_self(), SCHED_OTHER, &normal);
+  }
   const double load_after = load_average();
   const std::vector<Sample> samples = daemon.samples();
   // Which flagged samples blend back (they read the newest pose) rather than
@@ -532,12 +555,13 @@ int run_latency(const char* imuemud, double pose_hz, std::int64_t rate_hz, doubl
   const double goal_ms = 1e3 / pose_hz + 1.0;
   const std::optional<nlohmann::json> engine = daemon.engine_status();
   std::printf("end-to-end latency, pose datagram sent -> first dependent sample read from the pty\n");
-  std::printf("poses %.0f Hz, output %lld Hz, budget %.1f ms, realtime priority %d (granted: %s%s%s), load average %.2f "
-              "before, %.2f after\n",
+  std::printf("poses %.0f Hz, output %lld Hz, budget %.1f ms, realtime priority %d (granted: %s%s%s; the bench's "
+              "sender and reader: %s), load average %.2f before, %.2f after\n",
               pose_hz, static_cast<long long>(rate_hz), budget_ms, realtime_priority,
               engine && engine->value("realtime_priority", false) ? "yes" : "no",
               engine && !engine->value("realtime_note", std::string()).empty() ? "; " : "",
-              engine ? engine->value("realtime_note", std::string()).c_str() : "", load_before, load_after);
+              engine ? engine->value("realtime_note", std::string()).c_str() : "",
+              bench_realtime ? "SCHED_FIFO" : "normal", load_before, load_after);
   std::printf("%zu poses, %zu samples read: %zu flagged, of which %zu blending back by their gyro", pose_t.size(),
               samples.size(), flagged, blending_count);
   if (engine) {
