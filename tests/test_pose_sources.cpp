@@ -1173,6 +1173,37 @@ TEST(UdpPoseSource, LoopbackCountsEveryDropDuplicateReorderAndCorruption) {
   EXPECT_TRUE(log.contains("sender restarted: sequence 1 after 11"));
 }
 
+// Issue 17: a datagram's receive_ns is when it reached the socket (the
+// kernel's time stamp), not when the source's thread got round to reading
+// it: datagrams sent before the source's thread even started carry their
+// arrival, which lies before the start (the read time would lie after it).
+TEST(UdpPoseSource, ReceiveTimeIsTheKernelsArrivalNotTheRead) {
+  LogCapture log;
+  PoseSourceOptions options;
+  options.log = log.sink();
+  auto source = make_udp_pose_source({"127.0.0.1", 0}, options);
+  std::this_thread::sleep_for(50ms);  // the socket's time stamps are on
+  const TimeNs before_send_ns = monotonic_now_ns();
+  {
+    UdpSender sender(source->local_port());
+    sender.send(datagram(0, ned_quaternion_record(1'000'000'000, Vec3::Zero())));
+    sender.send(datagram(1, ned_quaternion_record(1'010'000'000, Vec3::Zero())));
+  }
+  const TimeNs after_send_ns = monotonic_now_ns();
+  std::this_thread::sleep_for(200ms);  // queued in the socket, unread
+  const TimeNs start_ns = monotonic_now_ns();
+  source->start();
+  ASSERT_TRUE(wait_until([&] { return source->queue().size() == 2; }));
+  std::vector<SourcedPose> poses;
+  ASSERT_EQ(source->queue().drain(poses), 2u);
+  for (const SourcedPose& p : poses) {
+    EXPECT_GE(p.receive_ns, before_send_ns);
+    EXPECT_LE(p.receive_ns, after_send_ns);
+    EXPECT_LT(p.receive_ns, start_ns);
+  }
+  EXPECT_LE(poses[0].receive_ns, poses[1].receive_ns);
+}
+
 TEST(UdpPoseSource, BurstBeyondTheQueueDropsTheOldest) {
   LogCapture log;
   PoseSourceOptions options;
