@@ -514,7 +514,7 @@ void EmissionEngine::Impl::take_live_pose(const io::SourcedPose& p) {
     if (!mapping_ready.load(std::memory_order_relaxed) && devices.front()->engine->knots_pushed() > 0) {
       // The first pose fixes the grid and the clock: its time is the
       // instant it arrived (receive_ns), not when the producer took it (a
-      // stream is acquired at its second pose, and the producer polls): else
+      // stream is acquired at its second pose): else
       // that wait, a pose interval and more, would add to every sample's
       // latency (issue 17). Ticks go out emit_delay_ns after their own time.
       t0_ns = devices.front()->engine->first_knot_ns();

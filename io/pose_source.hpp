@@ -42,7 +42,8 @@ TimeNs monotonic_now_ns() noexcept;
 struct SourcedPose {
   Pose pose;                              // scene frame (io/scene_poses.hpp)
   std::optional<std::uint64_t> sequence;  // the datagram's sequence number (datagrams only)
-  TimeNs receive_ns = 0;                  // CLOCK_MONOTONIC when its bytes were read (file replay: released)
+  TimeNs receive_ns = 0;                  // CLOCK_MONOTONIC when its bytes arrived (UDP: the kernel's receive
+                                          // time stamp; TCP, stdin: read; file replay: released)
   std::size_t line = 0;                   // line in the file or stream (per TCP connection); 0 for datagrams
   PoseRates rates;                        // derivatives the input carried, scene frame (datagram v2, MAVLink)
 };
