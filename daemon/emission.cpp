@@ -27,6 +27,7 @@
 #include "core/earth.hpp"
 #include "core/stream.hpp"
 #include "core/time_arith.hpp"
+#include "drivers/queued_writer.hpp"
 #include "drivers/socketcan.hpp"
 #include "io/pose_source.hpp"
 
@@ -50,6 +51,12 @@ __extension__ typedef __int128 Int128;  // exact products of int64 times (GCC/Cl
 
 constexpr TimeNs kMaxSleepChunkNs = 50'000'000;  // a stop request is seen within this
 constexpr TimeNs kProducerPollNs = 1'000'000;
+// Live input: the producer sleeps on the pose queue (woken by each pose's
+// arrival) until its next tick's gate, at most kMaxSleepChunkNs (stop,
+// stall and the like are looked at meanwhile), at least this long when the
+// gate has passed without the tick being computable (a full ring): never a
+// busy loop.
+constexpr TimeNs kProducerMinWaitNs = 20'000;
 // Poses waiting for their first dependent sample (a stalled emitter must not
 // grow the list without bound).
 constexpr std::size_t kMaxPoseMarks = 4096;
@@ -302,6 +309,7 @@ struct EmissionEngine::Impl {
   void take_live_end();
   void run_producer() noexcept;
   void producer_loop();
+  TimeNs producer_wake_ns(TimeNs now) const noexcept;
   void run_emission(std::promise<std::string>* setup) noexcept;
   void emission_loop(std::promise<std::string>* setup, bool& setup_done);
   void emit_tick(Device& d, std::uint64_t k, bool drop);
@@ -506,7 +514,7 @@ void EmissionEngine::Impl::take_live_pose(const io::SourcedPose& p) {
     if (!mapping_ready.load(std::memory_order_relaxed) && devices.front()->engine->knots_pushed() > 0) {
       // The first pose fixes the grid and the clock: its time is the
       // instant it arrived (receive_ns), not when the producer took it (a
-      // stream is acquired at its second pose, and the producer polls): else
+      // stream is acquired at its second pose): else
       // that wait, a pose interval and more, would add to every sample's
       // latency (issue 17). Ticks go out emit_delay_ns after their own time.
       t0_ns = devices.front()->engine->first_knot_ns();
@@ -560,6 +568,11 @@ void EmissionEngine::Impl::record_fault(const char* thread, const char* what) no
 // closing its devices): it is recorded, both threads stop, and the daemon
 // stops the scene with the message and a failure exit code.
 void EmissionEngine::Impl::run_producer() noexcept {
+  if (live_input() && options.realtime.priority > 1) {  // see start(); refused: the emission thread's note says why
+    sched_param sp{};
+    sp.sched_priority = options.realtime.priority - 1;
+    (void)pthread_setschedparam(pthread_self(), SCHED_FIFO, &sp);
+  }
   try {
     producer_loop();
   } catch (const std::exception& e) {
@@ -583,7 +596,8 @@ void EmissionEngine::Impl::producer_loop() {
           input_without_poses.store(true, std::memory_order_release);
           break;
         }
-        sleep_until_monotonic(monotonic_now_ns() + kProducerPollNs);
+        // Woken by the first pose's arrival (issue 17).
+        options.source->queue().wait_for_items_until(saturating_add_ns(monotonic_now_ns(), kMaxSleepChunkNs));
         continue;
       }
     }
@@ -603,8 +617,32 @@ void EmissionEngine::Impl::producer_loop() {
     }
     producer_cpu_ns.store(thread_cpu_ns(), std::memory_order_relaxed);
     if (all_done) break;
-    sleep_until_monotonic(monotonic_now_ns() + kProducerPollNs);
+    if (live_input()) {
+      // Until a pose arrives or the next tick may be computed, whichever is
+      // first: a pose is taken when it arrives, not at a poll (issue 17).
+      const TimeNs now = monotonic_now_ns();
+      options.source->queue().wait_for_items_until(std::max(producer_wake_ns(now), saturating_add_ns(now, kProducerMinWaitNs)));
+    } else {
+      sleep_until_monotonic(monotonic_now_ns() + kProducerPollNs);
+    }
   }
+}
+
+// Live input, mapping known: when the producer's next tick may be computed
+// (producer_lead before it is due) on the device that comes first; a full
+// ring is looked at again after kProducerPollNs.
+TimeNs EmissionEngine::Impl::producer_wake_ns(TimeNs now) const noexcept {
+  TimeNs wake = saturating_add_ns(now, kMaxSleepChunkNs);
+  for (const auto& d : devices) {
+    if (d->next_produce_tick >= d->end_tick.load(std::memory_order_relaxed)) continue;
+    if (d->ring.write_available() == 0) {
+      wake = std::min(wake, saturating_add_ns(now, kProducerPollNs));
+      continue;
+    }
+    const TimeNs due = deadline_ns(*d, d->next_produce_tick);
+    if (due != kNeverDueNs) wake = std::min(wake, saturating_sub_ns(due, options.producer_lead_ns));
+  }
+  return wake;
 }
 
 // On the emission thread: no allocation, no logging, no blocking call.
@@ -803,6 +841,10 @@ void EmissionEngine::start() {
       m.memory_locked = true;
     }
   }
+  // The transports' writer threads one step below the emission thread
+  // (issue 17: under load, a normal-priority writer delayed bytes the
+  // emission thread had queued on time); 0 restores normal scheduling.
+  drivers::set_writer_threads_realtime_priority(m.options.realtime.priority > 1 ? m.options.realtime.priority - 1 : 0);
   if (!m.live_input()) {
     // Every pose is here: fill the rings before the clock starts, so the
     // first tick can be due right away (start_lead_ns).
@@ -816,6 +858,15 @@ void EmissionEngine::start() {
     m.mapping_ready.store(true, std::memory_order_release);
   } else {
     m.options.source->start();
+    // Live input with SCHED_FIFO: the pose source's thread and the producer
+    // (run_producer) one step below the emission thread, so that under load
+    // a pose is read, taken and computed into its ticks when it arrives
+    // (issue 17); the emission thread, microseconds per tick, stays first.
+    if (m.options.realtime.priority > 1) {
+      const std::string refused = m.options.source->set_realtime_priority(m.options.realtime.priority - 1);
+      if (!refused.empty())
+        m.realtime_note += (m.realtime_note.empty() ? "" : "; ") + std::string("pose source SCHED_FIFO refused: ") + refused;
+    }
   }
   std::promise<std::string> setup;
   auto setup_result = setup.get_future();
@@ -842,7 +893,15 @@ void EmissionEngine::start() {
   m.producer = std::thread([&m] { m.run_producer(); });
 }
 
-void EmissionEngine::request_stop() noexcept { impl_->stop_requested.store(true, std::memory_order_release); }
+void EmissionEngine::request_stop() noexcept {
+  impl_->stop_requested.store(true, std::memory_order_release);
+  if (impl_->live_input()) {  // the producer may sleep on the pose queue: it sees the stop at once
+    try {
+      impl_->options.source->queue().wake_consumer();
+    } catch (...) {  // std::system_error from the mutex: the producer's own deadline still comes
+    }
+  }
+}
 
 bool EmissionEngine::wait(std::chrono::milliseconds timeout) {
   Impl& m = *impl_;
@@ -939,6 +998,7 @@ EngineStats EmissionEngine::stats() const {
     }
     ds.lateness = d.lateness.summary();
     ds.pose_latency = d.pose_latency.summary();
+    ds.pose_latency.buckets = d.pose_latency.buckets();
     ds.engine_lag_ns = d.engine_lag_ns.load(std::memory_order_relaxed);
     ds.last_sample_counter = d.last_counter.load(std::memory_order_relaxed);
     s.emitted += ds.emitted;
@@ -1011,6 +1071,16 @@ nlohmann::json lateness_json(const LatenessSummary& l) {
   return {{"count", l.count},     {"p50_ns", l.p50_ns}, {"p99_ns", l.p99_ns},
           {"p99_9_ns", l.p999_ns}, {"max_ns", l.max_ns}, {"mean_ns", l.mean_ns}};
 }
+// With the non-empty buckets (upper bound in us, count), for a histogram
+// against a goal (issue 17: pose_latency).
+nlohmann::json lateness_json_with_buckets(const LatenessSummary& l) {
+  nlohmann::json j = lateness_json(l);
+  nlohmann::json buckets = nlohmann::json::array();
+  for (const LatenessBucket& b : l.buckets)
+    buckets.push_back({{"upper_us", static_cast<double>(b.upper_ns) / 1e3}, {"count", b.count}});
+  j["buckets"] = std::move(buckets);
+  return j;
+}
 }  // namespace
 
 nlohmann::json to_json(const EngineStats& s) {
@@ -1052,7 +1122,7 @@ nlohmann::json to_json(const EngineStats& s) {
                        {"underrun_events", d.live.underrun_events},
                        {"stale_discarded", d.live.stale_discarded}}},
                      {"lateness", lateness_json(d.lateness)},
-                     {"pose_latency", lateness_json(d.pose_latency)},
+                     {"pose_latency", lateness_json_with_buckets(d.pose_latency)},
                      {"engine_lag_ns", d.engine_lag_ns},
                      {"last_sample_counter", d.last_sample_counter}};
     if (d.gpio)

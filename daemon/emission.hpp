@@ -100,6 +100,7 @@ enum class StartAlignment { now, next_realtime_second };
 
 struct RealtimeOptions {
   int priority = 0;              // SCHED_FIFO priority of the emission thread (1..99); 0: normal scheduling
+                                 // (from 2: the writer threads and, live, the producer and the pose source at -1)
   bool lock_memory = false;      // mlockall(MCL_CURRENT | MCL_FUTURE)
   bool require_realtime = false; // start() throws when the priority or the lock is refused
 };

@@ -68,4 +68,16 @@ LatenessSummary LatenessHistogram::summary() const noexcept {
   return s;
 }
 
+std::vector<LatenessBucket> LatenessHistogram::buckets() const {
+  std::vector<LatenessBucket> out;
+  for (std::size_t i = 0; i < kBuckets; ++i) {
+    const std::uint64_t n = counts_[i].load(std::memory_order_relaxed);
+    if (n == 0) continue;
+    const TimeNs upper = i == kBuckets - 1 ? std::max(max_ns_.load(std::memory_order_relaxed), kNsPerSecond)
+                                           : upper_edge_ns(i);
+    out.push_back({upper, n});
+  }
+  return out;
+}
+
 }  // namespace imuemu::emission

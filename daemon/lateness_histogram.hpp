@@ -13,10 +13,19 @@
 #include <atomic>
 #include <cstddef>
 #include <cstdint>
+#include <vector>
 
 #include "core/types.hpp"
 
 namespace imuemu::emission {
+
+// One non-empty bucket: its values are below upper_ns (the overflow bucket,
+// >= 1 s: at most upper_ns, the exact maximum), count of them.
+struct LatenessBucket {
+  TimeNs upper_ns = 0;
+  std::uint64_t count = 0;
+  bool operator==(const LatenessBucket&) const = default;
+};
 
 struct LatenessSummary {
   std::uint64_t count = 0;
@@ -25,6 +34,9 @@ struct LatenessSummary {
   TimeNs p999_ns = 0;
   TimeNs max_ns = 0;   // exact
   double mean_ns = 0.0;
+  // Filled only where asked (LatenessHistogram::buckets(): status
+  // pose_latency.buckets); empty otherwise.
+  std::vector<LatenessBucket> buckets;
 };
 
 class LatenessHistogram {
@@ -36,6 +48,11 @@ class LatenessHistogram {
   // Real-time safe: a few integer operations and relaxed atomic increments.
   void record(TimeNs lateness_ns) noexcept;
   LatenessSummary summary() const noexcept;
+  // The non-empty buckets in increasing order (allocates: not for the
+  // real-time thread). Counts are read one by one while the histogram may
+  // be written, so their sum may differ from summary().count by the values
+  // recorded meanwhile.
+  std::vector<LatenessBucket> buckets() const;
   // The value at quantile q in [0, 1] as its bucket's upper edge (ns).
   TimeNs quantile_ns(double q) const noexcept;
 

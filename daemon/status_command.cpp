@@ -7,9 +7,12 @@
 #include <algorithm>
 #include <cerrno>
 #include <cmath>
+#include <cstdio>
 #include <iostream>
 #include <ostream>
 #include <thread>
+#include <utility>
+#include <vector>
 
 #include <CLI/CLI.hpp>
 #include <boost/asio/buffers_iterator.hpp>
@@ -78,6 +81,35 @@ std::string text_of(const nlohmann::json& j, const char* key) {
 
 std::string microseconds(double ns) { return std::to_string(std::llround(ns / 1000.0)) + " us"; }
 
+// A bucket's upper bound as a person reads it: "850 us", "4.1 ms", "25 ms".
+std::string bucket_bound_text(double upper_us) {
+  char text[32];
+  if (upper_us < 10.0) std::snprintf(text, sizeof text, "%.1f us", upper_us);
+  else if (upper_us < 1000.0) std::snprintf(text, sizeof text, "%.0f us", upper_us);
+  else if (upper_us < 10'000.0) std::snprintf(text, sizeof text, "%.1f ms", upper_us / 1e3);
+  else std::snprintf(text, sizeof text, "%.0f ms", upper_us / 1e3);
+  return text;
+}
+
+// status pose_latency.buckets ({upper_us, count}, non-empty, increasing) on
+// one line: neighbouring buckets merged so at most kMaxGroups are shown, each
+// as "<= its last bucket's bound: the count".
+std::string buckets_text(const nlohmann::json& buckets) {
+  constexpr std::size_t kMaxGroups = 12;
+  std::vector<std::pair<double, std::uint64_t>> b;
+  for (const nlohmann::json& e : buckets)
+    if (e.is_object()) b.emplace_back(number_or_zero(e, "upper_us"), count_of(e, "count"));
+  const std::size_t per_group = (b.size() + kMaxGroups - 1) / kMaxGroups;
+  std::string out;
+  for (std::size_t i = 0; i < b.size(); i += per_group) {
+    const std::size_t end = std::min(b.size(), i + per_group);
+    std::uint64_t n = 0;
+    for (std::size_t k = i; k < end; ++k) n += b[k].second;
+    out += (out.empty() ? "<= " : ", <= ") + bucket_bound_text(b[end - 1].first) + ": " + std::to_string(n);
+  }
+  return out;
+}
+
 }  // namespace
 
 void print_status_summary(const nlohmann::json& status, std::ostream& out) {
@@ -113,6 +145,8 @@ void print_status_summary(const nlohmann::json& status, std::ostream& out) {
           << " poses): p50 " << microseconds(number_or_zero(pose_latency, "p50_ns")) << ", p99 "
           << microseconds(number_or_zero(pose_latency, "p99_ns")) << ", max "
           << microseconds(number_or_zero(pose_latency, "max_ns")) << "\n";
+    if (const auto b = pose_latency.find("buckets"); b != pose_latency.end() && b->is_array() && !b->empty())
+      out << "      histogram (poses up to each bound): " << buckets_text(*b) << "\n";
     out << "    transport: " << count_of(transport, "frames_sent") << " frames sent, "
         << count_of(transport, "queued") << " queued; not taken: " << count_of(d, "write_errors")
         << " packets (link down " << count_of(transport, "dropped_link_down")

@@ -2,6 +2,7 @@
 
 #include <poll.h>
 #include <pthread.h>
+#include <sched.h>
 #include <sys/eventfd.h>
 #include <unistd.h>
 
@@ -41,7 +42,26 @@ std::string seconds_text(std::chrono::nanoseconds d) {
   return text;
 }
 
+// set_writer_threads_realtime_priority: what every writer thread applies.
+std::atomic<int> g_writer_realtime_priority{0};
+
+// On the writer thread: applies a changed process-wide priority (a refusal
+// leaves the thread as it was; the emission thread's own request reports
+// whether SCHED_FIFO is granted at all).
+void apply_writer_priority(int& applied) noexcept {
+  const int wanted = g_writer_realtime_priority.load(std::memory_order_relaxed);
+  if (wanted == applied) return;
+  sched_param sp{};
+  sp.sched_priority = wanted;
+  (void)pthread_setschedparam(pthread_self(), wanted > 0 ? SCHED_FIFO : SCHED_OTHER, &sp);
+  applied = wanted;
+}
+
 }  // namespace
+
+void set_writer_threads_realtime_priority(int priority) noexcept {
+  g_writer_realtime_priority.store(priority, std::memory_order_relaxed);
+}
 
 std::string errno_message(int error) {
   char buffer[256];
@@ -350,7 +370,9 @@ void QueuedWriter::writer_failed(const char* what) noexcept {
 
 void QueuedWriter::write_loop() {
   pthread_setname_np(pthread_self(), "imuemu-tx");
+  int applied_priority = 0;
   while (!stop_.load(std::memory_order_acquire)) {
+    apply_writer_priority(applied_priority);
     if (!link_up_.load(std::memory_order_relaxed)) {
       wait_while_down();
       continue;

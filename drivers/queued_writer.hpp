@@ -202,6 +202,13 @@ class QueuedWriter {
   std::atomic<std::uint64_t> dropped_at_stop_{0};
 };
 
+// Issue 17 (latency): the SCHED_FIFO priority of every queued writer's
+// thread (1..99; 0: normal scheduling), process-wide. Each writer applies a
+// change at its next wake-up (its next frame). The emission engine sets it
+// from [daemon] realtime_priority, so the bytes of a sample leave for the
+// kernel as promptly as the emission thread queued them.
+void set_writer_threads_realtime_priority(int priority) noexcept;
+
 // strerror for messages (thread-safe).
 std::string errno_message(int error);
 

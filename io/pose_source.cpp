@@ -2,10 +2,13 @@
 // counters, pacing and backpressure; and the file replay source.
 #include "io/pose_source.hpp"
 
+#include <pthread.h>
+#include <sched.h>
 #include <time.h>
 
 #include <cmath>
 #include <cstdio>
+#include <cstring>
 #include <limits>
 #include <numeric>
 #include <stdexcept>
@@ -27,23 +30,64 @@ TimeNs monotonic_now_ns() noexcept {
 PoseQueue::PoseQueue(std::size_t capacity) : ring_(capacity == 0 ? 1 : capacity) {}
 
 bool PoseQueue::try_push(const SourcedPose& item) {
-  const std::lock_guard lock(mutex_);
-  if (count_ == ring_.size()) return false;
-  ring_[(head_ + count_) % ring_.size()] = item;
-  ++count_;
+  {
+    const std::lock_guard lock(mutex_);
+    if (count_ == ring_.size()) return false;
+    ring_[(head_ + count_) % ring_.size()] = item;
+    ++count_;
+  }
+  // Outside the lock: the woken consumer does not block on it at once. No
+  // waiter: a few loads, no system call (glibc's condition variable).
+  items_.notify_one();
   return true;
 }
 
 bool PoseQueue::push_or_drop_oldest(const SourcedPose& item) {
-  const std::lock_guard lock(mutex_);
-  const bool drop = count_ == ring_.size();
-  if (drop) {
-    head_ = (head_ + 1) % ring_.size();
-    --count_;
+  bool drop = false;
+  {
+    const std::lock_guard lock(mutex_);
+    drop = count_ == ring_.size();
+    if (drop) {
+      head_ = (head_ + 1) % ring_.size();
+      --count_;
+    }
+    ring_[(head_ + count_) % ring_.size()] = item;
+    ++count_;
   }
-  ring_[(head_ + count_) % ring_.size()] = item;
-  ++count_;
+  items_.notify_one();
   return drop;
+}
+
+bool PoseQueue::wait_for_items_until(TimeNs deadline_ns) {
+  // steady_clock is CLOCK_MONOTONIC in libstdc++ (monotonic_now_ns's clock),
+  // and wait_until on it sleeps on that clock (pthread_cond_clockwait).
+  const std::chrono::steady_clock::time_point deadline{std::chrono::nanoseconds(deadline_ns)};
+  std::unique_lock lock(mutex_);
+  wake_requested_ = wake_requested_ && count_ == 0;  // the caller looks at its state after any return
+  if (count_ != 0) {
+    ++waits_.items_on_entry;
+    return true;
+  }
+  items_.wait_until(lock, deadline, [this] { return count_ != 0 || wake_requested_; });
+  const bool items = count_ != 0;
+  if (items && std::chrono::steady_clock::now() < deadline) ++waits_.woken_by_push;
+  else if (!items && wake_requested_) ++waits_.woken;
+  else ++waits_.deadline;
+  wake_requested_ = false;
+  return items;
+}
+
+void PoseQueue::wake_consumer() {
+  {
+    const std::lock_guard lock(mutex_);
+    wake_requested_ = true;
+  }
+  items_.notify_all();
+}
+
+PoseQueue::WaitCounters PoseQueue::wait_counters() const {
+  const std::lock_guard lock(mutex_);
+  return waits_;
 }
 
 bool PoseQueue::wait_for_space(std::chrono::nanoseconds timeout) {
@@ -136,6 +180,22 @@ void PoseSource::start() {
     failed_.store(true, std::memory_order_release);
     mark_finished();
   });
+}
+
+void PoseSource::mark_finished() noexcept {
+  finished_.store(true, std::memory_order_release);
+  try {
+    queue_.wake_consumer();
+  } catch (...) {  // std::system_error from the mutex: the consumer's own deadline still comes
+  }
+}
+
+std::string PoseSource::set_realtime_priority(int priority) {
+  if (!thread_.joinable()) return "the source is not started";
+  sched_param sp{};
+  sp.sched_priority = priority;
+  const int rc = pthread_setschedparam(thread_.native_handle(), SCHED_FIFO, &sp);
+  return rc == 0 ? std::string() : std::string(std::strerror(rc));
 }
 
 std::string PoseSource::failure() const {

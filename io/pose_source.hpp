@@ -42,15 +42,19 @@ TimeNs monotonic_now_ns() noexcept;
 struct SourcedPose {
   Pose pose;                              // scene frame (io/scene_poses.hpp)
   std::optional<std::uint64_t> sequence;  // the datagram's sequence number (datagrams only)
-  TimeNs receive_ns = 0;                  // CLOCK_MONOTONIC when its bytes were read (file replay: released)
+  TimeNs receive_ns = 0;                  // CLOCK_MONOTONIC when its bytes arrived (UDP: the kernel's receive
+                                          // time stamp; TCP, stdin: read; file replay: released)
   std::size_t line = 0;                   // line in the file or stream (per TCP connection); 0 for datagrams
   PoseRates rates;                        // derivatives the input carried, scene frame (datagram v2, MAVLink)
 };
 
 // Bounded single-producer single-consumer hand-off. A mutex guards a
-// preallocated ring; it is held only to copy one item, so the consumer never
-// waits for data (try_pop/drain return at once) and never allocates
-// (drain appends to the caller's vector).
+// preallocated ring; it is held only to copy one item, so try_pop/drain
+// return at once and never allocate (drain appends to the caller's vector).
+// A consumer with nothing else to do until a deadline sleeps in
+// wait_for_items_until: every push wakes it (issue 17: the emission
+// engine's producer takes a pose when it arrives instead of at its next
+// 1 ms poll), and so does wake_consumer() (stop, end of input).
 class PoseQueue {
  public:
   explicit PoseQueue(std::size_t capacity);  // capacity >= 1
@@ -63,6 +67,22 @@ class PoseQueue {
   // Consumer side.
   bool try_pop(SourcedPose& out);
   std::size_t drain(std::vector<SourcedPose>& out, std::size_t max_items = SIZE_MAX);
+  // Sleeps until an item is queued, wake_consumer() is called, or
+  // CLOCK_MONOTONIC reaches deadline_ns (io::monotonic_now_ns()), whichever
+  // comes first; returns at once if an item is already queued. True when
+  // items are queued on return. Counts its returns (wait_counters()).
+  bool wait_for_items_until(TimeNs deadline_ns);
+  // Ends the consumer's current (or next) wait_for_items_until early.
+  void wake_consumer();
+
+  // How the consumer's waits ended: items were there on entry (no sleep); a
+  // push ended the sleep before the deadline; the deadline passed (items may
+  // have come meanwhile); wake_consumer() with nothing queued.
+  struct WaitCounters {
+    std::uint64_t items_on_entry = 0, woken_by_push = 0, deadline = 0, woken = 0;
+    std::uint64_t total() const noexcept { return items_on_entry + woken_by_push + deadline + woken; }
+  };
+  WaitCounters wait_counters() const;
 
   std::size_t size() const;
   std::size_t capacity() const noexcept { return ring_.size(); }
@@ -71,6 +91,9 @@ class PoseQueue {
  private:
   mutable std::mutex mutex_;
   std::condition_variable space_;
+  std::condition_variable items_;  // the consumer's wait_for_items_until
+  bool wake_requested_ = false;    // under mutex_
+  WaitCounters waits_;             // under mutex_
   std::vector<SourcedPose> ring_;
   std::size_t head_ = 0;   // oldest item
   std::size_t count_ = 0;
@@ -168,6 +191,11 @@ class PoseSource {
 
   void start();  // once
   void stop();   // idempotent; joins the thread, then logs suppressed counts
+  // After start(): runs the source's thread under SCHED_FIFO at this
+  // priority (1..99), so a pose is read and queued when it arrives however
+  // busy the host (issue 17). "" when granted, else why not (the thread
+  // keeps its scheduling).
+  std::string set_realtime_priority(int priority);
 
   PoseQueue& queue() noexcept { return queue_; }
   PoseSourceCounters counters() const;
@@ -188,7 +216,8 @@ class PoseSource {
   virtual void wake() = 0;  // makes run() notice stop_requested() promptly
 
   bool stop_requested() const noexcept { return stop_requested_.load(std::memory_order_acquire); }
-  void mark_finished() noexcept { finished_.store(true, std::memory_order_release); }
+  // The consumer waiting on the queue is woken too: it sees the end at once.
+  void mark_finished() noexcept;
   // Blocking push for sources that apply backpressure from their own thread
   // (file, stdin): counts one backpressure event per stall. False if stopping.
   bool push_with_backpressure(const SourcedPose& item);

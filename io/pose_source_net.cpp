@@ -7,8 +7,12 @@
 #include <boost/asio/steady_timer.hpp>
 #include <netinet/in.h>
 #include <netinet/tcp.h>
+#include <linux/sockios.h>
+#include <sys/ioctl.h>
 #include <sys/socket.h>
+#include <time.h>
 
+#include <algorithm>
 #include <optional>
 #include <stdexcept>
 #include <utility>
@@ -57,6 +61,10 @@ class UdpPoseSource final : public PoseSource {
     if (ec) bind_failed(endpoint_name("udp", endpoint.address, endpoint.port), ec);
     port_ = socket_.local_endpoint().port();
     if (name_.empty()) set_name(endpoint_name(mavlink ? "mavlink udp" : "udp", endpoint.address, port_));
+    // The first SIOCGSTAMPNS turns on the kernel's receive time stamps for
+    // this socket (it answers ENOENT: nothing received yet); see arrival_ns.
+    timespec unused{};
+    (void)::ioctl(socket_.native_handle(), SIOCGSTAMPNS, &unused);
   }
   ~UdpPoseSource() override { stop(); }
   std::uint16_t local_port() const noexcept override { return port_; }
@@ -79,10 +87,31 @@ class UdpPoseSource final : public PoseSource {
         // ICMP errors and the like are transient; a datagram stream goes on.
         admission_->log("receive_error", "receive failed: " + ec.message());
       } else {
-        handle(size, monotonic_now_ns());
+        handle(size, arrival_ns(monotonic_now_ns()));
       }
       receive_next();
     });
+  }
+
+  // When the datagram just read reached the socket (the kernel's receive
+  // time stamp, SIOCGSTAMPNS, CLOCK_REALTIME, taken back to CLOCK_MONOTONIC),
+  // not when this thread woke to read it: a pose's receive_ns anchors the
+  // live clock (the first pose's) and starts its latency (issue 17: a first
+  // pose read 2-4 ms after it arrived, this thread waking late, made every
+  // sample of the run that much later). Without a stamp, or with one older
+  // than 1 s or in the future (a clock step), the read time. Never before the
+  // previous pose's, never after the read.
+  TimeNs arrival_ns(TimeNs read_ns) {
+    TimeNs arrival = read_ns;
+    timespec stamp{};
+    timespec real{};
+    if (::ioctl(socket_.native_handle(), SIOCGSTAMPNS, &stamp) == 0 && ::clock_gettime(CLOCK_REALTIME, &real) == 0) {
+      const TimeNs age_ns = (static_cast<TimeNs>(real.tv_sec) - stamp.tv_sec) * kNsPerSecond + (real.tv_nsec - stamp.tv_nsec);
+      if (age_ns >= 0 && age_ns < kNsPerSecond) arrival = monotonic_now_ns() - age_ns;
+    }
+    arrival = std::clamp(arrival, std::min(last_arrival_ns_, read_ns), read_ns);
+    last_arrival_ns_ = arrival;
+    return arrival;
   }
 
   void handle(std::size_t size, TimeNs receive_ns) {
@@ -108,6 +137,7 @@ class UdpPoseSource final : public PoseSource {
   std::string sender_name_;
   std::vector<std::uint8_t> buffer_;
   std::uint16_t port_ = 0;
+  TimeNs last_arrival_ns_ = 0;  // arrival_ns's previous answer
   bool mavlink_;  // MAVLink 2 HIL_STATE_QUATERNION datagrams instead of pose datagrams
 };
 

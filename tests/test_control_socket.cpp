@@ -407,6 +407,44 @@ TEST(StatusSummary, LiveTimeAndConnectionCountersAreInTheJsonAndExplained) {
   EXPECT_NE(text.find("6 replaced"), std::string::npos) << text;
 }
 
+// Issue 17: the pose-latency histogram (status pose_latency.buckets) on one
+// line of the summary: 30 buckets of 0.1 ms from 3.0 to 6.0 ms, merged three
+// by three (at most 12 groups), each group shown with its last bound.
+TEST(StatusSummary, PoseLatencyBucketsAreShownCompactly) {
+  imuemu::emission::LatenessHistogram h;
+  for (int i = 0; i < 30; ++i)
+    for (int n = 0; n <= i % 3; ++n) h.record(3'000'000 + i * 100'000 + 50'000);  // 1, 2, 3, 1, 2, 3, ...
+  h.record(250'000);  // one at 250 us: a 31st bucket, alone in the first group
+  imuemu::emission::EngineStats s;
+  imuemu::emission::DeviceStats d;
+  d.name = "imu0";
+  d.output = "native on pty:/tmp/x";
+  d.rate_hz = 1000;
+  d.pose_latency = h.summary();
+  d.pose_latency.buckets = h.buckets();
+  s.devices.push_back(d);
+  const json status{{"scene", "live"}, {"pid", 9}, {"uptime_s", 2.0}, {"samples_emitted", 800},
+                    {"emitter_progressing", true}, {"engine", imuemu::emission::to_json(s)}};
+  std::ostringstream out;
+  imuemu::cli::print_status_summary(status, out);
+  const std::string text = out.str();
+  std::cout << text;
+  // 31 buckets: ceil(31 / 12) = 3 per group, 11 groups; the first holds
+  // 250 us (1) and [3.0, 3.2) ms (1 + 2), the second [3.2, 3.5) (3 + 1 + 2).
+  EXPECT_NE(text.find("pose latency (arrival -> first dependent sample to the transport; 61 poses)"), std::string::npos)
+      << text;
+  EXPECT_NE(text.find("histogram (poses up to each bound): <= 3.2 ms: 4, <= 3.5 ms: 6, <= 3.8 ms: 6, "),
+            std::string::npos)
+      << text;
+  EXPECT_NE(text.find(", <= 5.9 ms: 6, <= 6.0 ms: 3\n"), std::string::npos) << text;  // the 31st bucket alone
+  // A histogram with nothing recorded prints no histogram line.
+  s.devices[0].pose_latency = {};
+  std::ostringstream empty;
+  imuemu::cli::print_status_summary(
+      json{{"scene", "live"}, {"engine", imuemu::emission::to_json(s)}}, empty);
+  EXPECT_EQ(empty.str().find("histogram"), std::string::npos) << empty.str();
+}
+
 TEST(StatusSummary, AnEngineNotRunningIsSaidSo) {
   const json status{{"scene", "bench"}, {"pid", 7}, {"uptime_s", 1.0}, {"samples_emitted", 0},
                     {"emitter_progressing", false}, {"engine", nullptr}, {"waiting_for_device", true}};

@@ -21,6 +21,7 @@
 #include <cstdio>
 #include <fstream>
 #include <numbers>
+#include <sstream>
 
 #include "tests/support/spawn.hpp"
 #include "core/attitude.hpp"
@@ -158,6 +159,43 @@ TEST(LatenessHistogram, BucketsAreLogLinearFromOneMicrosecondToOneSecond) {
   EXPECT_EQ(s.p99_ns, 2'100);
   EXPECT_EQ(s.p999_ns, 500'000);  // bucket [500, 510) us capped by the exact maximum
   EXPECT_EQ(s.max_ns, 500'000);
+}
+
+// Issue 17: status pose_latency.buckets (the histogram against the goal):
+// the non-empty buckets, in order, with their upper bounds in us, from
+// values whose buckets follow from the definition (1 us..1 s, 90 per decade).
+TEST(LatenessHistogram, NonEmptyBucketsGoToTheStatusJsonOfPoseLatencyOnly) {
+  LatenessHistogram h;
+  EXPECT_TRUE(h.buckets().empty());
+  for (int i = 0; i < 7; ++i) h.record(4'050'000);  // [4.0, 4.1) ms
+  for (int i = 0; i < 3; ++i) h.record(2'500'000);  // [2.5, 2.6) ms
+  h.record(500);                                    // below 1 us
+  h.record(12'345'678);                             // [12, 13) ms
+  h.record(3 * kNsPerSecond);                       // overflow: bounded by the exact maximum
+  const std::vector<LatenessBucket> b = h.buckets();
+  const std::vector<LatenessBucket> expected{
+      {1'000, 1}, {2'600'000, 3}, {4'100'000, 7}, {13'000'000, 1}, {3 * kNsPerSecond, 1}};
+  EXPECT_EQ(b, expected);
+
+  EngineStats s;
+  DeviceStats d;
+  d.name = "imu0";
+  d.pose_latency = h.summary();
+  d.pose_latency.buckets = b;
+  d.lateness = h.summary();  // no buckets asked for
+  s.devices.push_back(d);
+  const nlohmann::json j = to_json(s);
+  const nlohmann::json& pl = j["devices"][0]["pose_latency"];
+  ASSERT_TRUE(pl.contains("buckets")) << pl.dump();
+  ASSERT_EQ(pl["buckets"].size(), 5u);
+  EXPECT_EQ(pl["buckets"][1]["upper_us"], 2600.0);
+  EXPECT_EQ(pl["buckets"][1]["count"], 3u);
+  EXPECT_EQ(pl["buckets"][2]["upper_us"], 4100.0);
+  EXPECT_EQ(pl["buckets"][2]["count"], 7u);
+  EXPECT_EQ(pl["buckets"][0]["upper_us"], 1.0);
+  EXPECT_EQ(pl["buckets"][4]["upper_us"], 3e6);
+  EXPECT_EQ(pl["count"], 13u);
+  EXPECT_FALSE(j["devices"][0]["lateness"].contains("buckets"));
 }
 
 TEST(Emission, ExactCountOnTheGridAndBitIdenticalToBatch) {
@@ -563,6 +601,73 @@ TEST(Emission, LivePoseSourceEmitsToTheEndOfTheInputAsTheBatchDoes) {
     EXPECT_EQ(s.gyro_rad_s, batch.imu[s.sequence].gyro_rad_s);
     EXPECT_EQ(s.accel_m_s2, batch.imu[s.sequence].accel_m_s2);
   }
+}
+
+// Issue 17: with live input the producer sleeps on the pose queue until a
+// pose arrives or its next tick may be computed; it no longer polls the
+// queue every 1 ms. The queue counts how each of its waits ended. Nothing
+// here depends on the host being fast: load makes waits end later, hence
+// fewer, never more; and a push can end a sleep early only if it notifies.
+TEST(Emission, LiveProducerSleepsOnThePoseQueueUntilAPoseArrivesOrItsNextTick) {
+  const std::vector<Pose> knots = circle_knots(8.0);  // 9 poses, 1 s apart
+  std::vector<std::string> lines;
+  {
+    std::istringstream in(pose_lines(knots));
+    for (std::string line; std::getline(in, line);) lines.push_back(line + "\n");
+  }
+  ASSERT_EQ(lines.size(), 10u);  // header + 9
+  int fds[2];
+  ASSERT_EQ(::pipe(fds), 0);
+  auto write_line = [&](std::size_t i) {
+    ASSERT_EQ(::write(fds[1], lines[i].data(), lines[i].size()), static_cast<ssize_t>(lines[i].size()));
+  };
+  io::PoseSourceOptions so;
+  so.physics = Physics::flat;
+  so.log = [](std::string_view) {};
+  auto source = io::make_fd_pose_source(fds[0], so);
+  RecordingTransport* rec = nullptr;
+  std::vector<DeviceOptions> devices;
+  devices.push_back(native_device("imu0", 10, &rec));
+  EngineOptions eo;
+  eo.source = source.get();
+  eo.emit_delay_ns = 120 * kNsPerSecond;  // no tick comes due during the test: the producer's deadline is far
+  EmissionEngine engine(std::move(eo), std::move(devices));
+  engine.start();
+  auto wait_for_poses = [&](std::uint64_t n) {
+    for (int i = 0; i < 2000 && engine.stats().poses_pushed < n; ++i) std::this_thread::sleep_for(10ms);
+    return engine.stats().poses_pushed;
+  };
+  write_line(0);
+  write_line(1);
+  write_line(2);  // the stream is acquired at its second pose
+  ASSERT_EQ(wait_for_poses(2), 2u);
+
+  // Idle for 1 s: polling every 1 ms woke the producer ~1000 times; sleeping
+  // to its next tick (2 min away), bounded by the 50 ms stop/stall check, ~20.
+  const io::PoseQueue::WaitCounters before = source->queue().wait_counters();
+  std::this_thread::sleep_for(1s);
+  const io::PoseQueue::WaitCounters idle = source->queue().wait_counters();
+  EXPECT_LE(idle.total() - before.total(), 60u);
+  EXPECT_GE(idle.deadline - before.deadline, 1u);  // it does sleep on the queue
+  EXPECT_EQ(idle.woken_by_push + idle.items_on_entry, before.woken_by_push + before.items_on_entry);
+
+  // Five more poses, one at a time: each is taken (counted by the engine),
+  // and pushes end the producer's sleep before its deadline. Each sleep is
+  // at most 50 ms, so a host that wakes the producer that late may see its
+  // deadline first: at least one of five must be a push's wake-up (none
+  // without the notification).
+  for (std::size_t i = 3; i < 8; ++i) {
+    write_line(i);
+    ASSERT_EQ(wait_for_poses(i), i);
+  }
+  const io::PoseQueue::WaitCounters fed = source->queue().wait_counters();
+  EXPECT_GE(fed.woken_by_push - idle.woken_by_push, 1u);
+  EXPECT_LE(fed.woken_by_push - idle.woken_by_push, 5u);
+  EXPECT_EQ(engine.stats().devices[0].emitted, 0u);  // nothing was due
+
+  engine.stop();
+  ::close(fds[1]);
+  ::close(fds[0]);
 }
 
 class RecordingCanOutput final : public CanOutput {

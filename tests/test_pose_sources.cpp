@@ -628,6 +628,102 @@ TEST(SequenceTracker, GapsLateRepeatsStaleAndRestarts) {
   EXPECT_EQ(top.gaps(), 1u);
 }
 
+// Issue 17: the consumer (the emission engine's producer) sleeps on the
+// queue until a deadline and is woken by a push, not by a poll. Every wait
+// here has a 60 s deadline and must end within 30 s: a loaded host delays a
+// wake-up by milliseconds, it cannot turn a missing notification into one.
+TEST(PoseQueue, AWaitingConsumerIsWokenByAPushAndByWakeConsumer) {
+  PoseQueue q(4);
+  SourcedPose pose;
+  pose.pose.t_ns = 1;
+  constexpr TimeNs kLongNs = 60 * kNsPerSecond, kWithinNs = 30 * kNsPerSecond;
+  // Nothing queued: the wait lasts to its deadline, and says it found nothing.
+  TimeNs t0 = monotonic_now_ns();
+  EXPECT_FALSE(q.wait_for_items_until(t0 + 20'000'000));
+  EXPECT_GE(monotonic_now_ns() - t0, 20'000'000);
+  EXPECT_EQ(q.wait_counters().deadline, 1u);
+
+  // A push from another thread ends a 60 s sleep.
+  auto wait_in_thread = [&](bool& result, TimeNs& returned_ns) {
+    return std::thread([&] {
+      result = q.wait_for_items_until(monotonic_now_ns() + kLongNs);
+      returned_ns = monotonic_now_ns();
+    });
+  };
+  bool result = false;
+  TimeNs returned_ns = 0;
+  std::thread consumer = wait_in_thread(result, returned_ns);
+  std::this_thread::sleep_for(50ms);  // most likely asleep by now; if not, it finds the item on entry
+  const TimeNs pushed_ns = monotonic_now_ns();
+  EXPECT_TRUE(q.try_push(pose));
+  consumer.join();
+  EXPECT_TRUE(result);
+  EXPECT_LT(returned_ns - pushed_ns, kWithinNs);
+  PoseQueue::WaitCounters c = q.wait_counters();
+  EXPECT_EQ(c.woken_by_push + c.items_on_entry, 1u);
+  EXPECT_EQ(c.deadline, 1u);
+
+  // An item already queued: at once, no sleep.
+  t0 = monotonic_now_ns();
+  EXPECT_TRUE(q.wait_for_items_until(t0 + kLongNs));
+  EXPECT_LT(monotonic_now_ns() - t0, kWithinNs);
+  EXPECT_EQ(q.wait_counters().items_on_entry, c.items_on_entry + 1);
+  std::vector<SourcedPose> out;
+  EXPECT_EQ(q.drain(out), 1u);
+
+  // push_or_drop_oldest (the UDP sources' push) wakes it too.
+  consumer = wait_in_thread(result, returned_ns);
+  std::this_thread::sleep_for(50ms);
+  EXPECT_FALSE(q.push_or_drop_oldest(pose));
+  consumer.join();
+  EXPECT_TRUE(result);
+  EXPECT_EQ(q.drain(out), 1u);
+
+  // wake_consumer() (a stop, the end of input) ends a sleep with nothing queued.
+  c = q.wait_counters();
+  consumer = wait_in_thread(result, returned_ns);
+  std::this_thread::sleep_for(50ms);
+  const TimeNs woken_ns = monotonic_now_ns();
+  q.wake_consumer();
+  consumer.join();
+  EXPECT_FALSE(result);
+  EXPECT_LT(returned_ns - woken_ns, kWithinNs);
+  EXPECT_EQ(q.wait_counters().woken, c.woken + 1);
+  // ... and one that comes before the wait is not lost: the next wait returns at once.
+  q.wake_consumer();
+  t0 = monotonic_now_ns();
+  EXPECT_FALSE(q.wait_for_items_until(t0 + kLongNs));
+  EXPECT_LT(monotonic_now_ns() - t0, kWithinNs);
+  EXPECT_EQ(q.wait_counters().woken, c.woken + 2);
+}
+
+// The end of an input wakes the consumer sleeping on the queue, so it sees
+// finished() at once instead of at its next deadline.
+TEST(PoseQueue, TheEndOfTheInputWakesAWaitingConsumer) {
+  int fds[2];
+  ASSERT_EQ(::pipe(fds), 0);
+  PoseSourceOptions options;
+  options.log = [](std::string_view) {};
+  auto source = make_fd_pose_source(fds[0], options);
+  source->start();
+  bool result = true;
+  TimeNs returned_ns = 0;
+  std::thread consumer([&] {
+    result = source->queue().wait_for_items_until(monotonic_now_ns() + 60 * kNsPerSecond);
+    returned_ns = monotonic_now_ns();
+  });
+  std::this_thread::sleep_for(50ms);
+  const TimeNs closed_ns = monotonic_now_ns();
+  ::close(fds[1]);  // end of input
+  consumer.join();
+  EXPECT_FALSE(result);
+  EXPECT_LT(returned_ns - closed_ns, 30 * kNsPerSecond);
+  EXPECT_TRUE(source->finished());
+  EXPECT_EQ(source->queue().wait_counters().woken, 1u);
+  source->stop();
+  ::close(fds[0]);
+}
+
 TEST(PoseQueue, BoundedDropOldestAndDrain) {
   PoseQueue q(3);
   auto item = [](TimeNs t) {
@@ -1075,6 +1171,37 @@ TEST(UdpPoseSource, LoopbackCountsEveryDropDuplicateReorderAndCorruption) {
   EXPECT_TRUE(log.contains("1 datagram(s) missing before sequence 4"));
   EXPECT_TRUE(log.contains("(lat_deg): expected a latitude in [-90, 90] degrees, got 95"));
   EXPECT_TRUE(log.contains("sender restarted: sequence 1 after 11"));
+}
+
+// Issue 17: a datagram's receive_ns is when it reached the socket (the
+// kernel's time stamp), not when the source's thread got round to reading
+// it: datagrams sent before the source's thread even started carry their
+// arrival, which lies before the start (the read time would lie after it).
+TEST(UdpPoseSource, ReceiveTimeIsTheKernelsArrivalNotTheRead) {
+  LogCapture log;
+  PoseSourceOptions options;
+  options.log = log.sink();
+  auto source = make_udp_pose_source({"127.0.0.1", 0}, options);
+  std::this_thread::sleep_for(50ms);  // the socket's time stamps are on
+  const TimeNs before_send_ns = monotonic_now_ns();
+  {
+    UdpSender sender(source->local_port());
+    sender.send(datagram(0, ned_quaternion_record(1'000'000'000, Vec3::Zero())));
+    sender.send(datagram(1, ned_quaternion_record(1'010'000'000, Vec3::Zero())));
+  }
+  const TimeNs after_send_ns = monotonic_now_ns();
+  std::this_thread::sleep_for(200ms);  // queued in the socket, unread
+  const TimeNs start_ns = monotonic_now_ns();
+  source->start();
+  ASSERT_TRUE(wait_until([&] { return source->queue().size() == 2; }));
+  std::vector<SourcedPose> poses;
+  ASSERT_EQ(source->queue().drain(poses), 2u);
+  for (const SourcedPose& p : poses) {
+    EXPECT_GE(p.receive_ns, before_send_ns);
+    EXPECT_LE(p.receive_ns, after_send_ns);
+    EXPECT_LT(p.receive_ns, start_ns);
+  }
+  EXPECT_LE(poses[0].receive_ns, poses[1].receive_ns);
 }
 
 TEST(UdpPoseSource, BurstBeyondTheQueueDropsTheOldest) {
