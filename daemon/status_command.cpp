@@ -209,6 +209,15 @@ nlohmann::json query_control_socket(const std::string& socket_path, const std::s
   }
 }
 
+nlohmann::json query_control_socket(const std::string& socket_path, const std::string& command,
+                                    const nlohmann::json& args, std::chrono::milliseconds timeout) {
+  if (!args.is_object()) throw ControlClientError("control command arguments must be a JSON object");
+  if (command.find_first_of(" \t") != std::string::npos)
+    throw ControlClientError("control command name '" + command + "' has a blank");
+  // Compact, and a newline inside a string is escaped: still one line.
+  return query_control_socket(socket_path, command + " " + args.dump(-1, ' ', true), timeout);
+}
+
 int run_status(const StatusArgs& args) {
   if (!(args.timeout_s > 0.0) || !std::isfinite(args.timeout_s) || args.timeout_s > 3600.0) {
     std::cerr << "imuemu status: --timeout-s must be in (0, 3600]\n";
