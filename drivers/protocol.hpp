@@ -66,6 +66,17 @@ struct CanFrame {
   std::array<std::uint8_t, 64> data{};
 };
 
+// Where the fields a link fault touches (drivers/link_fault.hpp) sit in one
+// frame an encoder sent, offsets from the frame's first byte.
+struct StreamFrameLayout {
+  std::size_t frame_bytes = 0;        // the whole frame (0: not a frame of this protocol)
+  std::size_t length_offset = 0;      // the length field...
+  std::uint8_t length_bytes = 0;      // ...its width (0: the protocol has none)
+  bool length_big_endian = false;
+  std::size_t checksum_offset = 0;    // the checksum / CRC...
+  std::uint8_t checksum_bytes = 0;    // ...its width (0: none)
+};
+
 // Byte-stream protocols (UART, pty): frames appended to `out`.
 class StreamEncoder {
  public:
@@ -82,6 +93,29 @@ class StreamEncoder {
   // The frame's delta_theta / delta_velocity are coning/sculling-compensated
   // increments (true) or raw integrals (false, the default).
   virtual bool compensated_increments() const { return false; }
+
+  // ---- link-fault hooks (issue 18; applied by drivers/link_fault.cpp,
+  // effects per protocol in docs/faults.md). Defaults: a protocol without
+  // the field does nothing. None allocates, throws or blocks.
+  //
+  // The layout of the frame that starts at frame[0], which this encoder sent
+  // (encode() or periodic() output). Default: the whole span is one frame
+  // with no length or checksum field known.
+  virtual StreamFrameLayout frame_layout(std::span<const std::uint8_t> frame) const {
+    return StreamFrameLayout{frame.size()};
+  }
+  // The protocol has a packet / sample counter sequence_step() and
+  // sequence_reset() move (false: they do nothing).
+  virtual bool has_sequence_counter() const { return false; }
+  // The counter the next frame carries moves by `step` (modulo its width;
+  // negative steps back), once: later frames count on from there.
+  virtual void sequence_step(std::int64_t step) { (void)step; }
+  // The next frame carries counter 0, later ones 1, 2, ...
+  virtual void sequence_reset() {}
+  // The device powers up again at now_ns: counters and uptime restart, and
+  // whatever the device sends at power-up is appended to `out` (before the
+  // sample the caller encodes next).
+  virtual void restart(TimeNs now_ns, std::vector<std::uint8_t>& out) { (void)now_ns; (void)out; }
 };
 
 // CAN protocols: frames appended to `out`.
@@ -96,6 +130,16 @@ class CanEncoder {
   virtual bool needs_level_attitude() const { return false; }
   // As StreamEncoder::compensated_increments.
   virtual bool compensated_increments() const { return false; }
+
+  // ---- link-fault hooks, as StreamEncoder's.
+  virtual bool has_sequence_counter() const { return false; }
+  virtual void sequence_step(std::int64_t step) { (void)step; }
+  virtual void sequence_reset() {}
+  virtual void restart(TimeNs now_ns, std::vector<CanFrame>& out) { (void)now_ns; (void)out; }
+  // The sample's frames form one transfer whose data carry a tail byte
+  // (DroneCAN: start / end / toggle / transfer id in the last data byte);
+  // false: each frame is a message of its own (J1939).
+  virtual bool frames_have_tail_byte() const { return false; }
 };
 
 // What a decoder recovered from a frame: the fields the protocol carries

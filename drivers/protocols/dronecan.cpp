@@ -8,6 +8,8 @@
 #include <limits>
 #include <stdexcept>
 
+#include "core/time_arith.hpp"
+
 namespace imuemu::drivers::dronecan {
 
 namespace {
@@ -335,6 +337,27 @@ void DroneCanEncoder::periodic(TimeNs now_ns, std::vector<CanFrame>& out) {
   note_time(now_ns);
   if (now_ns < next_node_status_ns_) return;
 
+  append_node_status(now_ns, NodeMode::kOperational, out);
+
+  // Next due: the first whole period after start that is later than now (a
+  // long pause sends one NodeStatus, not a burst of missed ones).
+  const TimeNs periods = (now_ns - start_ns_) / options_.node_status_period_ns + 1;
+  next_node_status_ns_ = start_ns_ + periods * options_.node_status_period_ns;
+}
+
+void DroneCanEncoder::restart(TimeNs now_ns, std::vector<CanFrame>& out) {
+  raw_imu_transfer_id_ = 0;
+  node_status_transfer_id_ = 0;
+  started_ = true;
+  start_ns_ = now_ns;
+  status_since_node_status_ = 0;
+  saturated_since_node_status_ = false;
+  fault_since_node_status_ = false;
+  append_node_status(now_ns, NodeMode::kInitialization, out);
+  next_node_status_ns_ = saturating_add_ns(now_ns, options_.node_status_period_ns);
+}
+
+void DroneCanEncoder::append_node_status(TimeNs now_ns, NodeMode mode, std::vector<CanFrame>& out) {
   const TimeNs uptime_ns = now_ns - start_ns_;
   const auto uptime_sec = static_cast<std::uint64_t>(uptime_ns / kNsPerSecond);
   NodeHealth health = NodeHealth::kOk;
@@ -344,18 +367,13 @@ void DroneCanEncoder::periodic(TimeNs now_ns, std::vector<CanFrame>& out) {
   BitWriter writer;
   writer.put(std::min<std::uint64_t>(uptime_sec, std::numeric_limits<std::uint32_t>::max()), 32);
   writer.put(static_cast<std::uint64_t>(health), 2);
-  writer.put(static_cast<std::uint64_t>(NodeMode::kOperational), 3);
+  writer.put(static_cast<std::uint64_t>(mode), 3);
   writer.put(0, 3);  // sub_mode: "keep zero when publishing"
   writer.put(status_since_node_status_ & 0xFFFFu, 16);
   const std::vector<std::uint8_t> payload = writer.take();
   append_transfer(out, message_can_id(options_.node_status_priority, kNodeStatusDataTypeId, options_.node_id),
                   kNodeStatusSignature, payload, node_status_transfer_id_);
   node_status_transfer_id_ = static_cast<std::uint8_t>((node_status_transfer_id_ + 1) & kTransferIdMask);
-
-  // Next due: the first whole period after start that is later than now (a
-  // long pause sends one NodeStatus, not a burst of missed ones).
-  const TimeNs periods = uptime_ns / options_.node_status_period_ns + 1;
-  next_node_status_ns_ = start_ns_ + periods * options_.node_status_period_ns;
   status_since_node_status_ = 0;
   saturated_since_node_status_ = false;
   fault_since_node_status_ = false;

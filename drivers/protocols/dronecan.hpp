@@ -143,8 +143,23 @@ class DroneCanEncoder final : public CanEncoder {
   std::uint64_t saturated_values() const { return saturated_values_; }
   std::uint64_t non_finite_values() const { return non_finite_values_; }
 
+  // Link faults (docs/faults.md). The sequence is RawIMU's 5-bit transfer
+  // id (spec 4.1). restart(): both transfer ids start again at 0, uptime
+  // restarts at 0, and a NodeStatus with mode INITIALIZATION ("node is
+  // initializing; this mode is entered immediately after startup",
+  // NodeStatus DSDL) goes out at once; the next one, a period later, is
+  // OPERATIONAL again.
+  bool has_sequence_counter() const override { return true; }
+  void sequence_step(std::int64_t step) override {
+    raw_imu_transfer_id_ = static_cast<std::uint8_t>((raw_imu_transfer_id_ + static_cast<std::uint8_t>(step)) & 0x1F);
+  }
+  void sequence_reset() override { raw_imu_transfer_id_ = 0; }
+  void restart(TimeNs now_ns, std::vector<CanFrame>& out) override;
+  bool frames_have_tail_byte() const override { return true; }
+
  private:
   void note_time(TimeNs t_ns);
+  void append_node_status(TimeNs now_ns, NodeMode mode, std::vector<CanFrame>& out);
   DroneCanOptions options_;
   std::uint8_t raw_imu_transfer_id_ = 0;
   std::uint8_t node_status_transfer_id_ = 0;

@@ -269,6 +269,16 @@ void J1939Encoder::encode(const ImuFrameInput& sample, std::vector<CanFrame>& ou
   }
 }
 
+void J1939Encoder::restart(TimeNs now_ns, std::vector<CanFrame>& out) {
+  (void)now_ns;
+  CanFrame frame;
+  frame.id = can_id(kAddressClaimedPriority, kPgnAddressClaimed | kGlobalAddress, options_.source_address);
+  frame.extended = true;
+  frame.len = kFrameBytes;
+  for (unsigned i = 0; i < kFrameBytes; ++i) frame.data[i] = static_cast<std::uint8_t>(options_.name >> (8 * i));
+  out.push_back(frame);
+}
+
 // ---- decoder ----
 
 J1939Decoder::J1939Decoder(const J1939Options& options) : options_(options) {}
@@ -352,8 +362,22 @@ void J1939Decoder::feed(const CanFrame& frame, const SampleCallback& on_sample) 
     return;
   }
 
+  if (id.pgn == kPgnAddressClaimed) {
+    std::uint64_t name = 0;
+    for (unsigned i = 0; i < kFrameBytes; ++i) name |= std::uint64_t{frame.data[i]} << (8 * i);
+    claimed_names_[id.source_address] = name;
+    ++counters_.frames;
+    return;
+  }
+
   ++detail_.unknown_pgn;
   ++counters_.other_errors;
+}
+
+std::optional<std::uint64_t> J1939Decoder::claimed_name(std::uint8_t source_address) const {
+  const auto it = claimed_names_.find(source_address);
+  if (it == claimed_names_.end()) return std::nullopt;
+  return it->second;
 }
 
 }  // namespace imuemu::drivers::j1939

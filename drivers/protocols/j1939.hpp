@@ -78,6 +78,16 @@ inline constexpr std::uint32_t kPgnSlopeSensorInformation2 = 61481;   // 0xF029 
 inline constexpr std::uint32_t kPgnAngularRateInformation = 61482;    // 0xF02A ARI
 inline constexpr std::uint32_t kPgnAccelerationSensor = 61485;        // 0xF02D ACCS
 inline constexpr std::uint8_t kDefaultPriority = 3;
+// Address Claimed (J1939-81; linux/can/j1939.h J1939_PGN_ADDRESS_CLAIMED):
+// PDU1 PGN 0xEE00 sent to the global address 0xFF, data = the 64-bit NAME
+// little-endian (bits 0-20 identity number, 21-31 manufacturer code, 32-34
+// ECU instance, 35-39 function instance, 40-47 function, 48 reserved,
+// 49-55 vehicle system, 56-59 its instance, 60-62 industry group, 63
+// arbitrary address capable: linux/can/j1939.h "J1939 NAME"). A node
+// claims its address at power-up before it sends anything else.
+inline constexpr std::uint32_t kPgnAddressClaimed = 0xEE00;
+inline constexpr std::uint8_t kGlobalAddress = 0xFF;
+inline constexpr std::uint8_t kAddressClaimedPriority = 6;
 
 // One SPN's linear scaling: physical = raw * resolution + offset, raw valid in
 // 0..max_valid_raw.
@@ -138,6 +148,10 @@ struct J1939Options {
   // ARI byte 8 and SSI2 byte 8 (0.5 ms/bit, 0..125 ms); not available when unset.
   std::optional<double> measurement_latency_ms;
   VehicleAxes axes = VehicleAxes::kJ1939da;
+  // The NAME the Address Claimed message of a restart (link fault) carries.
+  // Default: identity number 1, every other field 0 (manufacturer codes and
+  // functions are SAE-assigned; 0 is J1939_NO_NAME, so not that).
+  std::uint64_t name = 1;
 };
 
 // Throws std::invalid_argument naming the option that is out of range.
@@ -155,6 +169,9 @@ class J1939Encoder final : public CanEncoder {
   void encode(const ImuFrameInput& sample, std::vector<CanFrame>& out) override;
   bool needs_level_attitude() const override { return options_.send_slope; }
   std::uint64_t clamped_values() const { return clamped_values_; }
+  // Link faults (docs/faults.md): J1939 PGNs carry no counter (the default
+  // sequence hooks do nothing); restart() sends Address Claimed.
+  void restart(TimeNs now_ns, std::vector<CanFrame>& out) override;
 
  private:
   J1939Options options_;
@@ -171,7 +188,7 @@ struct J1939ErrorDetail {
 // (the encoder sends ARI then ACCS): an ACCS completes the pending ARI; an
 // ARI that finds another ARI still pending emits that one alone (gyro only);
 // an ACCS with no ARI pending is emitted alone (accel only). SSI2 angles go
-// to last_slope(). Not-available values decode as 0; error indicators and
+// to last_slope(), Address Claimed NAMEs to claimed_name(). Not-available values decode as 0; error indicators and
 // figure of merit "error" set kStatusFault; "degraded" sets kStatusSaturated
 // when the value sits at its range limit, else kStatusExtrapolated. J1939
 // has no sequence counter or time field: has_sequence / has_time are false
@@ -188,6 +205,8 @@ class J1939Decoder final : public CanDecoder {
     bool fault = false;
   };
   std::optional<Slope> last_slope(std::uint8_t source_address) const;
+  // The NAME of the last Address Claimed from a source address.
+  std::optional<std::uint64_t> claimed_name(std::uint8_t source_address) const;
 
  private:
   struct Pending {
@@ -200,6 +219,7 @@ class J1939Decoder final : public CanDecoder {
   J1939ErrorDetail detail_;
   std::map<std::uint8_t, Pending> pending_;
   std::map<std::uint8_t, Slope> slope_;
+  std::map<std::uint8_t, std::uint64_t> claimed_names_;
 };
 
 }  // namespace imuemu::drivers::j1939

@@ -28,6 +28,7 @@
 #include <limits>
 #include <optional>
 
+#include "core/time_arith.hpp"
 #include "drivers/protocols/wire_bytes.hpp"
 
 namespace imuemu::drivers::mavlink2 {
@@ -42,6 +43,9 @@ using X25Engine = boost::crc_optimal<16, 0x1021, 0xFFFF, 0, true, true>;
 // for components that are not flight controllers": 8.
 constexpr std::uint8_t kMavTypeImu = 40;
 constexpr std::uint8_t kMavAutopilotInvalid = 8;
+// MAV_STATE (minimal.xml): BOOT "System is booting up", ACTIVE "System is
+// active and might be already airborne".
+constexpr std::uint8_t kMavStateBoot = 1;
 constexpr std::uint8_t kMavStateActive = 4;
 constexpr std::uint8_t kMavlinkVersion = 3;  // the dialect <version>; "gets added by protocol"
 
@@ -178,6 +182,10 @@ void Encoder::periodic(TimeNs now_ns, std::vector<std::uint8_t>& out) {
                            ? *next_heartbeat_ns_ + kHeartbeatPeriodNs
                            : now_ns + kHeartbeatPeriodNs;
 
+  append_heartbeat(kMavStateActive, out);
+}
+
+void Encoder::append_heartbeat(std::uint8_t system_status, std::vector<std::uint8_t>& out) {
   // [X] HEARTBEAT wire order: custom_mode (u32) then the u8 fields in XML
   // order: type, autopilot, base_mode, system_status, mavlink_version.
   std::array<std::uint8_t, kHeartbeat.payload_bytes> p{};
@@ -185,9 +193,33 @@ void Encoder::periodic(TimeNs now_ns, std::vector<std::uint8_t>& out) {
   p[4] = kMavTypeImu;
   p[5] = kMavAutopilotInvalid;
   p[6] = 0;  // base_mode
-  p[7] = kMavStateActive;
+  p[7] = system_status;
   p[8] = kMavlinkVersion;
   append_packet(kHeartbeat, p, out);
+}
+
+void Encoder::restart(TimeNs now_ns, std::vector<std::uint8_t>& out) {
+  // A component announces itself with a HEARTBEAT as soon as it is up [H];
+  // while booting its system_status is MAV_STATE_BOOT. Its packet counter
+  // starts again at 0 [G].
+  sequence_ = 0;
+  if (!options_.mavlink_heartbeat) return;
+  append_heartbeat(kMavStateBoot, out);
+  next_heartbeat_ns_ = saturating_add_ns(now_ns, kHeartbeatPeriodNs);
+}
+
+StreamFrameLayout Encoder::frame_layout(std::span<const std::uint8_t> frame) const {
+  // [G] packet format: len at offset 1, the payload from offset 10, then
+  // the 2-byte checksum (this encoder never signs).
+  if (frame.size() < kHeaderBytes) return StreamFrameLayout{frame.size()};
+  const std::size_t len = frame[1];
+  StreamFrameLayout layout;
+  layout.frame_bytes = std::min(frame.size(), kHeaderBytes + len + kChecksumBytes);
+  layout.length_offset = 1;
+  layout.length_bytes = 1;
+  layout.checksum_offset = kHeaderBytes + len;
+  layout.checksum_bytes = layout.checksum_offset + kChecksumBytes <= frame.size() ? kChecksumBytes : 0;
+  return layout;
 }
 
 std::size_t Encoder::max_bytes_per_sample() const {

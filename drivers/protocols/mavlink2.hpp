@@ -50,7 +50,20 @@ class Encoder final : public StreamEncoder {
   void periodic(TimeNs now_ns, std::vector<std::uint8_t>& out) override;
   std::size_t max_bytes_per_sample() const override;
 
+  // Link faults (docs/faults.md): seq is the one 8-bit counter of every
+  // packet this component sends [G]; restart() sends a HEARTBEAT with
+  // system_status MAV_STATE_BOOT at once (the next one, a period later, is
+  // MAV_STATE_ACTIVE again) and seq restarts at 0.
+  StreamFrameLayout frame_layout(std::span<const std::uint8_t> frame) const override;
+  bool has_sequence_counter() const override { return true; }
+  void sequence_step(std::int64_t step) override {
+    sequence_ = static_cast<std::uint8_t>(sequence_ + static_cast<std::uint8_t>(step));
+  }
+  void sequence_reset() override { sequence_ = 0; }
+  void restart(TimeNs now_ns, std::vector<std::uint8_t>& out) override;
+
  private:
+  void append_heartbeat(std::uint8_t system_status, std::vector<std::uint8_t>& out);
   void append_packet(const MessageSpec& message, std::span<const std::uint8_t> payload,
                      std::vector<std::uint8_t>& out);
 

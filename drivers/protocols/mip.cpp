@@ -27,6 +27,7 @@
 // (LORD-MicroStrain/microstrain_inertial issue #97: "-9.81 does make sense").
 #include "drivers/protocols/mip.hpp"
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <limits>
@@ -178,6 +179,20 @@ void Encoder::encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out
       fletcher_checksum(std::span<const std::uint8_t>(out.data() + start, out.size() - start));
   out.push_back(static_cast<std::uint8_t>(checksum >> 8));
   out.push_back(static_cast<std::uint8_t>(checksum));
+}
+
+StreamFrameLayout Encoder::frame_layout(std::span<const std::uint8_t> frame) const {
+  // [P 6.3]: sync1 sync2 descriptor-set payload-length, the fields, then the
+  // 2-byte checksum (MSB first).
+  if (frame.size() < kHeaderBytes) return StreamFrameLayout{frame.size()};
+  const std::size_t payload = frame[3];
+  StreamFrameLayout layout;
+  layout.frame_bytes = std::min(frame.size(), kHeaderBytes + payload + kChecksumBytes);
+  layout.length_offset = 3;
+  layout.length_bytes = 1;
+  layout.checksum_offset = kHeaderBytes + payload;
+  layout.checksum_bytes = layout.checksum_offset + kChecksumBytes <= frame.size() ? kChecksumBytes : 0;
+  return layout;
 }
 
 std::size_t Encoder::max_bytes_per_sample() const {

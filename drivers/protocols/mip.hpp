@@ -57,6 +57,13 @@ class Encoder final : public StreamEncoder {
   // 0x0C,0x51) on: an INS integrates them without corrections of its own.
   bool compensated_increments() const override { return true; }
 
+  // Link faults (docs/faults.md): payload length byte and Fletcher
+  // checksum [P 6.3, 6.4]. The IMU data set carries no packet counter and
+  // the emulated device sends no power-up packet (it resumes streaming the
+  // same data set), so the sequence and restart hooks keep their defaults:
+  // a restart shows on the wire only as the silence before it.
+  StreamFrameLayout frame_layout(std::span<const std::uint8_t> frame) const override;
+
  private:
   StreamEncoderOptions options_;
 };

@@ -7,6 +7,7 @@
 // identity, done explicitly in frd_to_native() so a reader sees it is meant.
 #include "drivers/protocols/native.hpp"
 
+#include <algorithm>
 #include <array>
 #include <boost/crc.hpp>
 #include <limits>
@@ -63,7 +64,12 @@ void Encoder::encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out
 
   // Section 1 (payload): sequence = the device's sample counter, so a sync
   // pulse that names a counter value names exactly one frame.
-  wire::put_le<std::uint64_t>(p + 6, sample.sample_counter);
+  if (reset_pending_) {  // link fault: this frame carries 0
+    sequence_offset_ = step_after_reset_ - sample.sample_counter;
+    reset_pending_ = false;
+    step_after_reset_ = 0;
+  }
+  wire::put_le<std::uint64_t>(p + 6, sample.sample_counter + sequence_offset_);
   wire::put_le<std::int64_t>(p + 14, sample.t_ns);
   std::uint32_t status = sample.status & kStatusBitsV1;
   status |= put_vec3_f64(p + 26, frd_to_native(sample.gyro_rad_s));
@@ -77,6 +83,19 @@ void Encoder::encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out
   const std::size_t crc_at = kHeaderBytes + payload;
   wire::put_le<std::uint32_t>(p + crc_at, crc32c(std::span<const std::uint8_t>(p, crc_at)));
   out.insert(out.end(), p, p + crc_at + kCrcBytes);
+}
+
+StreamFrameLayout Encoder::frame_layout(std::span<const std::uint8_t> frame) const {
+  // Section 1: payload_length (u16 LE) at offset 4, the CRC-32C after the payload.
+  if (frame.size() < kHeaderBytes) return StreamFrameLayout{frame.size()};
+  const std::size_t payload = wire::get_le<std::uint16_t>(frame.data() + 4);
+  StreamFrameLayout layout;
+  layout.frame_bytes = std::min(frame.size(), kHeaderBytes + payload + kCrcBytes);
+  layout.length_offset = 4;
+  layout.length_bytes = 2;
+  layout.checksum_offset = kHeaderBytes + payload;
+  layout.checksum_bytes = layout.checksum_offset + kCrcBytes <= frame.size() ? kCrcBytes : 0;
+  return layout;
 }
 
 void Decoder::feed(std::span<const std::uint8_t> bytes, const SampleCallback& on_sample) {

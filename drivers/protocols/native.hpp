@@ -37,8 +37,30 @@ class Encoder final : public StreamEncoder {
     return include_deltas_ ? kFrameBytesDeltas : kFrameBytesBase;
   }
 
+  // Link faults (docs/faults.md). The frame's sequence is the sample counter
+  // plus an offset that sequence_step() moves and sequence_reset() / restart()
+  // set so that the next frame carries 0 (section 6 item 5: a step backwards
+  // is how a receiver sees a restart). Native v1 has no power-up frame.
+  StreamFrameLayout frame_layout(std::span<const std::uint8_t> frame) const override;
+  bool has_sequence_counter() const override { return true; }
+  void sequence_step(std::int64_t step) override {
+    (reset_pending_ ? step_after_reset_ : sequence_offset_) += static_cast<std::uint64_t>(step);
+  }
+  void sequence_reset() override {
+    reset_pending_ = true;
+    step_after_reset_ = 0;
+  }
+  void restart(TimeNs now_ns, std::vector<std::uint8_t>& out) override {
+    (void)now_ns;
+    (void)out;
+    sequence_reset();
+  }
+
  private:
   bool include_deltas_;
+  std::uint64_t sequence_offset_ = 0;  // modulo 2^64, as the field wraps
+  bool reset_pending_ = false;          // the next frame's sequence restarts at 0...
+  std::uint64_t step_after_reset_ = 0;  // ...plus steps asked for after the reset
 };
 
 class Decoder final : public StreamDecoder {
