@@ -17,6 +17,7 @@
 #include <toml++/toml.h>
 
 #include "daemon/error_model_config.hpp"
+#include "daemon/fault_config.hpp"
 
 #include "core/attitude.hpp"
 #include "core/limits.hpp"
@@ -217,6 +218,7 @@ class Table {
   }
 
   const Context& ctx() const { return ctx_; }
+  const toml::table& table() const { return table_; }
 
  private:
   const Context& ctx_;
@@ -605,7 +607,8 @@ void parse_sync(const Table& t, const ImuConfig& imu, SyncConfig& out) {
 ImuConfig parse_imu(const Table& t) {
   ImuConfig imu;
   imu.line = t.where().begin.line;
-  std::vector<std::string> allowed = {"name", "rate_hz", "protocol", "mounting", "transport", "sync", "error_model"};
+  std::vector<std::string> allowed = {"name",      "rate_hz",     "protocol", "mounting",     "transport",
+                                      "sync",      "error_model", "fault",    "random_faults"};
   for (const std::string& p : kProtocols) allowed.push_back(option_table_of(p));
   t.allow_only(allowed);
   imu.name = t.required_string("name", "the device's name in logs, status and the control socket");
@@ -648,6 +651,10 @@ ImuConfig parse_imu(const Table& t) {
                        std::string(ex.what()) + " (at rate_hz " + std::to_string(imu.rate_hz) + ")");
     }
   }
+  // Faults (daemon/fault_config.cpp), seeded from the error model's seed.
+  DeviceFaults faults = parse_device_faults(t.table(), t.ctx().file, t.path(), imu.name, imu.rate_hz, imu.error_model.spec.seed);
+  imu.faults = std::move(faults.faults);
+  imu.random_faults = std::move(faults.random);
   return imu;
 }
 

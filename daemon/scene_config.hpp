@@ -17,6 +17,8 @@
 
 #include "core/live_emitter.hpp"
 #include "core/mounting.hpp"
+#include "core/fault/fault.hpp"
+#include "core/fault/timeline.hpp"
 #include "core/pipeline.hpp"
 #include "core/sensor/sensor_model.hpp"
 #include "core/signal_chain/signal_chain.hpp"
@@ -198,6 +200,11 @@ struct ImuConfig {
   TransportConfig transport;
   std::optional<SyncConfig> sync;
   ErrorModelConfig error_model;
+  // [[imu.fault]] and [imu.random_faults] (daemon/fault_config.hpp,
+  // docs/faults.md): the faults on this device's timeline; their seeds
+  // default to the error model's.
+  std::vector<fault::FaultSpec> faults;
+  fault::RandomFaults random_faults;
   std::uint32_t line = 0;             // where its [[imu]] header is in the file
 };
 

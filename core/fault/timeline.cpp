@@ -204,11 +204,14 @@ FaultTimeline::FaultTimeline(TimelineOptions options) : options_(std::move(optio
   events_.resize(options_.event_capacity);
 }
 
-TimeNs FaultTimeline::max_delay_ns() const {
-  // history_.size() - 1 samples back.
-  const double ns = static_cast<double>(history_.size() - 1) * 1e9 / static_cast<double>(options_.context.rate_hz);
+TimeNs max_delay_ns_at(std::int64_t rate_hz) {
+  if (rate_hz < 1) return 0;
+  // history_samples - 1 samples back.
+  const double ns = static_cast<double>(history_samples(rate_hz) - 1) * 1e9 / static_cast<double>(rate_hz);
   return std::min(kMaxDelayNs, static_cast<TimeNs>(std::floor(ns)));
 }
+
+TimeNs FaultTimeline::max_delay_ns() const { return max_delay_ns_at(options_.context.rate_hz); }
 
 void FaultTimeline::check_fits(const FaultSpec& spec) const {
   if (spec.kind == Kind::delayed && spec.delay_ns > max_delay_ns())

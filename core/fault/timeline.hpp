@@ -98,6 +98,10 @@ DeviceContext device_context(const std::string& device, std::int64_t rate_hz,
 // defaults (fault.hpp), whatever the bias and ramp parameters say.
 FaultSpec random_fault_parameters();
 
+// The longest `delayed` fault a device at rate_hz takes: kMaxDelayNs, or
+// less above kMaxDelaySamples / 1 s (the history ring's size).
+TimeNs max_delay_ns_at(std::int64_t rate_hz);
+
 inline constexpr TimeNs kRandomWindowNs = 60 * kNsPerSecond;
 inline constexpr double kMaxRandomPerHour = 1800.0;
 inline constexpr std::uint32_t kMaxRandomPerWindow = 64;
