@@ -20,6 +20,7 @@
 #include "core/stream.hpp"
 #include "daemon/batch_generation.hpp"
 #include "daemon/error_model_config.hpp"
+#include "daemon/fault_config.hpp"
 #include "daemon/scene_runner.hpp"
 #include "core/earth.hpp"
 #include "core/pipeline.hpp"
@@ -174,9 +175,21 @@ int generate_for_scene(const GenerateArgs& args) {
   scene::ErrorModelConfig seeded = model;
   if (args.seed >= 0) seeded.spec.seed = static_cast<std::uint64_t>(args.seed);
   describe_sensor_stage(seeded, imu->name, imu->rate_hz, args.quiet);
+  // Faults ([[imu.fault]], [imu.random_faults]; docs/faults.md): on the
+  // samples as imuemud's producer applies them, logged beside the output.
+  BatchOutputs outputs{args.out_path, "", opt.scene.physics, end_ns, {}};
+  outputs.faults.faults = imu->faults;
+  outputs.faults.random = imu->random_faults;
+  if (!args.quiet)
+    for (const std::string& line : scene::fault_lines(imu->faults, imu->random_faults))
+      std::cerr << "imuemu: " << imu->name << ": " << line << "\n";
   // Streamed to the file sample by sample: O(window) memory (batch_generation.hpp).
-  const BatchCounts counts = generate_to_files(knots, opt, seeded, imu->name, {args.out_path, "", opt.scene.physics, end_ns});
+  const BatchCounts counts = generate_to_files(knots, opt, seeded, imu->name, outputs);
   report_saturation(imu->name, counts.saturated_samples, args.quiet);
+  if (!args.quiet && !counts.fault_log_path.empty())
+    std::cerr << "imuemu: " << imu->name << ": " << counts.faulted_samples << " samples faulted, " << counts.fault_events
+              << " fault events -> " << counts.fault_log_path
+              << " (link faults are logged; they act on the wire only: imuemud, emit)\n";
   if (!args.quiet)
     std::cerr << "imuemu: scene " << sc.name << ", imu " << imu->name << ": " << knots.size() << " knots -> "
               << counts.samples << " samples at " << imu->rate_hz << " Hz (Delta " << opt.kernel.delta << ") -> "
@@ -228,7 +241,7 @@ int generate(const GenerateArgs& args) {
       ProgressBar bar(!args.quiet);
       try {
         counts = generate_to_files(knots, opt, model, "imu0",
-                                   {args.out_path, args.trajectory_out_path, opt.scene.physics},
+                                   {args.out_path, args.trajectory_out_path, opt.scene.physics, std::numeric_limits<TimeNs>::max(), {}},
                                    [&](double f) { bar.update(f); });
       } catch (const GapError& e) {
         // Named by file line (knot k is the record at knot_lines[k]), not by

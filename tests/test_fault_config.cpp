@@ -5,9 +5,18 @@
 // and every refusal naming the file, the line and the dotted key.
 #include <gtest/gtest.h>
 
+#include <sys/wait.h>
+#include <unistd.h>
+
 #include <cmath>
+#include <cstdio>
+#include <filesystem>
+#include <fstream>
 #include <numbers>
+#include <sstream>
 #include <string>
+
+#include <nlohmann/json.hpp>
 
 #include "daemon/fault_config.hpp"
 #include "daemon/scene_config.hpp"
@@ -184,4 +193,100 @@ TEST(FaultConfig, RefusalsNameTheFileLineKeyAndWhatIsExpected) {
 
   r = refusal("[imu.faults]\n");
   EXPECT_NE(r.what.find("unknown key 'faults'"), std::string::npos) << r.what;
+}
+
+// ---- `imuemu generate --scene-file` with faults ----
+
+namespace {
+
+int run_cli(const std::string& args, std::string* output = nullptr) {
+  const std::string cmd = std::string(IMUEMU_CLI_PATH) + " " + args + " 2>&1";
+  FILE* p = ::popen(cmd.c_str(), "r");
+  if (p == nullptr) return -1;
+  char buf[4096];
+  std::string out;
+  std::size_t n;
+  while ((n = std::fread(buf, 1, sizeof buf, p)) > 0) out.append(buf, n);
+  const int status = ::pclose(p);
+  if (output != nullptr) *output = out;
+  return WIFEXITED(status) ? WEXITSTATUS(status) : -1;
+}
+
+std::vector<std::string> lines_of(const std::string& path) {
+  std::ifstream in(path);
+  std::vector<std::string> out;
+  for (std::string line; std::getline(in, line);) out.push_back(line);
+  return out;
+}
+
+std::vector<double> cells_of(const std::string& line) {
+  std::vector<double> out;
+  std::stringstream ss(line);
+  for (std::string cell; std::getline(ss, cell, ',');) out.push_back(std::strtod(cell.c_str(), nullptr));
+  return out;
+}
+
+}  // namespace
+
+TEST(FaultGenerate, SceneFaultsChangeExactlyTheirSamplesAndTheLogNamesThem) {
+  const std::filesystem::path dir =
+      std::filesystem::temp_directory_path() / ("imuemu_fault_gen_" + std::to_string(::getpid()));
+  std::filesystem::remove_all(dir);
+  std::filesystem::create_directories(dir);
+  auto write = [&](const std::string& name, const std::string& text) {
+    std::ofstream(dir / name) << text;
+    return (dir / name).string();
+  };
+  const std::string base = scene_with("");
+  const std::string plain = write("plain.toml", base);
+  const std::string faulty = write(
+      "faulty.toml", base +
+                         "[[imu.fault]]\ntype = \"bias_step\"\nafter_s = 1\nduration_s = 0.5\nbias_deg_s = 1\naxes = \"z\"\n"
+                         "[[imu.fault]]\ntype = \"dead\"\nafter_s = 2\nduration_s = 0.25\nsensor = \"accel\"\n");
+  const std::string out_plain = (dir / "plain.csv").string(), out_faulty = (dir / "faulty.csv").string();
+  ASSERT_EQ(run_cli("generate --scene-file " + plain + " --max-seconds 3 --quiet --out " + out_plain), 0);
+  std::string messages;
+  ASSERT_EQ(run_cli("generate --scene-file " + faulty + " --max-seconds 3 --out " + out_faulty, &messages), 0)
+      << messages;
+  EXPECT_NE(messages.find("fault 1: bias_step gyro z at 1 s since start for 0.5 s"), std::string::npos) << messages;
+  EXPECT_NE(messages.find("150 samples faulted, 4 fault events"), std::string::npos) << messages;
+  EXPECT_FALSE(std::filesystem::exists(dir / "plain.faults.jsonl")) << "no faults, no log";
+  const std::vector<std::string> a = lines_of(out_plain), b = lines_of(out_faulty);
+  ASSERT_EQ(a.size(), b.size());
+  ASSERT_GE(a.size(), 601u);  // header + 3 s at 200 Hz
+  // Row k + 1 is sample k (t_k = t_0 + k / 200 s).
+  for (std::size_t k = 0; k + 1 < a.size(); ++k) {
+    const bool biased = k >= 200 && k < 300, dead = k >= 400 && k < 450;
+    if (!biased && !dead) {
+      EXPECT_EQ(a[k + 1], b[k + 1]) << "sample " << k << " changed";
+      continue;
+    }
+    const std::vector<double> x = cells_of(a[k + 1]), y = cells_of(b[k + 1]);
+    ASSERT_EQ(x.size(), y.size());
+    EXPECT_EQ(x[0], y[0]) << "the time stays";
+    for (int i = 1; i <= 6; ++i) {
+      double expected = x[i];
+      if (biased && i == 3) expected = x[i] + kDeg;  // gyro z + 1 deg/s
+      if (dead && i >= 4) expected = 0.0;            // accel dead
+      EXPECT_DOUBLE_EQ(y[i], expected) << "sample " << k << " column " << i;
+    }
+  }
+  const std::vector<std::string> log = lines_of((dir / "faulty.faults.jsonl").string());
+  ASSERT_EQ(log.size(), 4u);
+  const std::int64_t t0 = static_cast<std::int64_t>(cells_of(a[1])[0]);
+  const struct {
+    const char* phase;
+    const char* type;
+    std::uint64_t sample;
+  } expected[4] = {{"start", "bias_step", 200}, {"end", "bias_step", 299}, {"start", "dead", 400}, {"end", "dead", 449}};
+  for (int i = 0; i < 4; ++i) {
+    const nlohmann::json j = nlohmann::json::parse(log[i]);
+    EXPECT_EQ(j["phase"], expected[i].phase) << log[i];
+    EXPECT_EQ(j["type"], expected[i].type) << log[i];
+    EXPECT_EQ(j["sample_counter"], expected[i].sample) << log[i];
+    EXPECT_EQ(j["t_ns"], t0 + static_cast<std::int64_t>(expected[i].sample) * 5'000'000) << log[i];
+    EXPECT_EQ(j["device"], "imu0");
+    EXPECT_EQ(j["source"], "scene");
+  }
+  std::filesystem::remove_all(dir);
 }

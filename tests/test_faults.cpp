@@ -17,6 +17,28 @@
 #include "core/fault/timeline.hpp"
 #include "daemon/fault_log.hpp"
 
+// Counts the allocations of this binary while `g_counting` is set (the
+// timeline's step() must allocate nothing per sample).
+namespace {
+std::atomic<bool> g_counting{false};
+std::atomic<std::uint64_t> g_allocations{0};
+}  // namespace
+void* operator new(std::size_t n) {
+  if (g_counting.load(std::memory_order_relaxed)) g_allocations.fetch_add(1, std::memory_order_relaxed);
+  if (void* p = std::malloc(n == 0 ? 1 : n)) return p;
+  throw std::bad_alloc();
+}
+// GCC sees free() on what `new` returned; here `new` is malloc.
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
+#endif
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic pop
+#endif
+
 namespace imuemu::fault {
 namespace {
 
@@ -453,6 +475,60 @@ TEST(Faults, TheEventBufferIsBoundedAndCountsWhatOverflows) {
   EXPECT_EQ(tl.counters().events_overflowed, 6u);  // 10 events, 4 kept
   EXPECT_EQ(tl.counters().started, 5u);
   EXPECT_EQ(tl.counters().ended, 5u);
+}
+
+TEST(Faults, StepAllocatesNothingPerSample) {
+  TimelineOptions o;
+  o.context = context();
+  // Every kind at once, each over samples 100..5099, some ending, some not.
+  for (std::string_view name : kind_names()) {
+    FaultSpec s = default_spec(*kind_from_name(name));
+    s.start_ns = kNsPerSecond;
+    s.duration_ns = 50 * kNsPerSecond;
+    s.gyro_bias_rad_s = 0.1;
+    s.gyro_ramp_rad_s2 = 0.1;
+    s.accel_bias_m_s2 = 0.1;
+    s.scale_ppm = 10;
+    s.noise_factor = 2;
+    s.rate_hz = 3;
+    s.on_ns = s.off_ns = 30'000'000;
+    s.delay_ns = 100'000'000;
+    s.bit_error_rate = 1e-3;
+    s.truncate_bytes = 2;
+    s.sequence_step = 3;
+    s.time_step_ns = 1000;
+    s.flag_status = true;
+    if (s.kind == Kind::drop) {
+      s.burst_samples = 4;
+      s.rate_hz = 1;
+    }
+    o.faults.push_back(s);
+  }
+  FaultTimeline tl(o);
+  std::vector<FaultEvent> events;
+  events.reserve(1000);
+  std::uint64_t allocations = 0, active = 0;
+  for (std::uint64_t k = 0; k < 6000; ++k) {
+    SampleValues v = input(k);
+    g_allocations = 0;
+    g_counting = true;
+    const SampleFaults f = tl.step(k, t_of(k), v);
+    g_counting = false;
+    allocations += g_allocations;
+    active += f.active;
+    tl.drain_events(events);
+    ASSERT_TRUE(v.gyro_rad_s.allFinite() && v.accel_m_s2.allFinite() && v.delta_theta_rad.allFinite() &&
+                v.delta_velocity_m_s.allFinite());
+  }
+  EXPECT_EQ(allocations, 0u);
+  // The counter counts (so the zero above means something).
+  g_allocations = 0;
+  g_counting = true;
+  auto probe = std::make_unique<std::vector<int>>(3);
+  g_counting = false;
+  EXPECT_EQ(g_allocations, 2u);
+  EXPECT_EQ(active, 5000u * kind_names().size()) << "every fault acted on its 5000 samples";
+  EXPECT_EQ(events.size(), 2 * kind_names().size());
 }
 
 // ---- link decisions ----
