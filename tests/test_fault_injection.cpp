@@ -9,6 +9,8 @@
 
 #include <atomic>
 #include <chrono>
+#include <cstdlib>
+#include <new>
 #include <cmath>
 #include <map>
 #include <memory>
@@ -24,6 +26,28 @@
 #include "daemon/fault_log.hpp"
 #include "drivers/protocols/can_protocols.hpp"
 #include "drivers/protocols/stream_protocols.hpp"
+
+// Counts the allocations of this binary while `g_counting` is set (the
+// emission thread must allocate nothing per sample, link faults included).
+namespace {
+std::atomic<bool> g_counting{false};
+std::atomic<std::uint64_t> g_allocations{0};
+}  // namespace
+void* operator new(std::size_t n) {
+  if (g_counting.load(std::memory_order_relaxed)) g_allocations.fetch_add(1, std::memory_order_relaxed);
+  if (void* p = std::malloc(n == 0 ? 1 : n)) return p;
+  throw std::bad_alloc();
+}
+// GCC sees free() on what `new` returned; here `new` is malloc.
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic push
+#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
+#endif
+void operator delete(void* p) noexcept { std::free(p); }
+void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+#if defined(__GNUC__) && !defined(__clang__)
+#pragma GCC diagnostic pop
+#endif
 
 namespace imuemu::emission {
 namespace {
@@ -329,6 +353,60 @@ TEST(FaultEngine, RandomFaultsFromOneSeedReproduceRunToRun) {
   EXPECT_EQ(logs[0].size() % 2, 0u);
   EXPECT_EQ(logs[0], logs[1]);
   EXPECT_EQ(bytes[0], bytes[1]);
+}
+
+// Every link action on every byte-stream protocol, 10 samples each, with
+// babble at its maximum: once the engine runs (the producer computed every
+// sample up front and ended), the emission thread applies them all without
+// one heap allocation, and every tick is accounted for.
+TEST(FaultEngine, TheEmissionThreadAllocatesNothingWithEveryLinkFault) {
+  using fault::Kind;
+  g_allocations = 0;
+  g_counting = true;
+  ::operator delete(::operator new(8));  // the counter itself counts (a call, never elided)
+  g_counting = false;
+  ASSERT_EQ(g_allocations.load(), 1u);
+  for (const std::string protocol : {"native", "mavlink2", "mip"}) {
+    DeviceOptions d;
+    d.name = "imu0";
+    d.rate_hz = 200;
+    d.pipeline = flat_pipeline(200);
+    d.stream_encoder = drivers::make_stream_encoder(protocol);
+    d.transport = std::make_unique<drivers::NullTransport>();
+    std::uint64_t at = 120;
+    for (const Kind kind : {Kind::duplicate, Kind::babble, Kind::bad_checksum, Kind::bit_errors, Kind::truncate,
+                            Kind::bad_length, Kind::sequence_jump, Kind::sequence_reset, Kind::time_jump,
+                            Kind::time_freeze, Kind::silence, Kind::restart, Kind::drop}) {
+      fault::FaultSpec s = window(kind, at, 10, 200);
+      s.babble_factor = fault::kMaxBabbleFactor;
+      s.bit_error_rate = 0.01;
+      s.truncate_bytes = 8;
+      s.sequence_step = 7;
+      s.time_step_ns = 3'000'000;
+      d.faults.scheduled.push_back(s);
+      at += 12;
+    }
+    std::vector<DeviceOptions> devices;
+    devices.push_back(std::move(d));
+    EmissionEngine engine(fast_options(circle_knots(4.0), 400, 4, 512), std::move(devices));
+    engine.start();
+    std::this_thread::sleep_for(100ms);  // the producer has nothing left to compute: it ended
+    g_allocations = 0;
+    g_counting = true;
+    const bool finished = engine.wait(20s);
+    g_counting = false;
+    const std::uint64_t allocations = g_allocations.load();
+    engine.stop();
+    ASSERT_TRUE(finished) << protocol;
+    EXPECT_EQ(allocations, 0u) << protocol;
+    const DeviceStats st = engine.stats().devices[0];
+    EXPECT_EQ(st.ticks, 400u) << protocol;
+    EXPECT_EQ(st.faults.silenced, 20u) << protocol << ": silence and restart's off time";
+    EXPECT_EQ(st.ticks, st.emitted + st.faults.silenced) << protocol;
+    EXPECT_EQ(st.write_errors, 0u) << protocol;
+    EXPECT_EQ(st.faults.started, 13u) << protocol;
+    EXPECT_EQ(st.faults.ended, 13u) << protocol;
+  }
 }
 
 }  // namespace
