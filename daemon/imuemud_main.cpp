@@ -619,6 +619,7 @@ class Daemon {
         {"uptime_s", static_cast<double>(monotonic_now_ns() - started_ns_) / 1e9},
         {"imus", scene_.imus.size()},
         {"waiting_for_device", waiting_for_device_},
+        {"fault_log", fault_log_path_.empty() ? nlohmann::json(nullptr) : nlohmann::json(fault_log_path_)},
     };
     if (job_) {
       status["building"] = {{"what", job_->kind == BuildJob::Kind::start ? "start" : "reload"},

@@ -113,6 +113,14 @@ void print_status_summary(const nlohmann::json& status, std::ostream& out) {
           << " poses): p50 " << microseconds(number_or_zero(pose_latency, "p50_ns")) << ", p99 "
           << microseconds(number_or_zero(pose_latency, "p99_ns")) << ", max "
           << microseconds(number_or_zero(pose_latency, "max_ns")) << "\n";
+    const nlohmann::json faults = d.value("faults", nlohmann::json::object());
+    if (count_of(faults, "started") + count_of(faults, "injected") + count_of(faults, "active") > 0)
+      out << "    faults (issue 18): " << count_of(faults, "active") << " acting now, " << count_of(faults, "started")
+          << " started and " << count_of(faults, "ended") << " ended (the fault log's events), "
+          << count_of(faults, "injected") << " injected and " << count_of(faults, "cleared")
+          << " cleared over the control socket, " << count_of(faults, "silenced")
+          << " ticks silenced (device off), " << count_of(faults, "dropped_events")
+          << " events lost (queue full)\n";
     out << "    transport: " << count_of(transport, "frames_sent") << " frames sent, "
         << count_of(transport, "queued") << " queued; not taken: " << count_of(d, "write_errors")
         << " packets (link down " << count_of(transport, "dropped_link_down")

@@ -538,6 +538,30 @@ TEST(StatusSummary, NamesEachCounterFromTheDaemonsJson) {
   EXPECT_EQ(text.find("pose source"), std::string::npos);  // a trajectory scene has none
 }
 
+// Issue 18: the fault counters are in the status JSON and explained, each
+// with its own value (a swapped field shows); none at all: no line.
+TEST(StatusSummary, FaultCountersAreInTheJsonAndExplained) {
+  imuemu::emission::EngineStats s;
+  imuemu::emission::DeviceStats d;
+  d.name = "imu0";
+  s.devices.push_back(d);
+  const auto summary_of = [](const imuemu::emission::EngineStats& st) {
+    std::ostringstream out;
+    imuemu::cli::print_status_summary(json{{"scene", "f"}, {"engine", imuemu::emission::to_json(st)}}, out);
+    return out.str();
+  };
+  EXPECT_EQ(summary_of(s).find("faults"), std::string::npos);
+  s.devices[0].faults = {1, 7, 6, 3, 2, 5, 40};
+  const json j = imuemu::emission::to_json(s)["devices"][0]["faults"];
+  EXPECT_EQ(j, (json{{"active", 1}, {"started", 7}, {"ended", 6}, {"injected", 3}, {"cleared", 2}, {"dropped_events", 5},
+                     {"silenced", 40}}));
+  EXPECT_NE(summary_of(s).find("faults (issue 18): 1 acting now, 7 started and 6 ended (the fault log's events), 3 "
+                               "injected and 2 cleared over the control socket, 40 ticks silenced (device off), 5 "
+                               "events lost (queue full)"),
+            std::string::npos)
+      << summary_of(s);
+}
+
 // Issue 13: the live-time counters (time_jump, resyncs, held) and the TCP
 // connection counters were counted by the pose source but missing from the
 // status JSON and the summary. Each has its own value here, so a swapped
