@@ -177,6 +177,32 @@ class OnDemandSource final : public live::ExactSampleSource {
   std::uint64_t refused_ = 0;
 };
 
+// A link fault the device's protocol has no field for would do nothing on
+// the wire while the fault log claims it acted (drivers/link_fault.hpp
+// link_fault_support): refused, naming the device and the protocol.
+void check_protocol_supports(const DeviceOptions& d, fault::Kind kind) {
+  using fault::Kind;
+  const bool stream = d.stream_encoder != nullptr;
+  const drivers::LinkFaultSupport s =
+      stream ? drivers::link_fault_support(*d.stream_encoder) : drivers::link_fault_support(*d.can_encoder);
+  const char* missing = nullptr;
+  switch (kind) {
+    case Kind::sequence_jump:
+    case Kind::sequence_reset: if (!s.sequence) missing = "no sequence counter"; break;
+    case Kind::bad_checksum: if (!s.checksum) missing = "no checksum field"; break;
+    case Kind::bad_length: if (!s.length) missing = "no length field"; break;
+    case Kind::bit_errors: if (!s.bit_errors) missing = "no bit errors on this link (CAN's CRC and retransmission hide them)"; break;
+    case Kind::can_wrong_id: if (!s.can_id) missing = "no CAN identifier"; break;
+    case Kind::can_missing_frame: if (!s.missing_frame) missing = "no multi-frame transfers"; break;
+    default: break;
+  }
+  if (missing != nullptr) {
+    const std::string protocol = stream ? d.stream_encoder->name() : d.can_encoder->name();
+    throw std::invalid_argument("fault type " + std::string(fault::kind_name(kind)) + " on imu '" + d.name + "' (" +
+                                protocol + "): the protocol has " + missing + ", the fault would show nothing");
+  }
+}
+
 }  // namespace
 
 std::unique_ptr<CanOutput> can_transport_output(std::unique_ptr<drivers::CanTransport> transport) {
@@ -421,6 +447,9 @@ EmissionEngine::EmissionEngine(EngineOptions options, std::vector<DeviceOptions>
       d->samples = std::make_unique<live::StreamSampleSource>(*d->engine);
       if (o.max_ticks_per_device) d->end_tick = *o.max_ticks_per_device;
     }
+    for (const fault::FaultSpec& f : d->options.faults.scheduled) check_protocol_supports(d->options, f.kind);
+    if (d->options.faults.random.per_hour > 0.0)
+      for (const fault::Kind kind : d->options.faults.random.kinds) check_protocol_supports(d->options, kind);
     try {
       d->faults = std::make_unique<DeviceFaults>(
           d->options.name, d->options.rate_hz, d->options.sensor_model, d->options.faults,
@@ -685,6 +714,7 @@ void EmissionEngine::Impl::run_request(FaultRequest& r) {
       r.spec.start_ns = saturating_add_ns(next_since_start_ns, r.after_ns);
       r.spec.device = d.options.name;
       r.spec.source = "control";
+      check_protocol_supports(d.options, r.spec.kind);
       r.injected.id = d.faults->inject(r.spec);  // validates: throws before adding
       r.injected.start_since_start_ns = r.spec.start_ns;
       // The first k with floor(k 1e9 / rate) >= start: ceil(start rate / 1e9).
