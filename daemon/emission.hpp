@@ -18,8 +18,19 @@
 // sample k is `imuemu generate`'s sample k at the same rate; a tick that is
 // not sent (producer late, pause policy) leaves a gap the receiver sees.
 //
+// Faults (issue 18, daemon/device_faults.hpp): the producer runs every
+// sample through the device's fault timeline after the signal chain (sensor
+// faults change the values, time faults the frame's t_ns) and leaves the
+// sample's drivers::LinkActions in its ring slot; the emission thread hands
+// them to drivers::encode_with_link_faults (no action: encode() + periodic()
+// byte for byte). Run-time inject/list/clear reach the producer through a
+// mailbox; the ground-truth events go the other way through a bounded queue
+// (take_fault_events). The emission thread takes no lock and allocates
+// nothing for any of it.
+//
 // Thread safety: start/request_stop/wait/stop from one controlling thread;
-// stats(), last_progress_ns() and the test hooks from any thread.
+// stats(), last_progress_ns(), the test hooks and the fault requests from
+// any thread but the emission thread.
 #pragma once
 
 #include <chrono>
