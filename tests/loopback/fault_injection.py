@@ -45,6 +45,7 @@ import time
 import tty
 
 sys.path.insert(0, os.path.join(os.path.dirname(os.path.abspath(__file__)), "..", "support"))
+import protocol_reference  # noqa: E402
 from protocol_reference import crc32c  # noqa: E402  (bitwise, from the CRC's Rocksoft parameters)
 
 RATE = 200
@@ -260,6 +261,17 @@ def check_scene_faults(a, work, failures):
     rows, summary = listen_decode(a.imuemu, d.capture, work)
     if (why := same_as_listen(samples, rows)):
         failures.append("scene faults: the decoders disagree: " + why)
+    # The project's reference receiver (protocol_reference.reference_decode,
+    # from the link-fault work, when present): the same samples, and the
+    # same error counters as imuemu listen.
+    shared_reference = getattr(protocol_reference, "reference_decode", None)
+    if shared_reference is not None:
+        shared_counters, shared_samples = shared_reference("native", data)
+        if [(x["sequence"], x["t_ns"]) for x in shared_samples] != [(x["seq"], x["t_ns"]) for x in samples]:
+            failures.append("scene faults: protocol_reference.reference_decode decodes other samples")
+        for key in ("checksum_errors", "other_errors", "resync_bytes"):
+            if shared_counters[key] != summary.get(key):
+                failures.append(f"scene faults: {key}: protocol_reference {shared_counters[key]}, listen {summary.get(key)}")
     windows = {kind: range(round(after * RATE), round(after * RATE) + WINDOW) for kind, after, _ in SCENE_FAULTS}
     w0 = {kind: w[0] for kind, w in windows.items()}
     # Ground truth: ids 1.. in file order, start/end exactly at the window.
@@ -371,7 +383,7 @@ def check_scene_faults(a, work, failures):
                       "reference_decoder": counters,
                       "listen": {k: summary.get(k) for k in ("samples", "checksum_errors", "resync_bytes",
                                                              "sequence_gaps", "other_errors")},
-                      "fault_events": len(events)}))
+                      "fault_events": len(events), "protocol_reference_receiver": shared_reference is not None}))
 
 
 def run_cli(imuemu, args):
