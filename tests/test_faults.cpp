@@ -531,6 +531,40 @@ TEST(Faults, StepAllocatesNothingPerSample) {
   EXPECT_EQ(events.size(), 2 * kind_names().size());
 }
 
+TEST(Faults, TheDeviceContextComesFromTheSensorModelAndBoundsTheDelay) {
+  sensor::SensorModelSpec spec;
+  spec.gyro.range = 250.0 * std::numbers::pi / 180.0;
+  spec.accel.white_density = Vec3(1e-3, 2e-3, 3e-3);
+  const DeviceContext c = device_context("imu9", 400, spec);
+  EXPECT_EQ(c.gyro_range_rad_s, spec.gyro.range);
+  EXPECT_EQ(c.accel_range_m_s2, kDefaultAccelRangeMS2) << "no accelerometer range: the default 16 g";
+  EXPECT_EQ(c.accel_noise_density, spec.accel.white_density);
+  EXPECT_EQ(device_context("imu9", 400, std::nullopt).gyro_range_rad_s, kDefaultGyroRangeRadS);
+  // 1 s of history up to 65535 samples back: at 100 kHz 655.35 ms.
+  EXPECT_EQ(max_delay_ns_at(400), kMaxDelayNs);
+  EXPECT_EQ(max_delay_ns_at(100'000), 655'350'000);
+  // A saturation fault goes to the model's range.
+  TimelineOptions o;
+  o.context = c;
+  FaultSpec s = default_spec(Kind::saturation);
+  s.triad = Triad::gyro;
+  o.faults = {s};
+  FaultTimeline tl(o);
+  SampleValues v = input(0);
+  v.gyro_rad_s[1] = -0.5;
+  tl.step(0, 0, v);
+  EXPECT_EQ(v.gyro_rad_s, Vec3(spec.gyro.range, -spec.gyro.range, spec.gyro.range));
+  FaultSpec late = default_spec(Kind::delayed);
+  late.delay_ns = 700'000'000;
+  TimelineOptions fast;
+  fast.context = context();
+  fast.context.rate_hz = 100'000;
+  FaultTimeline fast_tl(fast);
+  EXPECT_THROW(fast_tl.inject(late), std::invalid_argument) << "700 ms is beyond 100 kHz's history";
+  late.delay_ns = 600'000'000;
+  EXPECT_NO_THROW(fast_tl.inject(late));
+}
+
 // ---- link decisions ----
 
 TEST(FaultLink, OneShotAndTimeFaultsActOnTheirSamples) {

@@ -34,7 +34,7 @@ enum class Kind : std::uint8_t {
   spikes,          // isolated spikes at a rate, of an amplitude
   saturation,      // forced to the range's limit (sign of the true value), saturated status
   slow,            // a lower output rate: the value changes only every `divisor`-th sample
-  intermittent,    // on/off pattern (on_ns, off_ns): the wrapped sensor fault, or `dead` when none
+  intermittent,    // on/off pattern (on_ns, off_ns) from the start: dead while on, untouched while off
   delayed,         // the value of delay_ns earlier (bounded history)
   plausible_drift, // a slowly growing bias below usual detection thresholds
   // Link and protocol faults: act on the encoder and the transport.
@@ -46,11 +46,11 @@ enum class Kind : std::uint8_t {
   bad_length,       // the length field disagrees with the payload
   sequence_jump,    // the protocol's counter jumps by sequence_step once
   sequence_reset,   // the protocol's counter restarts at 0
-  time_jump,        // the protocol's time field jumps by time_step_ns (and stays shifted)
-  time_freeze,      // the protocol's time field frozen
+  time_jump,        // the protocol's time field jumps by time_step_ns (stays shifted while the fault acts)
+  time_freeze,      // the protocol's time field frozen at the fault's first sample's
   babble,           // babble_factor frames per tick instead of one (bursts faster than the rate)
   silence,          // nothing sent (device off)
-  restart,          // device restart: silence for duration, then the start-up sequence, counters reset
+  restart,          // device restart: silence for duration, then the start-up sequence, counters reset (duration > 0)
   can_wrong_id,     // CAN: frames under a wrong identifier (can_id)
   can_missing_frame // CAN: one frame of a multi-frame transfer missing
 };

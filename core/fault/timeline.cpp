@@ -375,9 +375,19 @@ SampleFaults FaultTimeline::step(std::uint64_t k, TimeNs t, SampleValues& values
 const FaultTimeline::History* FaultTimeline::delayed(std::uint64_t k_wanted) const noexcept {
   // The newest recorded sample at or before k_wanted (samples are recorded
   // in increasing k); the oldest one when the history does not reach back.
+  if (history_count_ == 0) return nullptr;
+  auto back = [&](std::size_t j) -> const History& {  // j = 1: the newest
+    return history_[(history_next_ + history_.size() - j) % history_.size()];
+  };
+  // Without skipped samples the wanted one is exactly newest_k - k_wanted back.
+  const std::uint64_t newest_k = back(1).k;
+  if (k_wanted <= newest_k && newest_k - k_wanted < history_count_) {
+    const History& guess = back(static_cast<std::size_t>(newest_k - k_wanted) + 1);
+    if (guess.k == k_wanted) return &guess;
+  }
   const History* best = nullptr;
   const History* oldest = nullptr;
-  for (std::size_t j = 1; j <= history_count_; ++j) {  // newest first
+  for (std::size_t j = 1; j <= history_count_; ++j) {  // newest first (after skipped samples)
     const History& hst = history_[(history_next_ + history_.size() - j) % history_.size()];
     oldest = &hst;
     if (hst.k <= k_wanted) {
