@@ -113,8 +113,12 @@ FaultClearRequest parse_fault_clear(const json& args) {
   const auto all = args.find("all");
   if ((id == args.end()) == (all == args.end())) throw std::invalid_argument("give either \"id\": N or \"all\": true");
   if (id != args.end()) {
-    if (!id->is_number_unsigned()) throw std::invalid_argument("\"id\": expected a fault id (an integer >= 1)");
-    r.id = id->get<std::uint64_t>();
+    // A JSON parser gives a non-negative integer as unsigned, a program may
+    // build it signed: both are ids when >= 1.
+    const bool valid = id->is_number_unsigned() ? id->get<std::uint64_t>() >= 1
+                                                : id->is_number_integer() && id->get<std::int64_t>() >= 1;
+    if (!valid) throw std::invalid_argument("\"id\": expected a fault id (an integer >= 1)");
+    r.id = id->is_number_unsigned() ? id->get<std::uint64_t>() : static_cast<std::uint64_t>(id->get<std::int64_t>());
   } else if (!all->is_boolean() || !all->get<bool>()) {
     throw std::invalid_argument("\"all\": expected true");
   }

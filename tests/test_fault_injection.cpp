@@ -23,6 +23,7 @@
 #include "core/fault/fault.hpp"
 #include "core/reference_motion.hpp"
 #include "daemon/emission.hpp"
+#include "daemon/fault_control.hpp"
 #include "daemon/fault_log.hpp"
 #include "drivers/link_fault.hpp"
 #include "drivers/protocols/can_protocols.hpp"
@@ -217,6 +218,51 @@ TEST(FaultEngine, CanFaultsActOnExactlyTheirSamplesAndNothingElse) {
   EXPECT_EQ(faulty.stats.faults.ended, 3u);
   EXPECT_EQ(faulty.stats.faults.active, 0u);
   EXPECT_TRUE(clean.events.empty());
+}
+
+// The control socket's fault-inject arguments: datasheet units through the
+// scene's own [[imu.fault]] parser (bias_deg_s -> rad/s), strict keys, the
+// start and duration only as after_s/duration_s; clear wants an id or all.
+TEST(FaultControl, ArgumentsAreCheckedBeforeAnythingReachesTheEngine) {
+  using nlohmann::json;
+  const service::FaultInjectRequest r = service::parse_fault_inject(
+      json{{"imu", "imu0"}, {"type", "bias_step"}, {"after_s", 0.25}, {"duration_s", 1.5},
+           {"params", {{"sensor", "gyro"}, {"axes", "xz"}, {"bias_deg_s", 10}, {"flag_status", true}}}});
+  EXPECT_EQ(r.imu, "imu0");
+  EXPECT_EQ(r.after_ns, 250'000'000);
+  EXPECT_EQ(r.spec.kind, fault::Kind::bias_step);
+  EXPECT_EQ(r.spec.duration_ns, 1'500'000'000);
+  EXPECT_EQ(r.spec.triad, fault::Triad::gyro);
+  EXPECT_EQ(r.spec.axes, 0b101);
+  EXPECT_NEAR(r.spec.gyro_bias_rad_s, 10.0 * 3.14159265358979323846 / 180.0, 1e-15);
+  EXPECT_TRUE(r.spec.flag_status);
+  EXPECT_EQ(r.spec.source, "control");
+  const auto refused = [](const json& args, const std::string& why) {
+    try {
+      (void)service::parse_fault_inject(args);
+      ADD_FAILURE() << "accepted " << args.dump();
+    } catch (const std::invalid_argument& e) {
+      EXPECT_NE(std::string(e.what()).find(why), std::string::npos) << e.what();
+    }
+  };
+  refused(json{{"type", "dead"}}, "missing \"imu\"");
+  refused(json{{"imu", "imu0"}}, "missing \"type\"");
+  refused(json{{"imu", "imu0"}, {"type", "melt"}}, "'melt' is not a fault type");
+  refused(json{{"imu", "imu0"}, {"type", "dead"}, {"colour", 1}}, "unknown key 'colour'");
+  refused(json{{"imu", "imu0"}, {"type", "dead"}, {"after_s", -1}}, "\"after_s\": expected a finite number >= 0");
+  refused(json{{"imu", "imu0"}, {"type", "dead"}, {"params", {{"at_s", 3}}}}, "params.at_s");
+  refused(json{{"imu", "imu0"}, {"type", "dead"}, {"params", {{"bias_deg_s", 1}}}}, "bias_deg_s");
+  refused(json{{"imu", "imu0"}, {"type", "dead"}, {"params", {{"axes", json::array()}}}}, "params.axes");
+  EXPECT_EQ(service::parse_fault_clear(json{{"imu", "a"}, {"id", 3}}).id, std::optional<std::uint64_t>(3));
+  EXPECT_FALSE(service::parse_fault_clear(json{{"imu", "a"}, {"all", true}}).id.has_value());
+  EXPECT_THROW(service::parse_fault_clear(json{{"imu", "a"}}), std::invalid_argument);
+  EXPECT_THROW(service::parse_fault_clear(json{{"imu", "a"}, {"id", 1}, {"all", true}}), std::invalid_argument);
+  EXPECT_THROW(service::parse_fault_clear(json{{"imu", "a"}, {"id", -1}}), std::invalid_argument);
+  EXPECT_THROW(service::parse_fault_clear(json{{"imu", "a"}, {"id", 0}}), std::invalid_argument);
+  EXPECT_EQ(service::parse_fault_clear(json::parse(R"({"imu": "a", "id": 4})")).id, std::optional<std::uint64_t>(4));
+  EXPECT_EQ(service::parse_fault_list(json::object()), "");
+  EXPECT_EQ(service::parse_fault_list(json{{"imu", "b"}}), "b");
+  EXPECT_THROW(service::parse_fault_list(json{{"id", 1}}), std::invalid_argument);
 }
 
 // A scene fault the device's protocol has no field for is refused when the
