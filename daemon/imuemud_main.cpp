@@ -111,6 +111,8 @@ std::string summary_line(const sc::SceneConfig& scene, const imuemu::emission::E
     if (d.deadline_misses > 0) out << ", " << d.deadline_misses << " late";
     if (d.write_errors > 0) out << ", " << d.write_errors << " not written";
     if (d.transport.dropped_link_down > 0) out << " (" << d.transport.dropped_link_down << " while no reader/link down)";
+    if (d.faults.active > 0) out << ", " << d.faults.active << " fault" << (d.faults.active == 1 ? "" : "s") << " acting";
+    if (d.faults.silenced > 0) out << ", " << d.faults.silenced << " silenced by faults";
     first = false;
   }
   out << "; lateness p99 " << us_text(s.lateness.p99_ns) << ", max " << us_text(s.lateness.max_ns);
