@@ -29,7 +29,8 @@ using stream_protocol = asio::local::stream_protocol;
 struct ControlServer::Shared {
   struct Command {
     std::string help;
-    ControlCommandHandler handler;
+    ControlCommandHandler handler;   // either this (no arguments)...
+    ControlArgsHandler with_args;    // ...or this
   };
   std::mutex mutex;  // guards commands against add_command from another thread
   std::map<std::string, Command> commands;
@@ -37,8 +38,15 @@ struct ControlServer::Shared {
   bool closed = false;  // set on the io thread (or after it stopped) by close()
   std::unique_ptr<asio::steady_timer> accept_retry;
 
-  nlohmann::json run(const std::string& command) {
-    ControlCommandHandler handler;
+  nlohmann::json run(const std::string& line) {
+    ControlRequest request;
+    try {
+      request = parse_control_request(line);
+    } catch (const std::exception& e) {
+      return {{"error", e.what()}};
+    }
+    const std::string& command = request.name;
+    Command found_command;
     {
       const std::lock_guard lock(mutex);
       if (command == "help") {
@@ -53,10 +61,11 @@ struct ControlServer::Shared {
         for (const auto& [name, c] : commands) names.push_back(name);
         return {{"error", "unknown command '" + command + "'"}, {"commands", names}};
       }
-      handler = found->second.handler;
+      found_command = found->second;
     }
+    if (request.has_args && !found_command.with_args) return {{"error", command + ": takes no arguments"}};
     try {
-      return handler();
+      return found_command.with_args ? found_command.with_args(request.args) : found_command.handler();
     } catch (const std::exception& e) {
       return {{"error", command + ": " + e.what()}};
     }
@@ -115,7 +124,7 @@ class Session : public std::enable_shared_from_this<Session> {
     }
     const std::size_t newline = line.find('\n');
     if (newline != std::string::npos) line.resize(newline);
-    reply(shared_->run(trimmed_command(std::move(line))));
+    reply(shared_->run(line));
   }
 
   void reply(const nlohmann::json& document) {
@@ -174,6 +183,27 @@ bool someone_listens_on(const std::string& path) {
 }
 
 }  // namespace
+
+ControlRequest parse_control_request(const std::string& line) {
+  const std::string text = trimmed_command(line);
+  ControlRequest request;
+  const std::size_t blank = text.find_first_of(" \t");
+  request.name = text.substr(0, blank);
+  if (blank == std::string::npos) return request;
+  const std::string rest = trimmed_command(text.substr(blank));
+  if (rest.empty()) return request;
+  request.has_args = true;
+  nlohmann::json args;
+  try {
+    args = nlohmann::json::parse(rest);
+  } catch (const nlohmann::json::parse_error& e) {
+    throw std::invalid_argument(request.name + ": the arguments are not JSON (" + e.what() + ")");
+  }
+  if (!args.is_object())
+    throw std::invalid_argument(request.name + ": the arguments must be one JSON object, got " + std::string(args.type_name()));
+  request.args = std::move(args);
+  return request;
+}
 
 std::string default_control_socket_path(const std::string& scene_name) {
   return "/run/imuemu/" + scene_name + ".sock";
@@ -238,7 +268,12 @@ ControlServer::~ControlServer() { close(); }
 
 void ControlServer::add_command(const std::string& name, const std::string& help, ControlCommandHandler handler) {
   const std::lock_guard lock(shared_->mutex);
-  shared_->commands[name] = Shared::Command{help, std::move(handler)};
+  shared_->commands[name] = Shared::Command{help, std::move(handler), {}};
+}
+
+void ControlServer::add_command_with_args(const std::string& name, const std::string& help, ControlArgsHandler handler) {
+  const std::lock_guard lock(shared_->mutex);
+  shared_->commands[name] = Shared::Command{help, {}, std::move(handler)};
 }
 
 void ControlServer::close() {

@@ -1,12 +1,17 @@
 // imuemud's control socket: a Unix stream socket served from Boost.Asio on
 // the daemon's service io_context (never the emission thread). A client
-// connects, sends ONE line (a command name, "\n"-terminated, at most
-// kMaxCommandBytes), and receives ONE JSON document followed by "\n", then
-// the daemon closes the connection. Protocol documented in docs/daemon.md.
+// connects, sends ONE line ("\n"-terminated, at most kMaxCommandBytes): a
+// command name, optionally followed by blanks and ONE JSON object with the
+// command's arguments (`fault-inject {"imu": "imu0", "type": "dead"}`), and
+// receives ONE JSON document followed by "\n", then the daemon closes the
+// connection. Protocol documented in docs/daemon.md.
 //
-// Commands are registered by the daemon (status, test hooks);
-// an unknown command gets {"error": "...", "commands": [...]}, a handler
-// that throws gets {"error": "<command>: <what>"}. A client that sends
+// Commands are registered by the daemon (status, fault-*, test hooks);
+// an unknown command gets {"error": "...", "commands": [...]}, arguments
+// that are not one JSON object, or arguments to a command that takes none,
+// get {"error": "<command>: ..."} and the handler is not called; a handler
+// that throws gets {"error": "<command>: <what>"} (a handler that refuses
+// its arguments throws before changing anything). A client that sends
 // nothing, too much or no newline within the client timeout is dropped; it
 // never blocks other clients (every connection is asynchronous).
 //
@@ -31,7 +36,9 @@
 
 namespace imuemu::service {
 
-inline constexpr std::size_t kMaxCommandBytes = 256;
+// A fault specification with its parameters fits in well under 1 KiB; 4 KiB
+// leaves room without letting a client make the daemon buffer much.
+inline constexpr std::size_t kMaxCommandBytes = 4096;
 
 // Where imuemud of scene `scene_name` listens unless told otherwise (same
 // rule as the scene file's [daemon] control_socket default):
@@ -53,6 +60,20 @@ struct ControlSocketOptions {
 // Runs on the io_context's thread; must not block (read atomics, copy a
 // snapshot under a short lock).
 using ControlCommandHandler = std::function<nlohmann::json()>;
+// A command with arguments: the JSON object after the name ({} when the line
+// has only the name). Throw std::invalid_argument (or any std::exception) to
+// refuse them; the client gets {"error": "<command>: <what>"}.
+using ControlArgsHandler = std::function<nlohmann::json(const nlohmann::json& args)>;
+
+// One request line split: the command name and its arguments (an object, {}
+// when none). Throws std::invalid_argument when the text after the name is
+// not one JSON object. Leading/trailing blanks and CR are ignored.
+struct ControlRequest {
+  std::string name;
+  nlohmann::json args = nlohmann::json::object();
+  bool has_args = false;  // the line had text after the name
+};
+ControlRequest parse_control_request(const std::string& line);
 
 class ControlServer {
  public:
@@ -67,7 +88,10 @@ class ControlServer {
 
   // Registers (or replaces) a command. `help` is listed in "help"'s reply.
   // Register before clients may call it, or from the io_context's thread.
+  // A command registered this way takes no arguments: a line with arguments
+  // is refused with an error (nothing is called).
   void add_command(const std::string& name, const std::string& help, ControlCommandHandler handler);
+  void add_command_with_args(const std::string& name, const std::string& help, ControlArgsHandler handler);
 
   const std::string& path() const { return options_.path; }
   void close();  // stop accepting, remove the socket file; idempotent

@@ -28,6 +28,7 @@
 #include "core/stream.hpp"
 #include "core/time_arith.hpp"
 #include "drivers/queued_writer.hpp"
+#include "drivers/link_fault.hpp"
 #include "drivers/socketcan.hpp"
 #include "io/pose_source.hpp"
 
@@ -135,6 +136,11 @@ struct Slot {
   // The arrival (CLOCK_MONOTONIC) of the newest pose this is the first
   // sample to depend on; 0: none (issue 17's end-to-end latency).
   TimeNs pose_receive_ns = 0;
+  // Issue 18: what the active link faults do to this sample (decided by the
+  // producer; the emission thread only applies it), and the sample's own
+  // time for the sync pulse (frame.t_ns may carry a time_jump/time_freeze).
+  drivers::LinkActions link;
+  TimeNs pulse_t_ns = 0;
 };
 
 // Trajectory input: the stream engine is fed knots only as far as the next
@@ -178,6 +184,32 @@ class OnDemandSource final : public live::ExactSampleSource {
   std::uint64_t refused_ = 0;
 };
 
+// A link fault the device's protocol has no field for would do nothing on
+// the wire while the fault log claims it acted (drivers/link_fault.hpp
+// link_fault_support): refused, naming the device and the protocol.
+void check_protocol_supports(const DeviceOptions& d, fault::Kind kind) {
+  using fault::Kind;
+  const bool stream = d.stream_encoder != nullptr;
+  const drivers::LinkFaultSupport s =
+      stream ? drivers::link_fault_support(*d.stream_encoder) : drivers::link_fault_support(*d.can_encoder);
+  const char* missing = nullptr;
+  switch (kind) {
+    case Kind::sequence_jump:
+    case Kind::sequence_reset: if (!s.sequence) missing = "no sequence counter"; break;
+    case Kind::bad_checksum: if (!s.checksum) missing = "no checksum field"; break;
+    case Kind::bad_length: if (!s.length) missing = "no length field"; break;
+    case Kind::bit_errors: if (!s.bit_errors) missing = "no bit errors on this link (CAN's CRC and retransmission hide them)"; break;
+    case Kind::can_wrong_id: if (!s.can_id) missing = "no CAN identifier"; break;
+    case Kind::can_missing_frame: if (!s.missing_frame) missing = "no multi-frame transfers"; break;
+    default: break;
+  }
+  if (missing != nullptr) {
+    const std::string protocol = stream ? d.stream_encoder->name() : d.can_encoder->name();
+    throw std::invalid_argument("fault type " + std::string(fault::kind_name(kind)) + " on imu '" + d.name + "' (" +
+                                protocol + "): the protocol has " + missing + ", the fault would show nothing");
+  }
+}
+
 }  // namespace
 
 std::unique_ptr<CanOutput> can_transport_output(std::unique_ptr<drivers::CanTransport> transport) {
@@ -200,7 +232,9 @@ struct Device {
   signal_chain::IncrementConvention increments = signal_chain::IncrementConvention::raw;  // the encoder's
   boost::lockfree::spsc_queue<Slot> ring;
 
-  // Producer thread only.
+  // Producer thread only (run-time requests reach it through the engine's mailbox).
+  std::unique_ptr<DeviceFaults> faults;
+  std::vector<fault::FaultEvent> fault_scratch;  // this sample's events, before they are queued
   std::uint64_t next_produce_tick = 0;
   std::optional<std::pair<std::uint64_t, Kinematics>> previous;  // tick k - 1: the interval's start
 
@@ -216,6 +250,8 @@ struct Device {
   std::atomic<std::uint64_t> ticks{0}, emitted{0}, exact{0}, extrapolated{0}, blending{0}, not_sent{0},
       producer_late{0}, deadline_misses{0}, dropped_late{0}, write_errors{0}, last_counter{0}, saturated{0};
   std::atomic<TimeNs> engine_lag_ns{0};
+  std::atomic<std::uint64_t> faults_active{0}, faults_started{0}, faults_ended{0}, faults_injected{0},
+      faults_cleared{0}, fault_events_dropped{0}, silenced{0};
   LatenessHistogram lateness;
   // End-to-end latency of live poses (causal method): from a pose's arrival
   // to its first dependent sample handed to the transport. pose_marks
@@ -271,6 +307,49 @@ struct EmissionEngine::Impl {
   std::string fault;  // under fault_mutex
   std::atomic<bool> producer_fault_for_test{false};
   bool started = false, stopped = false;
+
+  // Issue 18 run-time fault requests: the io thread posts one and waits; the
+  // producer thread serves the mailbox at the top of each iteration, under
+  // the lock (requests are quick: a list, a validate, a push), so a request
+  // the caller withdraws after its timeout is never half done.
+  struct FaultRequest {
+    enum class Op { inject, clear, list } op = Op::list;
+    Device* device = nullptr;  // list: nullptr = all
+    fault::FaultSpec spec;
+    TimeNs after_ns = 0;
+    std::optional<std::uint64_t> id;
+    bool done = false;
+    std::exception_ptr error;
+    InjectedFault injected;
+    std::vector<std::uint64_t> cleared;
+    std::vector<FaultInfo> infos;
+  };
+  std::mutex mailbox_mutex;
+  std::condition_variable mailbox_cv;
+  std::vector<FaultRequest*> mailbox;  // under mailbox_mutex
+  bool producer_serving = false;       // under mailbox_mutex: the producer loop runs and will look
+  std::string producer_gone_reason = "the engine has not started";  // under mailbox_mutex
+  void serve_fault_requests();
+  // Posts r and waits until the producer served it, or withdraws it (the
+  // timeout, the producer gone) and throws; r's error is rethrown.
+  void post_and_wait(FaultRequest& r) {
+    std::unique_lock lock(mailbox_mutex);
+    if (!producer_serving) throw std::runtime_error(producer_gone_reason);
+    mailbox.push_back(&r);
+    if (!mailbox_cv.wait_for(lock, options.fault_request_timeout, [&] { return r.done; })) {
+      mailbox.erase(std::find(mailbox.begin(), mailbox.end(), &r));  // never served: nothing changed
+      throw std::runtime_error("the producer thread did not take the request within " +
+                               std::to_string(options.fault_request_timeout.count()) + " ms (nothing changed)");
+    }
+    if (r.error) std::rethrow_exception(r.error);
+  }
+  void stop_serving_fault_requests(const std::string& why);
+  void run_request(FaultRequest& r);
+  Device& device_named(const std::string& name);
+  // Ground-truth events for the daemon's fault log (producer -> io thread).
+  mutable std::mutex fault_events_mutex;
+  std::deque<fault::FaultEvent> fault_events;  // under fault_events_mutex, at most fault_event_capacity
+  void queue_fault_events(Device& d);
 
   std::thread producer, emitter;
   std::mutex done_mutex;
@@ -376,9 +455,21 @@ EmissionEngine::EmissionEngine(EngineOptions options, std::vector<DeviceOptions>
       d->samples = std::make_unique<live::StreamSampleSource>(*d->engine);
       if (o.max_ticks_per_device) d->end_tick = *o.max_ticks_per_device;
     }
-    // Reserved now so that encoding on the emission thread never allocates.
-    d->bytes.reserve(o.reserve_bytes);
-    d->can_frames.reserve(o.reserve_can_frames);
+    for (const fault::FaultSpec& f : d->options.faults.scheduled) check_protocol_supports(d->options, f.kind);
+    if (d->options.faults.random.per_hour > 0.0)
+      for (const fault::Kind kind : d->options.faults.random.kinds) check_protocol_supports(d->options, kind);
+    try {
+      d->faults = std::make_unique<DeviceFaults>(
+          d->options.name, d->options.rate_hz, d->options.sensor_model, d->options.faults,
+          d->options.stream_encoder ? d->options.stream_encoder->max_bytes_per_sample() : 0);
+    } catch (const std::invalid_argument& e) {
+      throw std::invalid_argument(where + "faults: " + e.what());
+    }
+    // Reserved now so that encoding on the emission thread never allocates,
+    // link faults included (babble's copies, a restart's power-up traffic).
+    if (d->options.stream_encoder)
+      d->bytes.reserve(std::max(o.reserve_bytes, drivers::link_fault_reserve(*d->options.stream_encoder, fault::kMaxBabbleFactor)));
+    d->can_frames.reserve(std::max(o.reserve_can_frames, drivers::link_fault_reserve_can_frames(fault::kMaxBabbleFactor)));
     impl_->devices.push_back(std::move(d));
   }
 }
@@ -458,6 +549,15 @@ void EmissionEngine::Impl::produce(Device& d, bool time_gated) {
       if (d.options.can_encoder && d.options.can_encoder->needs_level_attitude())
         set_level_attitude(e.kinematics, d.options.pipeline.scene.physics, f);
       d.previous.emplace(k, e.kinematics);
+      slot.pulse_t_ns = f.t_ns;
+      // Issue 18: the faults act on the signal chain's output (the sensor
+      // model's stage) and decide what the link does with this sample. Every
+      // sample goes through the timeline (its clock starts at the first, and
+      // `delayed`/`stuck` need the unfaulted history); with no fault acting
+      // the values come back untouched, bit for bit, and no link action.
+      d.faults->apply(k, tick_ns, f, slot.link, d.fault_scratch);
+      if (!d.fault_scratch.empty()) queue_fault_events(d);
+      d.faults_active.store(d.faults->active_count(), std::memory_order_relaxed);
     } else {
       d.previous.reset();
     }
@@ -580,6 +680,108 @@ void EmissionEngine::Impl::run_producer() noexcept {
   } catch (...) {
     record_fault("producer", "unknown exception");
   }
+  // The faults still active end with the last sample computed (ground truth).
+  try {
+    for (auto& d : devices) {
+      d->faults->finish(d->fault_scratch);
+      if (!d->fault_scratch.empty()) queue_fault_events(*d);
+      d->faults_active.store(0, std::memory_order_relaxed);
+    }
+  } catch (...) {  // no memory for the events: counted as dropped by queue_fault_events where it could
+  }
+  stop_serving_fault_requests(stop_requested.load() ? "the engine is stopping" : "the engine's input has ended (every sample is computed)");
+}
+
+void EmissionEngine::Impl::queue_fault_events(Device& d) {
+  for (const fault::FaultEvent& e : d.fault_scratch)
+    (e.phase == fault::FaultEvent::Phase::start ? d.faults_started : d.faults_ended).fetch_add(1, std::memory_order_relaxed);
+  {
+    std::lock_guard lock(fault_events_mutex);
+    for (fault::FaultEvent& e : d.fault_scratch) {
+      if (fault_events.size() >= options.fault_event_capacity) {
+        d.fault_events_dropped.fetch_add(1, std::memory_order_relaxed);
+        continue;
+      }
+      fault_events.push_back(std::move(e));
+    }
+  }
+  d.fault_scratch.clear();
+}
+
+Device& EmissionEngine::Impl::device_named(const std::string& name) {
+  for (auto& d : devices)
+    if (d->options.name == name) return *d;
+  std::string names;
+  for (auto& d : devices) names += (names.empty() ? "" : ", ") + d->options.name;
+  throw std::invalid_argument("no imu '" + name + "' in this scene (imus: " + names + ")");
+}
+
+void EmissionEngine::Impl::run_request(FaultRequest& r) {
+  switch (r.op) {
+    case FaultRequest::Op::inject: {
+      Device& d = *r.device;
+      // The start, on the device's own clock (time since its sample 0): the
+      // next sample this thread computes, plus after_ns.
+      const TimeNs next_since_start_ns = grid_ns(0, d.next_produce_tick, d.options.rate_hz);
+      r.spec.clock = fault::Clock::since_start;
+      r.spec.start_ns = saturating_add_ns(next_since_start_ns, r.after_ns);
+      r.spec.device = d.options.name;
+      r.spec.source = "control";
+      check_protocol_supports(d.options, r.spec.kind);
+      r.injected.id = d.faults->inject(r.spec);  // validates: throws before adding
+      r.injected.start_since_start_ns = r.spec.start_ns;
+      // The first k with floor(k 1e9 / rate) >= start: ceil(start rate / 1e9).
+      const Int128 first = (static_cast<Int128>(r.spec.start_ns) * d.options.rate_hz + kNsPerSecond - 1) / kNsPerSecond;
+      r.injected.first_sample = static_cast<std::uint64_t>(first);
+      d.faults_injected.fetch_add(1, std::memory_order_relaxed);
+      d.faults_active.store(d.faults->active_count(), std::memory_order_relaxed);
+      break;
+    }
+    case FaultRequest::Op::clear: {
+      Device& d = *r.device;
+      r.cleared = d.faults->clear(r.id, d.fault_scratch);
+      if (!d.fault_scratch.empty()) queue_fault_events(d);
+      if (r.cleared.empty())
+        throw std::invalid_argument(r.id ? "imu '" + d.options.name + "' has no fault " + std::to_string(*r.id) + " to clear"
+                                         : "imu '" + d.options.name + "' has no fault to clear");
+      d.faults_cleared.fetch_add(r.cleared.size(), std::memory_order_relaxed);
+      d.faults_active.store(d.faults->active_count(), std::memory_order_relaxed);
+      break;
+    }
+    case FaultRequest::Op::list:
+      for (auto& d : devices)
+        if (r.device == nullptr || r.device == d.get())
+          for (FaultInfo& info : d->faults->list()) r.infos.push_back(std::move(info));
+      break;
+  }
+}
+
+void EmissionEngine::Impl::serve_fault_requests() {
+  std::lock_guard lock(mailbox_mutex);
+  producer_serving = true;
+  if (mailbox.empty()) return;
+  for (FaultRequest* r : mailbox) {
+    try {
+      run_request(*r);
+    } catch (...) {
+      r->error = std::current_exception();
+    }
+    r->done = true;
+  }
+  mailbox.clear();
+  mailbox_cv.notify_all();
+}
+
+void EmissionEngine::Impl::stop_serving_fault_requests(const std::string& why) {
+  std::lock_guard lock(mailbox_mutex);
+  producer_serving = false;
+  producer_gone_reason = why;
+  for (FaultRequest* r : mailbox) {
+    r->error = std::make_exception_ptr(std::runtime_error(why));
+    r->done = true;
+  }
+  mailbox.clear();
+  mailbox_cv.notify_all();
 }
 
 void EmissionEngine::Impl::producer_loop() {
@@ -589,6 +791,7 @@ void EmissionEngine::Impl::producer_loop() {
       sleep_until_monotonic(monotonic_now_ns() + kProducerPollNs);
       continue;
     }
+    serve_fault_requests();
     if (live_input()) {
       take_live_input();
       if (!mapping_ready.load(std::memory_order_acquire)) {
@@ -672,27 +875,40 @@ void EmissionEngine::Impl::emit_tick(Device& d, std::uint64_t k, bool drop) {
     d.ring.pop();
     return;
   }
+  // Issue 18 silence (the device off, a restart's off time): the encoder
+  // still runs (its counters move on as if the frames went out, so the
+  // output after the fault is the fault-free run's) but nothing reaches the
+  // wire and no sync pulse is raised; not a write error.
+  const bool silenced = slot->link.silence;
+  if (silenced) d.silenced.fetch_add(1, std::memory_order_relaxed);
   const drivers::ImuFrameInput& frame = slot->frame;
   try {
+  // encode() then periodic(), with the sample's link faults applied (no
+  // action: exactly what the encoder alone writes; drivers/link_fault.hpp).
   if (d.options.stream_encoder) {
     d.bytes.clear();
-    d.options.stream_encoder->encode(frame, d.bytes);
-    d.options.stream_encoder->periodic(frame.t_ns, d.bytes);
-    if (!d.options.transport->write_frame(std::as_bytes(std::span<const std::uint8_t>(d.bytes))))
-      d.write_errors.fetch_add(1, std::memory_order_relaxed);
-    else if (slot->pose_receive_ns > 0)
-      d.pose_latency.record(saturating_sub_ns(monotonic_now_ns(), slot->pose_receive_ns));
+    drivers::encode_with_link_faults(slot->link, *d.options.stream_encoder, frame, d.bytes);
+    // A dropped sample with no periodic traffic leaves nothing to write.
+    if (!d.bytes.empty()) {
+      if (!d.options.transport->write_frame(std::as_bytes(std::span<const std::uint8_t>(d.bytes))))
+        d.write_errors.fetch_add(1, std::memory_order_relaxed);
+      else if (slot->pose_receive_ns > 0)
+        d.pose_latency.record(saturating_sub_ns(monotonic_now_ns(), slot->pose_receive_ns));
+    }
   } else {
     d.can_frames.clear();
-    d.options.can_encoder->encode(frame, d.can_frames);
-    d.options.can_encoder->periodic(frame.t_ns, d.can_frames);
+    drivers::encode_with_link_faults(slot->link, *d.options.can_encoder, frame, d.can_frames);
     for (const drivers::CanFrame& f : d.can_frames)
       if (!d.options.can_output->send(f)) d.write_errors.fetch_add(1, std::memory_order_relaxed);
   }
   } catch (const std::exception&) {  // an encoder refusing a sample: counted, the schedule goes on
     d.write_errors.fetch_add(1, std::memory_order_relaxed);
   }
-  if (d.options.gpio) d.options.gpio->pulse(frame.sample_counter, frame.t_ns);
+  if (silenced) {  // not emitted: ticks = emitted + not_sent + underruns + dropped_late + silenced
+    d.ring.pop();
+    return;
+  }
+  if (d.options.gpio) d.options.gpio->pulse(frame.sample_counter, slot->pulse_t_ns);
   if ((frame.status & drivers::kStatusSaturated) != 0) d.saturated.fetch_add(1, std::memory_order_relaxed);
   switch (slot->status) {
     case live::EmissionStatus::exact: d.exact.fetch_add(1, std::memory_order_relaxed); break;
@@ -1001,6 +1217,13 @@ EngineStats EmissionEngine::stats() const {
     ds.pose_latency.buckets = d.pose_latency.buckets();
     ds.engine_lag_ns = d.engine_lag_ns.load(std::memory_order_relaxed);
     ds.last_sample_counter = d.last_counter.load(std::memory_order_relaxed);
+    ds.faults.active = d.faults_active.load(std::memory_order_relaxed);
+    ds.faults.started = d.faults_started.load(std::memory_order_relaxed);
+    ds.faults.ended = d.faults_ended.load(std::memory_order_relaxed);
+    ds.faults.injected = d.faults_injected.load(std::memory_order_relaxed);
+    ds.faults.cleared = d.faults_cleared.load(std::memory_order_relaxed);
+    ds.faults.dropped_events = d.fault_events_dropped.load(std::memory_order_relaxed);
+    ds.faults.silenced = d.silenced.load(std::memory_order_relaxed);
     s.emitted += ds.emitted;
     s.devices.push_back(std::move(ds));
   }
@@ -1060,6 +1283,43 @@ bool EmissionEngine::healthy(TimeNs now_monotonic_ns, TimeNs max_silence_ns) con
 void EmissionEngine::set_emission_stall_for_test(bool stalled) noexcept { impl_->emission_stall.store(stalled); }
 void EmissionEngine::set_producer_stall_for_test(bool stalled) noexcept { impl_->producer_stall.store(stalled); }
 void EmissionEngine::inject_producer_fault_for_test() noexcept { impl_->producer_fault_for_test.store(true); }
+
+EmissionEngine::InjectedFault EmissionEngine::inject_fault(const std::string& device, fault::FaultSpec spec,
+                                                          TimeNs after_ns) {
+  if (after_ns < 0) throw std::invalid_argument("the start delay must be >= 0");
+  Impl::FaultRequest r;
+  r.op = Impl::FaultRequest::Op::inject;
+  r.device = &impl_->device_named(device);
+  r.spec = std::move(spec);
+  r.after_ns = after_ns;
+  impl_->post_and_wait(r);
+  return r.injected;
+}
+
+std::vector<std::uint64_t> EmissionEngine::clear_faults(const std::string& device, std::optional<std::uint64_t> id) {
+  Impl::FaultRequest r;
+  r.op = Impl::FaultRequest::Op::clear;
+  r.device = &impl_->device_named(device);
+  r.id = id;
+  impl_->post_and_wait(r);
+  return r.cleared;
+}
+
+std::vector<FaultInfo> EmissionEngine::list_faults(const std::string& device) {
+  Impl::FaultRequest r;
+  r.op = Impl::FaultRequest::Op::list;
+  if (!device.empty()) r.device = &impl_->device_named(device);
+  impl_->post_and_wait(r);
+  return r.infos;
+}
+
+std::vector<fault::FaultEvent> EmissionEngine::take_fault_events() {
+  std::lock_guard lock(impl_->fault_events_mutex);
+  std::vector<fault::FaultEvent> out(std::make_move_iterator(impl_->fault_events.begin()),
+                                     std::make_move_iterator(impl_->fault_events.end()));
+  impl_->fault_events.clear();
+  return out;
+}
 
 std::optional<live::TimeMapping> EmissionEngine::mapping() const {
   if (!impl_->mapping_ready.load(std::memory_order_acquire)) return std::nullopt;
@@ -1124,7 +1384,15 @@ nlohmann::json to_json(const EngineStats& s) {
                      {"lateness", lateness_json(d.lateness)},
                      {"pose_latency", lateness_json_with_buckets(d.pose_latency)},
                      {"engine_lag_ns", d.engine_lag_ns},
-                     {"last_sample_counter", d.last_sample_counter}};
+                     {"last_sample_counter", d.last_sample_counter},
+                     {"faults",
+                      {{"active", d.faults.active},
+                       {"started", d.faults.started},
+                       {"ended", d.faults.ended},
+                       {"injected", d.faults.injected},
+                       {"cleared", d.faults.cleared},
+                       {"dropped_events", d.faults.dropped_events},
+                       {"silenced", d.faults.silenced}}}};
     if (d.gpio)
       j["gpio"] = {{"pulses", d.gpio->pulses},
                    {"pps_pulses", d.gpio->pps_pulses},

@@ -18,8 +18,19 @@
 // sample k is `imuemu generate`'s sample k at the same rate; a tick that is
 // not sent (producer late, pause policy) leaves a gap the receiver sees.
 //
+// Faults (issue 18, daemon/device_faults.hpp): the producer runs every
+// sample through the device's fault timeline after the signal chain (sensor
+// faults change the values, time faults the frame's t_ns) and leaves the
+// sample's drivers::LinkActions in its ring slot; the emission thread hands
+// them to drivers::encode_with_link_faults (no action: encode() + periodic()
+// byte for byte). Run-time inject/list/clear reach the producer through a
+// mailbox; the ground-truth events go the other way through a bounded queue
+// (take_fault_events). The emission thread takes no lock and allocates
+// nothing for any of it.
+//
 // Thread safety: start/request_stop/wait/stop from one controlling thread;
-// stats(), last_progress_ns() and the test hooks from any thread.
+// stats(), last_progress_ns(), the test hooks and the fault requests from
+// any thread but the emission thread.
 #pragma once
 
 #include <chrono>
@@ -37,6 +48,7 @@
 #include "core/sensor/sensor_model.hpp"
 #include "core/signal_chain/signal_chain.hpp"
 #include "core/time_mapping.hpp"
+#include "daemon/device_faults.hpp"
 #include "daemon/lateness_histogram.hpp"
 #include "drivers/gpio_sync.hpp"
 #include "drivers/protocol.hpp"
@@ -94,6 +106,10 @@ struct DeviceOptions {
   // The device's signal chain (core/signal_chain/signal_chain.hpp): internal
   // rate, filters, decimation, delay compensation; ideal by default.
   signal_chain::ChainSpec chain;
+  // Fault injection (issue 18, daemon/device_faults.hpp): the scene's faults
+  // of this device; more are injected at run time (inject_fault). Sensor
+  // faults act on the signal chain's output, link faults at the encoder.
+  DeviceFaultPlan faults;
 };
 
 enum class StartAlignment { now, next_realtime_second };
@@ -137,6 +153,22 @@ struct EngineOptions {
   // Encoder output buffers reserved up front, so the emission thread never allocates.
   std::size_t reserve_bytes = 4096;
   std::size_t reserve_can_frames = 64;
+  // Ground-truth fault events waiting for take_fault_events() (all devices);
+  // beyond this they are dropped and counted (faults.dropped_events).
+  std::size_t fault_event_capacity = 4096;
+  // How long inject_fault/clear_faults/list_faults wait for the producer
+  // thread to take the request (it looks every millisecond); after that the
+  // request is withdrawn (nothing changed) and refused.
+  std::chrono::milliseconds fault_request_timeout{1000};
+};
+
+// Issue 18 counters of one device.
+struct FaultCounters {
+  std::uint64_t active = 0;          // faults affecting samples now (a gauge, as of the newest sample computed)
+  std::uint64_t started = 0, ended = 0;  // start / end events (first / last affected sample)
+  std::uint64_t injected = 0, cleared = 0;  // run-time requests taken
+  std::uint64_t dropped_events = 0;  // ground-truth events lost: the queue was full (the log writer too slow)
+  std::uint64_t silenced = 0;        // ticks not sent: silence, a restart's off time (not write errors)
 };
 
 struct DeviceStats {
@@ -161,6 +193,7 @@ struct DeviceStats {
   LatenessSummary pose_latency;
   TimeNs engine_lag_ns = 0;          // StreamPipeline::current_lag_ns, as last seen by the producer
   std::uint64_t last_sample_counter = 0;
+  FaultCounters faults;
 };
 
 // The live pose source's counters (io::PoseSourceCounters, the main ones).
@@ -252,6 +285,30 @@ class EmissionEngine {
 
   // The mapping once known (trajectory: at start(); live: at the first pose).
   std::optional<live::TimeMapping> mapping() const;
+
+  // Run-time faults (issue 18): from any thread but the emission thread
+  // (the daemon's io thread). The request goes through a mailbox the producer
+  // thread takes within about a millisecond; the reply comes from there.
+  // Throws std::invalid_argument (unknown device, a spec fault::validate
+  // refuses, no such fault id) and std::runtime_error (the engine is not
+  // running, its input ended, or the producer did not take the request
+  // within fault_request_timeout); a refused request changes nothing.
+  struct InjectedFault {
+    std::uint64_t id = 0;
+    std::uint64_t first_sample = 0;  // the first sample at or after the start (unless the fault is intermittent)
+    TimeNs start_since_start_ns = 0;
+  };
+  // The fault starts after_ns after the next sample the producer computes
+  // (the samples before it are in the ring already, at most the producer's
+  // lead); spec.clock and spec.start_ns are set from that.
+  InjectedFault inject_fault(const std::string& device, fault::FaultSpec spec, TimeNs after_ns);
+  // Ends fault `id` of the device, or all (nullopt); returns the ids ended.
+  std::vector<std::uint64_t> clear_faults(const std::string& device, std::optional<std::uint64_t> id);
+  // Every fault the device knows (scheduled, active, ended); empty device: all.
+  std::vector<FaultInfo> list_faults(const std::string& device);
+  // The ground-truth events since the last call, in the order they happened
+  // per device (the daemon writes them to the fault log).
+  std::vector<fault::FaultEvent> take_fault_events();
 
  private:
   void stop_engine(std::chrono::milliseconds flush_timeout, bool keep_transports);

@@ -10,6 +10,7 @@
 #include "daemon/emit_command.hpp"
 #include "daemon/bench_timing_command.hpp"
 #include "daemon/status_command.hpp"
+#include "daemon/fault_command.hpp"
 
 int main(int argc, char** argv) {
   using namespace imuemu::cli;
@@ -115,6 +116,7 @@ int main(int argc, char** argv) {
   add_emit_command(app, exit_code);
   add_bench_timing_command(app, exit_code);
   add_status_command(app, exit_code);
+  add_fault_command(app, exit_code);
   add_allan_command(app, exit_code);
 
   try {

@@ -58,6 +58,8 @@
 #include "daemon/control_socket.hpp"
 #include "daemon/default_scene.hpp"
 #include "daemon/emission.hpp"
+#include "daemon/fault_control.hpp"
+#include "daemon/fault_log.hpp"
 #include "log/log.hpp"
 #include "daemon/scene_check.hpp"
 #include "daemon/scene_config.hpp"
@@ -109,6 +111,8 @@ std::string summary_line(const sc::SceneConfig& scene, const imuemu::emission::E
     if (d.deadline_misses > 0) out << ", " << d.deadline_misses << " late";
     if (d.write_errors > 0) out << ", " << d.write_errors << " not written";
     if (d.transport.dropped_link_down > 0) out << " (" << d.transport.dropped_link_down << " while no reader/link down)";
+    if (d.faults.active > 0) out << ", " << d.faults.active << " fault" << (d.faults.active == 1 ? "" : "s") << " acting";
+    if (d.faults.silenced > 0) out << ", " << d.faults.silenced << " silenced by faults";
     first = false;
   }
   out << "; lateness p99 " << us_text(s.lateness.p99_ns) << ", max " << us_text(s.lateness.max_ns);
@@ -168,8 +172,9 @@ void run_build_job(BuildJob& job) {
 class Daemon {
  public:
   Daemon(boost::asio::io_context& io, std::string scene_path, sc::SceneConfig scene, sc::RunnerOptions runner,
-         std::optional<double> run_seconds, bool test_hooks)
+         std::optional<double> run_seconds, bool test_hooks, std::string fault_log_path)
       : io_(io),
+        fault_log_path_(std::move(fault_log_path)),
         scene_path_(std::move(scene_path)),
         scene_(std::move(scene)),
         runner_(std::move(runner)),
@@ -187,6 +192,42 @@ class Daemon {
     petter_ = petter;
     watchdog_ = watchdog;
     control.add_command("status", "scene, devices, counters, lateness, watchdog", [this] { return status_json(); });
+    // Issue 18: run-time faults. The arguments are checked here (nothing
+    // reaches the engine otherwise); the engine's producer thread takes the
+    // request through its mailbox (a few ms at most, bounded).
+    control.add_command_with_args(
+        "fault-inject", "{\"imu\", \"type\", \"after_s\", \"duration_s\", \"params\": {...}}: start a fault (docs/faults.md)",
+        [this](const nlohmann::json& args) {
+          const svc::FaultInjectRequest r = svc::parse_fault_inject(args);
+          imuemu::emission::EmissionEngine& engine = running_engine();
+          const auto injected = engine.inject_fault(r.imu, r.spec, r.after_ns);
+          svc::log_notice("fault injected on " + r.imu + ": id " + std::to_string(injected.id) + ", " +
+                          imuemu::fault::describe(r.spec) + ", from sample " + std::to_string(injected.first_sample));
+          return nlohmann::json{{"imu", r.imu},
+                                {"id", injected.id},
+                                {"type", std::string(imuemu::fault::kind_name(r.spec.kind))},
+                                {"first_sample", injected.first_sample},
+                                {"start_since_start_ns", injected.start_since_start_ns},
+                                {"duration_ns", r.spec.duration_ns}};
+        });
+    control.add_command_with_args("fault-list", "{} or {\"imu\"}: the scheduled and active faults",
+                                  [this](const nlohmann::json& args) {
+                                    const std::string imu = svc::parse_fault_list(args);
+                                    nlohmann::json faults = nlohmann::json::array();
+                                    for (const auto& f : running_engine().list_faults(imu))
+                                      faults.push_back(svc::fault_info_json(f));
+                                    return nlohmann::json{{"faults", std::move(faults)}};
+                                  });
+    control.add_command_with_args("fault-clear", "{\"imu\", \"id\"} or {\"imu\", \"all\": true}: end faults",
+                                  [this](const nlohmann::json& args) {
+                                    const svc::FaultClearRequest r = svc::parse_fault_clear(args);
+                                    const std::vector<std::uint64_t> cleared = running_engine().clear_faults(r.imu, r.id);
+                                    std::string ids;
+                                    for (const std::uint64_t id : cleared) ids += (ids.empty() ? "" : ", ") + std::to_string(id);
+                                    svc::log_notice("faults cleared on " + r.imu + ": " + ids);
+                                    write_fault_events();  // the end events at once
+                                    return nlohmann::json{{"imu", r.imu}, {"cleared", cleared}};
+                                  });
     if (test_hooks_) {
       control.add_command("stall-emitter", "TEST HOOK: the emission thread stops progressing (watchdog test)", [this] {
         svc::log_warning("test hook: emitter stalled on request");
@@ -445,12 +486,42 @@ class Daemon {
     }
   }
 
+  imuemu::emission::EmissionEngine& running_engine() {
+    if (!built_.engine) throw std::runtime_error(job_ ? "the scene is being built; try again" : "no scene is running");
+    return *built_.engine;
+  }
+
+  // Ground truth (issue 18): the engine's fault events to the fault log,
+  // one JSON line each (daemon/fault_log.hpp), on the io thread. Without a
+  // log they are still taken (the engine's queue is bounded) and counted.
+  void write_fault_events() {
+    if (!built_.engine) return;
+    const std::vector<imuemu::fault::FaultEvent> events = built_.engine->take_fault_events();
+    if (events.empty() || !fault_log_) return;
+    for (const imuemu::fault::FaultEvent& e : events) imuemu::fault_log::write_fault_event_json_line(*fault_log_, e);
+    fault_log_->flush();
+    if (!*fault_log_ && !fault_log_failed_) {
+      fault_log_failed_ = true;
+      svc::log_err("fault log " + fault_log_path_ + ": writing failed; fault events are no longer recorded");
+    }
+  }
+
+ public:
+  // Opens (appends to) the fault log; throws naming the path.
+  void open_fault_log() {
+    if (fault_log_path_.empty()) return;
+    fault_log_.emplace(fault_log_path_, std::ios::app);
+    if (!*fault_log_) throw std::runtime_error("fault log " + fault_log_path_ + ": cannot open it for writing");
+  }
+
+ private:
   // keep: the byte-stream transports with a reuse_key() stay open and go
   // there (the scene's devices are the engine's, in order); the rest close.
   void stop_engine(sc::ReusableTransports* keep = nullptr) {
     if (!built_.engine) return;
     if (keep != nullptr) built_.engine->stop_keeping_transports();
     else built_.engine->stop();
+    write_fault_events();  // the last ones, the ends of the faults still active included
     final_stats_ = built_.engine->stats();
     svc::log_info("emission stopped: " + summary_line(scene_, *final_stats_, true));
     if (keep != nullptr) {
@@ -485,6 +556,7 @@ class Daemon {
 
   void on_status_tick(std::chrono::nanoseconds status_period) {
     if (!built_.engine) return;
+    write_fault_events();
     const imuemu::emission::EngineStats s = built_.engine->stats();
     if (!s.fault.empty() || s.thread_faults > 0) {
       // An exception reached the top of an engine thread (caught there, both
@@ -549,6 +621,7 @@ class Daemon {
         {"uptime_s", static_cast<double>(monotonic_now_ns() - started_ns_) / 1e9},
         {"imus", scene_.imus.size()},
         {"waiting_for_device", waiting_for_device_},
+        {"fault_log", fault_log_path_.empty() ? nlohmann::json(nullptr) : nlohmann::json(fault_log_path_)},
     };
     if (job_) {
       status["building"] = {{"what", job_->kind == BuildJob::Kind::start ? "start" : "reload"},
@@ -577,6 +650,9 @@ class Daemon {
   }
 
   boost::asio::io_context& io_;
+  std::string fault_log_path_;  // empty: no fault log
+  std::optional<std::ofstream> fault_log_;
+  bool fault_log_failed_ = false;
   std::string scene_path_;  // empty: the built-in scene
   sc::SceneConfig scene_;
   sc::RunnerOptions runner_;
@@ -647,6 +723,9 @@ int main(int argc, char** argv) {
   app.add_option("--late-ticks", late_ticks, "Override the scene's [daemon] late_ticks: drop or send")
       ->check(CLI::IsMember({"drop", "send"}));
   app.add_option("--stats-json", stats_json, "At exit, write the emission statistics (JSON) here");
+  std::string fault_log_path;
+  app.add_option("--fault-log", fault_log_path,
+                 "Append every fault's start and end (JSON lines, docs/faults.md) here; overrides the scene's [daemon] fault_log");
   app.add_option("--log-level", log_level, "err, warning, notice, info, debug")->capture_default_str()
       ->check(CLI::IsMember({"err", "warning", "notice", "info", "debug"}));
   try {
@@ -688,7 +767,8 @@ int main(int argc, char** argv) {
   runner.pty_link_dir = pty_link_dir;
   if (!late_ticks.empty()) runner.drop_late_ticks = late_ticks == "drop";
   runner.log = [](std::string_view line) { svc::log_notice(line); };
-  Daemon daemon(io, scene_path, scene, runner, run_seconds, test_hooks);
+  Daemon daemon(io, scene_path, scene, runner, run_seconds, test_hooks,
+                fault_log_path.empty() ? scene.daemon.fault_log : fault_log_path);
   try {
     const std::string socket_path = !socket_override.empty() ? socket_override
                                     : !scene.daemon.control_socket.empty()
@@ -711,6 +791,7 @@ int main(int argc, char** argv) {
       const TimeNs max_age_ns = std::chrono::duration_cast<std::chrono::nanoseconds>(*watchdog / 2).count();
       petter.emplace(io, *watchdog, [&daemon, max_age_ns] { return daemon.healthy(max_age_ns); });
     }
+    daemon.open_fault_log();
     daemon.attach(control, petter ? &*petter : nullptr, watchdog);
     svc::ServiceSignals signals(io, [&](int) { daemon.stop(kExitOk); }, [&] { daemon.reload(); });
     daemon.on_stopped([&] {

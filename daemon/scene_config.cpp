@@ -404,7 +404,7 @@ void parse_live_section(const Table& t, LiveConfig& out) {
 
 void parse_daemon_section(const Table& t, const std::string& scene_name, DaemonConfig& out) {
   t.allow_only({"realtime_priority", "lock_memory", "require_realtime", "control_socket", "control_group",
-                "status_interval_s", "watchdog", "late_ticks", "device_missing", "device_retry_initial_s", "device_retry_max_s"});
+                "status_interval_s", "watchdog", "late_ticks", "device_missing", "device_retry_initial_s", "device_retry_max_s", "fault_log"});
   out.realtime_priority = static_cast<int>(t.integer("realtime_priority", 0, 0, 99));
   out.lock_memory = t.boolean("lock_memory", false);
   out.require_realtime = t.boolean("require_realtime", false);
@@ -415,6 +415,7 @@ void parse_daemon_section(const Table& t, const std::string& scene_name, DaemonC
   if (out.control_socket.size() > 107)
     t.fail_at("control_socket", "path is " + std::to_string(out.control_socket.size()) + " bytes; a Unix socket path holds at most 107");
   out.control_group = t.string("control_group", "");
+  out.fault_log = t.string("fault_log", "");  // issue 18 ground truth (JSON lines); empty: none
   out.status_interval_s = t.number("status_interval_s", 1.0, 0.0, 86400.0);
   out.watchdog = t.boolean("watchdog", true);
   out.drop_late_ticks = t.choice("late_ticks", "drop", {"drop", "send"}) == "drop";

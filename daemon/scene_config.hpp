@@ -120,6 +120,7 @@ struct DaemonConfig {
   bool require_realtime = false;    // refuse to start without the priority / lock that was asked for
   std::string control_socket;       // default /run/imuemu/<scene name>.sock
   std::string control_group;        // group owning the control socket; empty: the daemon's
+  std::string fault_log;            // issue 18: append fault start/end events here (JSON lines); empty: none
   double status_interval_s = 1.0;   // status line / JSON every this many seconds
   bool watchdog = true;             // sd_notify WATCHDOG=1 when systemd set WatchdogSec=
   // A tick whose wake-up missed its deadline by more than one period: dropped

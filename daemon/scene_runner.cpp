@@ -153,6 +153,8 @@ BuiltEngine build_engine(const SceneConfig& scene, const RunnerOptions& options,
     dev.mounting = imu.mounting;
     dev.sensor_model = imu.error_model.sensor();
     dev.chain = imu.error_model.chain;
+    dev.faults.scheduled = imu.faults;  // issue 18: [[imu.fault]], [imu.random_faults]
+    dev.faults.random = imu.random_faults;
     const LatencyPlan plan = latency_plan(scene, imu);
     max_emission_delay_ns = std::max(max_emission_delay_ns, plan.emission_delay_ns);
     producer_lead_ns = std::min(producer_lead_ns, plan.producer_lead_ns);

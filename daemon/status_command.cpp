@@ -147,6 +147,14 @@ void print_status_summary(const nlohmann::json& status, std::ostream& out) {
           << microseconds(number_or_zero(pose_latency, "max_ns")) << "\n";
     if (const auto b = pose_latency.find("buckets"); b != pose_latency.end() && b->is_array() && !b->empty())
       out << "      histogram (poses up to each bound): " << buckets_text(*b) << "\n";
+    const nlohmann::json faults = d.value("faults", nlohmann::json::object());
+    if (count_of(faults, "started") + count_of(faults, "injected") + count_of(faults, "active") > 0)
+      out << "    faults (issue 18): " << count_of(faults, "active") << " acting now, " << count_of(faults, "started")
+          << " started and " << count_of(faults, "ended") << " ended (the fault log's events), "
+          << count_of(faults, "injected") << " injected and " << count_of(faults, "cleared")
+          << " cleared over the control socket, " << count_of(faults, "silenced")
+          << " ticks silenced (device off), " << count_of(faults, "dropped_events")
+          << " events lost (queue full)\n";
     out << "    transport: " << count_of(transport, "frames_sent") << " frames sent, "
         << count_of(transport, "queued") << " queued; not taken: " << count_of(d, "write_errors")
         << " packets (link down " << count_of(transport, "dropped_link_down")
@@ -241,6 +249,15 @@ nlohmann::json query_control_socket(const std::string& socket_path, const std::s
   } catch (const nlohmann::json::parse_error& e) {
     throw ControlClientError("control socket " + socket_path + ": the reply is not JSON (" + e.what() + ")");
   }
+}
+
+nlohmann::json query_control_socket(const std::string& socket_path, const std::string& command,
+                                    const nlohmann::json& args, std::chrono::milliseconds timeout) {
+  if (!args.is_object()) throw ControlClientError("control command arguments must be a JSON object");
+  if (command.find_first_of(" \t") != std::string::npos)
+    throw ControlClientError("control command name '" + command + "' has a blank");
+  // Compact, and a newline inside a string is escaped: still one line.
+  return query_control_socket(socket_path, command + " " + args.dump(-1, ' ', true), timeout);
 }
 
 int run_status(const StatusArgs& args) {

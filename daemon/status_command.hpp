@@ -28,6 +28,9 @@ class ControlClientError : public std::runtime_error {
 // ControlClientError (message names `socket_path`).
 nlohmann::json query_control_socket(const std::string& socket_path, const std::string& command,
                                     std::chrono::milliseconds timeout);
+// A command with arguments: sends `command {args}` (one line, compact JSON).
+nlohmann::json query_control_socket(const std::string& socket_path, const std::string& command,
+                                    const nlohmann::json& args, std::chrono::milliseconds timeout);
 
 struct StatusArgs {
   std::string socket_path;  // empty: default_control_socket_path(scene)

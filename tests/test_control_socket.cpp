@@ -9,6 +9,7 @@
 #include <sys/socket.h>
 #include <sys/stat.h>
 #include <sys/un.h>
+#include <sys/wait.h>
 #include <unistd.h>
 
 #include <array>
@@ -22,6 +23,7 @@
 #include <optional>
 #include <string>
 #include <iostream>
+#include <mutex>
 #include <sstream>
 #include <thread>
 #include <vector>
@@ -63,6 +65,14 @@ struct Daemon {
         return json{{"reset", true}};
       });
       server->add_command("explode", "throws", []() -> json { throw std::runtime_error("boom"); });
+      // Takes {"add": n}: refuses anything else before changing the counter.
+      server->add_command_with_args("add", "adds to the counter", [this](const json& args) {
+        const auto add = args.find("add");
+        if (add == args.end() || !add->is_number_unsigned())
+          throw std::invalid_argument("expected {\"add\": unsigned}, got " + args.dump());
+        samples += add->get<std::uint64_t>();
+        return json{{"samples_emitted", samples.load()}, {"args", args}};
+      });
     });
   }
   ~Daemon() { io.run([&] { server.reset(); }); }
@@ -146,7 +156,7 @@ TEST(ControlSocket, UnknownCommandAndThrowingHandlerAnswerWithErrors) {
   Daemon daemon(path);
   const json unknown = query_control_socket(path, "self-destruct", 2000ms);
   EXPECT_EQ(unknown["error"], "unknown command 'self-destruct'");
-  EXPECT_EQ(unknown["commands"], (json{"help", "explode", "stats-reset", "status"}));
+  EXPECT_EQ(unknown["commands"], (json{"help", "add", "explode", "stats-reset", "status"}));
   EXPECT_EQ(query_control_socket(path, "explode", 2000ms), (json{{"error", "explode: boom"}}));
   // Blanks and CRLF around the command are not part of it.
   const int fd = connect_raw(path);
@@ -154,6 +164,110 @@ TEST(ControlSocket, UnknownCommandAndThrowingHandlerAnswerWithErrors) {
   ASSERT_EQ(::write(fd, "  status\r\n", 10), 10);
   EXPECT_EQ(json::parse(read_all(fd))["scene"], "bench");
   ::close(fd);
+}
+
+TEST(ControlSocket, ArgumentsAreOneJsonObjectAfterTheName) {
+  TempDir dir;
+  const std::string path = dir.path + "/args.sock";
+  Daemon daemon(path);
+  daemon.samples = 10;
+  const json reply = query_control_socket(path, "add", json{{"add", 5}}, 2000ms);
+  EXPECT_EQ(reply["samples_emitted"], 15);
+  EXPECT_EQ(reply["args"], (json{{"add", 5}}));
+  // Raw line with blanks around the name and the object, CRLF.
+  const int fd = connect_raw(path);
+  ASSERT_GE(fd, 0);
+  const std::string line = "  add \t {\"add\": 2}  \r\n";
+  ASSERT_EQ(::write(fd, line.data(), line.size()), static_cast<ssize_t>(line.size()));
+  EXPECT_EQ(json::parse(read_all(fd))["samples_emitted"], 17);
+  ::close(fd);
+  // The name alone: the handler gets {} (and refuses it here).
+  EXPECT_EQ(query_control_socket(path, "add", 2000ms)["error"], "add: expected {\"add\": unsigned}, got {}");
+  // Refused arguments change nothing.
+  EXPECT_EQ(query_control_socket(path, "add {\"add\": -3}", 2000ms)["error"],
+            "add: expected {\"add\": unsigned}, got {\"add\":-3}");
+  const json not_json = query_control_socket(path, "add {add: 1}", 2000ms);
+  EXPECT_NE(not_json["error"].get<std::string>().find("add: the arguments are not JSON"), std::string::npos) << not_json;
+  EXPECT_EQ(query_control_socket(path, "add [1, 2]", 2000ms)["error"],
+            "add: the arguments must be one JSON object, got array");
+  EXPECT_EQ(query_control_socket(path, "add {\"add\": 1} {\"add\": 1}", 2000ms).count("error"), 1u);
+  // A command without arguments refuses them (it is not called).
+  EXPECT_EQ(query_control_socket(path, "stats-reset {}", 2000ms)["error"], "stats-reset: takes no arguments");
+  EXPECT_EQ(query_control_socket(path, "stats-reset now", 2000ms)["error"].get<std::string>().find("stats-reset: "), 0u);
+  EXPECT_EQ(daemon.samples.load(), 17u);
+  // A line up to kMaxCommandBytes (newline excluded) is taken whole.
+  json big{{"add", 1}, {"pad", ""}};
+  const std::size_t base = std::string("add ").size() + big.dump().size();
+  big["pad"] = std::string(svc::kMaxCommandBytes - 1 - base, 'x');
+  EXPECT_EQ(query_control_socket(path, "add", big, 2000ms)["samples_emitted"], 18);
+  // The client refuses a line that does not fit, sending nothing.
+  big["pad"] = std::string(svc::kMaxCommandBytes, 'x');
+  EXPECT_THROW(query_control_socket(path, "add", big, 2000ms), ControlClientError);
+  EXPECT_THROW(query_control_socket(path, "two words", json::object(), 2000ms), ControlClientError);
+  EXPECT_EQ(daemon.samples.load(), 18u);
+}
+
+TEST(ControlSocket, ParseControlRequestSplitsNameAndArguments) {
+  EXPECT_EQ(svc::parse_control_request("status").name, "status");
+  EXPECT_FALSE(svc::parse_control_request(" status \r\n").has_args);
+  EXPECT_EQ(svc::parse_control_request(" status \r\n").args, json::object());
+  const svc::ControlRequest r = svc::parse_control_request("fault-inject {\"imu\": \"imu0\", \"type\": \"dead\"}");
+  EXPECT_EQ(r.name, "fault-inject");
+  EXPECT_TRUE(r.has_args);
+  EXPECT_EQ(r.args, (json{{"imu", "imu0"}, {"type", "dead"}}));
+  EXPECT_THROW(svc::parse_control_request("x 1"), std::invalid_argument);
+  EXPECT_THROW(svc::parse_control_request("x \"s\""), std::invalid_argument);
+  EXPECT_THROW(svc::parse_control_request("x {"), std::invalid_argument);
+}
+
+// Issue 18: the socket's 0660 mode is what keeps fault injection to its
+// group. A process that is neither the owner nor in the group gets EACCES
+// from connect(2) itself (path permission check, Linux unix(7)). Needs root
+// to become another user; as a normal user the test cannot switch identity.
+TEST(ControlSocket, AClientOutsideTheGroupIsRefusedByTheKernel) {
+  if (::geteuid() != 0) GTEST_SKIP() << "needs root to switch to uid/gid 65534";
+  TempDir dir;
+  ::chmod(dir.path.c_str(), 0755);  // the directory is searchable: only the socket's mode decides
+  const std::string path = dir.path + "/perm.sock";
+  Daemon daemon(path);
+  struct stat st {};
+  ASSERT_EQ(::stat(path.c_str(), &st), 0);
+  ASSERT_NE(st.st_gid, 65534u) << "the socket's group must not be nogroup for this test";
+  ASSERT_EQ(st.st_mode & 0777, 0660u);
+  // The child reports connect()'s errno (0: connected) through a pipe.
+  const auto connect_as = [&](uid_t uid, gid_t gid) -> int {
+    int fds[2];
+    if (::pipe(fds) != 0) return -1;
+    const pid_t child = ::fork();
+    if (child == 0) {
+      ::close(fds[0]);
+      int result = 0;
+      const gid_t none[1] = {gid};
+      if (::setgroups(1, none) != 0 || ::setgid(gid) != 0 || ::setuid(uid) != 0) {
+        result = -2;
+      } else {
+        const int fd = ::socket(AF_UNIX, SOCK_STREAM, 0);
+        sockaddr_un address{};
+        address.sun_family = AF_UNIX;
+        std::strncpy(address.sun_path, path.c_str(), sizeof address.sun_path - 1);
+        result = ::connect(fd, reinterpret_cast<sockaddr*>(&address), sizeof address) == 0 ? 0 : errno;
+      }
+      (void)!::write(fds[1], &result, sizeof result);
+      ::_exit(0);
+    }
+    ::close(fds[1]);
+    int result = -1;
+    if (::read(fds[0], &result, sizeof result) != static_cast<ssize_t>(sizeof result)) result = -3;
+    ::close(fds[0]);
+    int status = 0;
+    ::waitpid(child, &status, 0);
+    return result;
+  };
+  EXPECT_EQ(connect_as(65534, 65534), EACCES);
+  // The same identity in the socket's group is let in: the refusal is the
+  // group's, not something else about the child.
+  EXPECT_EQ(connect_as(65534, st.st_gid), 0);
+  EXPECT_EQ(query_control_socket(path, "status", 2000ms)["scene"], "bench");  // the daemon is unaffected
 }
 
 TEST(ControlSocket, Mode0660AndGroupAndRemovedAtExit) {
@@ -233,7 +347,7 @@ TEST(ControlSocket, SlowAndGarbageClientsDoNotBlockOthers) {
   const int garbage = connect_raw(path);
   const std::string junk(5000, '\x7f');
   ASSERT_EQ(::write(garbage, junk.data(), junk.size()), static_cast<ssize_t>(junk.size()));
-  EXPECT_EQ(json::parse(read_all(garbage))["error"], "command longer than 256 bytes");
+  EXPECT_EQ(json::parse(read_all(garbage))["error"], "command longer than 4096 bytes");
   ::close(garbage);
   // Binary garbage on one line: unknown command (bytes replaced in the JSON text).
   const int binary = connect_raw(path);
@@ -328,6 +442,63 @@ TEST(StatusCommand, PrintsPrettyJsonAndExitCodes) {
 // `imuemu status --summary`: the lines a person reads, from the JSON the
 // daemon's own serialiser (emission::to_json) writes, each number where its
 // explanation says.
+// `imuemu fault`: the command line becomes one request line with a JSON
+// object; the daemon's reply is printed; its error is the exit code 4 with
+// the daemon's message; a bad command line is 2 and sends nothing.
+TEST(FaultCommand, SendsTheRequestAndReportsTheDaemonsAnswer) {
+  TempDir dir;
+  const std::string path = dir.path + "/fault.sock";
+  Daemon daemon(path);
+  std::vector<std::pair<std::string, json>> seen;
+  std::mutex seen_mutex;
+  daemon.io.run([&] {
+    for (const char* name : {"fault-inject", "fault-list", "fault-clear"}) {
+      daemon.server->add_command_with_args(name, "echo", [&, name = std::string(name)](const json& args) -> json {
+        {
+          std::lock_guard lock(seen_mutex);
+          seen.emplace_back(name, args);
+        }
+        if (args.value("imu", "") == "nope") throw std::invalid_argument("no imu 'nope' in this scene");
+        return json{{"ok", name}};
+      });
+    }
+  });
+  const std::string cli = std::string(IMUEMU_CLI_PATH) + " fault ";
+  ShellRun r = run_shell(cli + "inject --socket " + path +
+                         " --imu imu0 --type bias_step --after-s 0.5 --duration-s 2 --param gyro_bias_rad_s=0.01"
+                         " --param axes=xz --param flag_status=true --param seed=7 --compact");
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_EQ(r.out, "{\"ok\":\"fault-inject\"}\n");
+  r = run_shell(cli + "list --socket " + path + " --compact");
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  r = run_shell(cli + "clear --socket " + path + " --imu imu0 --id 3 --compact");
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  r = run_shell(cli + "clear --socket " + path + " --imu imu0 --all --compact");
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  r = run_shell(cli + "clear --socket " + path + " --imu nope --all 2>&1 >/dev/null");
+  EXPECT_EQ(r.exit_code, 4);
+  EXPECT_NE(r.out.find("imuemu fault clear: the daemon at " + path + " refused: fault-clear: no imu 'nope' in this scene"),
+            std::string::npos) << r.out;
+  {
+    std::lock_guard lock(seen_mutex);
+    ASSERT_EQ(seen.size(), 5u);
+    EXPECT_EQ(seen[0].first, "fault-inject");
+    EXPECT_EQ(seen[0].second, (json{{"imu", "imu0"}, {"type", "bias_step"}, {"after_s", 0.5}, {"duration_s", 2.0},
+                                    {"params", {{"gyro_bias_rad_s", 0.01}, {"axes", "xz"}, {"flag_status", true}, {"seed", 7}}}}));
+    EXPECT_EQ(seen[1], (std::pair<std::string, json>{"fault-list", json::object()}));
+    EXPECT_EQ(seen[2], (std::pair<std::string, json>{"fault-clear", {{"imu", "imu0"}, {"id", 3}}}));
+    EXPECT_EQ(seen[3], (std::pair<std::string, json>{"fault-clear", {{"imu", "imu0"}, {"all", true}}}));
+  }
+  // Usage errors: nothing is sent.
+  for (const std::string bad : {"inject --imu imu0 --type dead --param novalue", "clear --imu imu0",
+                                "clear --imu imu0 --id 1 --all", "inject --imu imu0"}) {
+    r = run_shell(cli + bad + " --socket " + path + " 2>&1");
+    EXPECT_EQ(r.exit_code, 2) << bad << ": " << r.out;
+  }
+  std::lock_guard lock(seen_mutex);
+  EXPECT_EQ(seen.size(), 5u);
+}
+
 TEST(StatusSummary, NamesEachCounterFromTheDaemonsJson) {
   imuemu::emission::EngineStats s;
   imuemu::emission::DeviceStats d;
@@ -365,6 +536,30 @@ TEST(StatusSummary, NamesEachCounterFromTheDaemonsJson) {
   EXPECT_NE(text.find("p50 67 us, p99 220 us, max 96330 us; smoother running 8.5 s ahead"), std::string::npos);
   EXPECT_NE(text.find("1995 frames sent, 0 queued; not taken: 8 packets (link down 8: e.g. no reader on the pty"), std::string::npos);
   EXPECT_EQ(text.find("pose source"), std::string::npos);  // a trajectory scene has none
+}
+
+// Issue 18: the fault counters are in the status JSON and explained, each
+// with its own value (a swapped field shows); none at all: no line.
+TEST(StatusSummary, FaultCountersAreInTheJsonAndExplained) {
+  imuemu::emission::EngineStats s;
+  imuemu::emission::DeviceStats d;
+  d.name = "imu0";
+  s.devices.push_back(d);
+  const auto summary_of = [](const imuemu::emission::EngineStats& st) {
+    std::ostringstream out;
+    imuemu::cli::print_status_summary(json{{"scene", "f"}, {"engine", imuemu::emission::to_json(st)}}, out);
+    return out.str();
+  };
+  EXPECT_EQ(summary_of(s).find("faults"), std::string::npos);
+  s.devices[0].faults = {1, 7, 6, 3, 2, 5, 40};
+  const json j = imuemu::emission::to_json(s)["devices"][0]["faults"];
+  EXPECT_EQ(j, (json{{"active", 1}, {"started", 7}, {"ended", 6}, {"injected", 3}, {"cleared", 2}, {"dropped_events", 5},
+                     {"silenced", 40}}));
+  EXPECT_NE(summary_of(s).find("faults (issue 18): 1 acting now, 7 started and 6 ended (the fault log's events), 3 "
+                               "injected and 2 cleared over the control socket, 40 ticks silenced (device off), 5 "
+                               "events lost (queue full)"),
+            std::string::npos)
+      << summary_of(s);
 }
 
 // Issue 13: the live-time counters (time_jump, resyncs, held) and the TCP
