@@ -184,30 +184,8 @@ class OnDemandSource final : public live::ExactSampleSource {
   std::uint64_t refused_ = 0;
 };
 
-// A link fault the device's protocol has no field for would do nothing on
-// the wire while the fault log claims it acted (drivers/link_fault.hpp
-// link_fault_support): refused, naming the device and the protocol.
 void check_protocol_supports(const DeviceOptions& d, fault::Kind kind) {
-  using fault::Kind;
-  const bool stream = d.stream_encoder != nullptr;
-  const drivers::LinkFaultSupport s =
-      stream ? drivers::link_fault_support(*d.stream_encoder) : drivers::link_fault_support(*d.can_encoder);
-  const char* missing = nullptr;
-  switch (kind) {
-    case Kind::sequence_jump:
-    case Kind::sequence_reset: if (!s.sequence) missing = "no sequence counter"; break;
-    case Kind::bad_checksum: if (!s.checksum) missing = "no checksum field"; break;
-    case Kind::bad_length: if (!s.length) missing = "no length field"; break;
-    case Kind::bit_errors: if (!s.bit_errors) missing = "no bit errors on this link (CAN's CRC and retransmission hide them)"; break;
-    case Kind::can_wrong_id: if (!s.can_id) missing = "no CAN identifier"; break;
-    case Kind::can_missing_frame: if (!s.missing_frame) missing = "no multi-frame transfers"; break;
-    default: break;
-  }
-  if (missing != nullptr) {
-    const std::string protocol = stream ? d.stream_encoder->name() : d.can_encoder->name();
-    throw std::invalid_argument("fault type " + std::string(fault::kind_name(kind)) + " on imu '" + d.name + "' (" +
-                                protocol + "): the protocol has " + missing + ", the fault would show nothing");
-  }
+  emission::check_protocol_supports(d.name, d.stream_encoder.get(), d.can_encoder.get(), kind);
 }
 
 }  // namespace

@@ -1,6 +1,8 @@
 #include "daemon/scene_check.hpp"
 
+#include "daemon/device_faults.hpp"
 #include "daemon/error_model_config.hpp"
+#include "daemon/fault_config.hpp"
 
 #include <algorithm>
 #include <cstdio>
@@ -187,8 +189,24 @@ SceneCheck check_scene(const SceneConfig& scene) {
     }
     c.cpu_fraction = static_cast<double>(imu.rate_hz) * seconds_per_sample;
     const auto rate = static_cast<double>(imu.rate_hz);
+    c.faults = fault_lines(imu.faults, imu.random_faults);
+    // A scene fault the protocol cannot show is what a start would refuse.
+    auto check_faults = [&](const drivers::StreamEncoder* stream, const drivers::CanEncoder* can) {
+      std::vector<fault::Kind> kinds;
+      for (const fault::FaultSpec& f : imu.faults) kinds.push_back(f.kind);
+      kinds.insert(kinds.end(), imu.random_faults.kinds.begin(), imu.random_faults.kinds.end());
+      for (const fault::Kind kind : kinds) {
+        try {
+          emission::check_protocol_supports(imu.name, stream, can, kind);
+        } catch (const std::invalid_argument& e) {
+          check.refused = true;
+          check.warnings.push_back(std::string("fault refused: ") + e.what());
+        }
+      }
+    };
     if (is_can_protocol(imu.protocol)) {
       const auto encoder = drivers::make_can_encoder(imu.protocol, imu.can_options);
+      check_faults(nullptr, encoder.get());
       can_traffic[i] = drivers::measure_can_traffic(*encoder, rate,
                                                     imu.transport.type == TransportType::can && imu.transport.can.bitrate_switch);
       double frames = 0.0;
@@ -200,6 +218,7 @@ SceneCheck check_scene(const SceneConfig& scene) {
       }
     } else {
       const auto encoder = drivers::make_stream_encoder(imu.protocol, imu.stream_options);
+      check_faults(encoder.get(), nullptr);
       c.bytes_per_second = static_cast<double>(encoder->max_bytes_per_sample()) * rate;
       if (imu.transport.type == TransportType::serial)
         c.link = drivers::uart_budget(*encoder, rate, imu.transport.serial.settings);
@@ -272,6 +291,7 @@ std::string to_text(const SceneCheck& c) {
     out << "\n";
     for (std::size_t i = 0; i < d.error_model.size(); ++i)
       out << (i == 0 ? "    sensor model: " : "      ") << d.error_model[i] << "\n";
+    for (const std::string& f : d.faults) out << "    fault: " << f << "\n";
   }
   for (const SceneCheck::SharedLink& s : c.shared_links) {
     out << "  " << s.link << " shared by";
@@ -285,7 +305,7 @@ std::string to_text(const SceneCheck& c) {
       << "bench/bench_signal_chain); "
       << "largest emission delay " << seconds_text(c.max_emission_delay_ns) << "\n";
   for (const std::string& w : c.warnings) out << "  warning: " << w << "\n";
-  out << (c.refused ? "REFUSED: a link cannot carry its traffic\n" : "OK\n");
+  out << (c.refused ? "REFUSED: a link cannot carry its traffic, or a fault cannot be shown (warnings above)\n" : "OK\n");
   return out.str();
 }
 
@@ -326,6 +346,7 @@ std::string to_json(const SceneCheck& c) {
     e["can_frames_per_second"] = d.can_frames_per_second ? json(*d.can_frames_per_second) : json(nullptr);
     e["link"] = d.link ? budget_json(*d.link) : json(nullptr);
     e["error_model"] = d.error_model;
+    e["faults"] = d.faults;
     j["imus"].push_back(std::move(e));
   }
   j["shared_links"] = json::array();

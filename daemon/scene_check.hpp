@@ -51,6 +51,7 @@ struct ImuCheck {
   int oversampling = 1;                  // the signal chain's internal rate / rate_hz
   std::size_t vibration_components = 0;  // random vibration components (linear and angular)
   std::vector<std::string> error_model;  // each term with its discrete sigma at rate_hz (daemon/error_model_config.hpp)
+  std::vector<std::string> faults;       // [[imu.fault]] and [imu.random_faults], one line each (daemon/fault_config.hpp)
 };
 
 struct SceneCheck {

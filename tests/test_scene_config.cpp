@@ -466,6 +466,32 @@ TEST(SceneCheck, UartBudgetRefusesALinkTooSlowForTheRate) {
   EXPECT_FALSE(fast.refused) << to_text(fast);
 }
 
+// Issue 18: check-config prints each scene fault, and refuses what a start
+// would: a link fault the device's protocol has no field for (MIP has no
+// sequence counter), naming the type, the device and the protocol.
+TEST(SceneCheck, FaultsArePrintedAndAFaultTheProtocolCannotShowIsRefused) {
+  TempDir dir;
+  const std::string mip = second_imu_with("protocol = \"native\"", "protocol = \"mip\"");
+  auto check_with = [&](const std::string& name, const std::string& fault) {
+    return check_scene(parse_scene_file(dir.write(name, scene_text({"", {}, "", 0, "", ""}) + mip + fault)));
+  };
+  const SceneCheck ok = check_with("ok.toml", "[[imu.fault]]\ntype = \"bad_checksum\"\nafter_s = 2\nduration_s = 1\n");
+  EXPECT_FALSE(ok.refused) << to_text(ok);
+  ASSERT_EQ(ok.imus.size(), 2u);
+  EXPECT_TRUE(ok.imus[0].faults.empty());
+  ASSERT_EQ(ok.imus[1].faults.size(), 1u);
+  EXPECT_NE(ok.imus[1].faults[0].find("bad_checksum"), std::string::npos) << ok.imus[1].faults[0];
+  EXPECT_NE(to_text(ok).find("    fault: "), std::string::npos) << to_text(ok);
+  const SceneCheck refused =
+      check_with("seq.toml", "[[imu.fault]]\ntype = \"sequence_jump\"\nafter_s = 2\nsequence_step = 5\n");
+  EXPECT_TRUE(refused.refused);
+  const std::string text = to_text(refused);
+  EXPECT_NE(text.find("fault refused: fault type sequence_jump on imu 'b' (mip): the protocol has no sequence counter"),
+            std::string::npos)
+      << text;
+  EXPECT_NE(text.find("REFUSED"), std::string::npos);
+}
+
 TEST(SceneCheck, DevicesOnOneCanInterfaceShareItsBudget) {
   TempDir dir;
   std::string text = scene_text({"", {}, "", 0, "", ""});
