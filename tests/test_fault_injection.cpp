@@ -20,6 +20,7 @@
 #include <tuple>
 #include <vector>
 
+#include "tests/support/recording_transport.hpp"
 #include "core/fault/fault.hpp"
 #include "core/reference_motion.hpp"
 #include "daemon/emission.hpp"
@@ -29,27 +30,8 @@
 #include "drivers/protocols/can_protocols.hpp"
 #include "drivers/protocols/stream_protocols.hpp"
 
-// Counts the allocations of this binary while `g_counting` is set (the
-// emission thread must allocate nothing per sample, link faults included).
-namespace {
-std::atomic<bool> g_counting{false};
-std::atomic<std::uint64_t> g_allocations{0};
-}  // namespace
-void* operator new(std::size_t n) {
-  if (g_counting.load(std::memory_order_relaxed)) g_allocations.fetch_add(1, std::memory_order_relaxed);
-  if (void* p = std::malloc(n == 0 ? 1 : n)) return p;
-  throw std::bad_alloc();
-}
-// GCC sees free() on what `new` returned; here `new` is malloc.
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
-#endif
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic pop
-#endif
+// Counts this binary's allocations while g_counting is set (the emission thread must allocate nothing per sample, link faults included).
+#include "tests/support/allocation_counter.hpp"
 
 namespace imuemu::emission {
 namespace {
@@ -75,25 +57,7 @@ class RecordingCanOutput final : public CanOutput {
   std::vector<drivers::CanFrame> frames_;
 };
 
-class RecordingTransport final : public drivers::Transport {
- public:
-  bool write_frame(std::span<const std::byte> frame) override {
-    std::lock_guard lock(mutex_);
-    const auto* p = reinterpret_cast<const std::uint8_t*>(frame.data());
-    bytes_.insert(bytes_.end(), p, p + frame.size());
-    return true;
-  }
-  std::string describe() const override { return "recording"; }
-  drivers::TransportCounters counters() const override { return {}; }
-  std::vector<std::uint8_t> bytes() const {
-    std::lock_guard lock(mutex_);
-    return bytes_;
-  }
-
- private:
-  mutable std::mutex mutex_;
-  std::vector<std::uint8_t> bytes_;
-};
+using RecordingTransport = test_support::RecordingTransport;
 
 std::vector<Pose> circle_knots(double duration_s) {
   const reference::Circle circle(200.0, 20.0, 0, static_cast<TimeNs>(duration_s * 1e9));

@@ -17,27 +17,8 @@
 #include "core/fault/timeline.hpp"
 #include "daemon/fault_log.hpp"
 
-// Counts the allocations of this binary while `g_counting` is set (the
-// timeline's step() must allocate nothing per sample).
-namespace {
-std::atomic<bool> g_counting{false};
-std::atomic<std::uint64_t> g_allocations{0};
-}  // namespace
-void* operator new(std::size_t n) {
-  if (g_counting.load(std::memory_order_relaxed)) g_allocations.fetch_add(1, std::memory_order_relaxed);
-  if (void* p = std::malloc(n == 0 ? 1 : n)) return p;
-  throw std::bad_alloc();
-}
-// GCC sees free() on what `new` returned; here `new` is malloc.
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic push
-#pragma GCC diagnostic ignored "-Wmismatched-new-delete"
-#endif
-void operator delete(void* p) noexcept { std::free(p); }
-void operator delete(void* p, std::size_t) noexcept { std::free(p); }
-#if defined(__GNUC__) && !defined(__clang__)
-#pragma GCC diagnostic pop
-#endif
+// Counts this binary's allocations while g_counting is set (the timeline's step() must allocate nothing per sample).
+#include "tests/support/allocation_counter.hpp"
 
 namespace imuemu::fault {
 namespace {

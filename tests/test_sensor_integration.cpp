@@ -18,6 +18,7 @@
 
 #include <nlohmann/json.hpp>
 
+#include "tests/support/recording_transport.hpp"
 #include "core/pipeline.hpp"
 #include "core/sensor/datasheet.hpp"
 #include "core/sensor/sensor_model.hpp"
@@ -38,25 +39,7 @@ namespace {
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
 
-class Recording final : public drivers::Transport {
- public:
-  bool write_frame(std::span<const std::byte> frame) override {
-    std::lock_guard lock(mutex_);
-    const auto* p = reinterpret_cast<const std::uint8_t*>(frame.data());
-    bytes_.insert(bytes_.end(), p, p + frame.size());
-    return true;
-  }
-  std::string describe() const override { return "recording"; }
-  drivers::TransportCounters counters() const override { return {}; }
-  std::vector<std::uint8_t> bytes() const {
-    std::lock_guard lock(mutex_);
-    return bytes_;
-  }
-
- private:
-  mutable std::mutex mutex_;
-  std::vector<std::uint8_t> bytes_;
-};
+using Recording = test_support::RecordingTransport;
 
 std::vector<drivers::DecodedSample> decode_native(const std::vector<std::uint8_t>& bytes) {
   auto decoder = drivers::make_stream_decoder("native");
