@@ -9,10 +9,12 @@ bad_checksum, sequence_jump). candump -L captures the bus; the capture is
 decoded here from the specification (UAVCAN v0 transport: 29-bit id, tail
 byte start/end/toggle/transfer id, transfer CRC seeded with the RawIMU data
 type signature; CRC and float16 helpers from can_peer.py), and imuemu listen
-decodes the same bus. Both must see exactly the samples outside the fault
-windows, with the transfer ids the faults leave (silence and the others keep
-the encoder running: consecutive ids jump by the window; sequence_jump adds
-5), and the fault log must name exactly the windows. Functional only (UML's
+decodes the same bus. Both must see the same samples: none inside a fault
+window, every other one of the first 4 s unless imuemud counted it as never
+encoded (an underrun: UML on a loaded host), with the transfer ids the faults
+leave (silence and the others keep the encoder running: consecutive ids jump
+by the window; sequence_jump adds 5), and the fault log must name exactly
+the windows. Functional only (UML's
 clock is emulated): no timing is checked.
 """
 import json
@@ -35,12 +37,22 @@ FAULTS = [  # (type, first sample, extra keys); 10 samples each
     ("bad_checksum", 250, ""),
     ("sequence_jump", 300, "sequence_step = 5"),
 ]
-DURATION_S = 4
+# Samples 0..CHECKED-1 (4 s) are checked; the run goes on DURATION_S - 4 s
+# more because under user-mode Linux on a loaded host the CAN writer lags
+# the schedule, and what is still queued when imuemud stops after its bounded
+# drain is discarded (counted as dropped_at_stop: 561 frames, the last 0.8 s,
+# in one CI run with the ASan build beside it). The padding keeps that loss
+# out of the checked samples; samples after them are not compared.
+DURATION_S = 6
+CHECKED = 400
+# Replayed at half speed (the same samples over twice the wall time): the
+# producer under UML on a loaded host then keeps up (83 of 601 ticks late
+# at full speed with the ASan tests running beside it).
 
 
 def scene(faults=True):
     text = (f'[scene]\nname = "canfaults"\nphysics = "flat"\n[trajectory]\nsource = "sample:flight"\n'
-            f'duration_s = {DURATION_S}\nknot_interval_s = 0.1\n'
+            f'duration_s = {DURATION_S}\nknot_interval_s = 0.1\nspeed = 0.5\n'
             f'[[imu]]\nname = "imu0"\nrate_hz = {RATE}\nprotocol = "dronecan"\n'
             f'[imu.dronecan]\nnode_id = {NODE_ID}\n[imu.transport]\ntype = "can"\ninterface = "vcan0"\n')
     if faults:
@@ -140,15 +152,39 @@ def main():
     got = [(usec_to_k.get(usec), tid) for tid, usec in transfers]
     if any(k is None for k, _ in got):
         failures.append("a RawIMU timestamp is not on the output grid")
+    got = [(k, tid) for k, tid in got if k is None or k < CHECKED]
     windows = {kind: range(first, first + 10) for kind, first, _ in FAULTS}
     absent = set(windows["can_wrong_id"]) | set(windows["can_missing_frame"]) | set(windows["silence"]) | \
         set(windows["bad_checksum"])
     first_k = got[0][0] if got else 0
-    want = [(k, (k + (5 if k >= 300 else 0)) % 32) for k in range(first_k, len(grid)) if k not in absent]
-    if got != want:
-        diff = next((i for i, (a, b) in enumerate(zip(got, want)) if a != b), min(len(got), len(want)))
-        failures.append(f"reference decoder: {len(got)} samples, expected {len(want)}; first difference at "
-                        f"{diff}: {got[diff:diff + 3]} vs {want[diff:diff + 3]}")
+    # Ticks the producer computed too late under UML's slow emulation are not
+    # encoded at all (stats "underruns": no frame, no transfer id used); the
+    # faulted samples are encoded and withheld or broken on the wire. So
+    # between two received samples the transfer id advances by the samples
+    # in between, minus those never encoded (not received and outside every
+    # fault window), plus 5 across the sequence jump; the samples never
+    # encoded must be at most the underruns imuemud counted. With none, this
+    # is exactly: every sample outside the windows, id (k + 5 [k >= 300]) mod 32.
+    with open(os.path.join(out, "stats.json")) as f:
+        underruns = json.load(f)["devices"][0]["underruns"]
+    never_encoded = 0
+    if got and got[0][0] is not None:  # ids start at 0 with sample 0: those before the first never encoded
+        never_encoded += (got[0][0] - got[0][1]) % 32
+    for (k1, t1), (k2, t2) in zip(got, got[1:]):
+        if k1 is None or k2 is None:
+            continue
+        if k2 in absent:
+            failures.append(f"sample {k2} inside a fault window was received")
+        missing = sum(1 for j in range(k1 + 1, k2) if j not in absent)
+        jump = 5 if k1 < 300 <= k2 else 0
+        if (t2 - t1) % 32 != (k2 - k1 + jump - missing) % 32:
+            failures.append(f"transfer id {t2} at sample {k2} after {t1} at {k1} ({missing} never encoded between)")
+        never_encoded += missing
+    never_encoded += CHECKED - 1 - (got[-1][0] or 0) if got else 0
+    if never_encoded > underruns:
+        failures.append(f"{never_encoded} samples outside the fault windows missing, imuemud counted {underruns} underruns")
+    if len(got) < CHECKED // 2:
+        failures.append(f"only {len(got)} of the first {CHECKED} samples decoded")
     if first_k > 50:
         failures.append(f"the capture starts at sample {first_k}")
     wrong_id = sum(1 for ident, extended, _, _ in parse_candump_log(os.path.join(out, "candump.log"))
@@ -161,7 +197,10 @@ def main():
             obj = json.loads(line)
             if obj.get("type") != "summary":
                 listened.append(max(obj["t_ns"] // 1000, 1))
-    if listened != [usec for _, usec in transfers]:
+    # The same checked samples (each receiver drains the unchecked tail at its own pace).
+    checked_usec = max(grid[CHECKED] // 1000, 1)
+    listened = [usec for usec in listened if usec < checked_usec]
+    if listened != [usec for _, usec in transfers if usec < checked_usec]:
         failures.append(f"imuemu listen decoded {len(listened)} samples, the reference {len(transfers)}; they differ")
     with open(log) as f:
         events = [json.loads(line) for line in f if line.strip()]
