@@ -114,7 +114,7 @@ void add_fault_command(CLI::App& app, int& exit_code) {
         ->check(seconds_in(0.0, kMaxIntervalS));
     cmd->add_option("--duration-s", args->duration_s, "Last this long (default: until cleared)")
         ->check(seconds_in(0.0, kMaxDurationS));
-    cmd->add_option("--param", args->params, "key=value, datasheet units in the key (gyro_bias_deg_h=100); repeatable");
+    cmd->add_option("--param", args->params, "key=value, the scene's [[imu.fault]] keys, datasheet units in the key (bias_deg_h=100); repeatable");
   }
   {
     auto args = std::make_shared<FaultArgs>();
