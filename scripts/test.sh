@@ -41,7 +41,9 @@ else
   echo "=== asan: build failed (above); its tests and the fuzz targets did not run"
   exit 1
 fi
-# The libFuzzer targets, bounded in time (FUZZ_SECONDS per target).
+# The libFuzzer targets, bounded in time (FUZZ_SECONDS per target). 15 s:
+# the whole run took 29.5 min on a 2-core VM with the fault-injection tests
+# (issue 18) and must stay under 30; longer campaigns: scripts/fuzz.sh 600.
 echo "=== fuzz"
-bash scripts/fuzz.sh "${FUZZ_SECONDS:-30}" || status=1
+bash scripts/fuzz.sh "${FUZZ_SECONDS:-15}" || status=1
 exit $status
