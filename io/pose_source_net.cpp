@@ -18,6 +18,7 @@
 #include <utility>
 #include <vector>
 
+#include "core/time_arith.hpp"
 #include "io/pose_admission.hpp"
 #include "io/pose_source.hpp"
 
@@ -106,8 +107,12 @@ class UdpPoseSource final : public PoseSource {
     timespec stamp{};
     timespec real{};
     if (::ioctl(socket_.native_handle(), SIOCGSTAMPNS, &stamp) == 0 && ::clock_gettime(CLOCK_REALTIME, &real) == 0) {
-      const TimeNs age_ns = (static_cast<TimeNs>(real.tv_sec) - stamp.tv_sec) * kNsPerSecond + (real.tv_nsec - stamp.tv_nsec);
-      if (age_ns >= 0 && age_ns < kNsPerSecond) arrival = monotonic_now_ns() - age_ns;
+      // Through the saturating helpers: a stamp is the kernel's, but a
+      // garbage one must give a refused age, never a wrapped one.
+      const TimeNs age_ns =
+          saturating_add_ns(saturating_mul_ns(saturating_sub_ns(real.tv_sec, stamp.tv_sec), kNsPerSecond),
+                            saturating_sub_ns(real.tv_nsec, stamp.tv_nsec));
+      if (age_ns >= 0 && age_ns < kNsPerSecond) arrival = saturating_sub_ns(monotonic_now_ns(), age_ns);
     }
     arrival = std::clamp(arrival, std::min(last_arrival_ns_, read_ns), read_ns);
     last_arrival_ns_ = arrival;
