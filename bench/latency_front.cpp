@@ -5,7 +5,7 @@
 // smoothing method (Eq. 3.68) when the budget covers its look-ahead, else the
 // causal Hermite method (core/causal_hermite.hpp); a pose is available at
 // its own time (arrival = pose time) and the tick of time t is computed at
-// t + budget - producer lead (daemon/scene_config.cpp latency_plan), where
+// t + budget - producer lead (daemon/scene/scene_config.cpp latency_plan), where
 // the live emitter (core/live_emitter.hpp) extrapolates (flagged) what is not
 // there yet and blends back. Every emitted IMU sample is compared with the
 // analytic IMU (Eq. 3.70 of the exact motion).
@@ -68,7 +68,7 @@ Result run(double pose_hz, double budget_ms, double seconds) {
   const TimeNs smoothing_lookahead = StreamPipeline::lookahead_ns(po, h_ns);
   const auto budget_ns = static_cast<TimeNs>(std::llround(budget_ms * 1e6));
   Result r;
-  r.causal = budget_ns < smoothing_lookahead + 20'000'000;  // daemon/scene_config.cpp latency_plan
+  r.causal = budget_ns < smoothing_lookahead + 20'000'000;  // daemon/scene/scene_config.cpp latency_plan
   po.causal = r.causal;
   r.lookahead_ns = StreamPipeline::lookahead_ns(po, h_ns);
   const TimeNs lead_ns = r.causal ? std::clamp<TimeNs>((budget_ns - h_ns) / 2, 500'000, 20'000'000) : 20'000'000;

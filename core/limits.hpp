@@ -31,7 +31,7 @@ class SizeLimitError : public std::invalid_argument {
 inline constexpr std::size_t kMaxKnots = 10'000'000;
 
 // Knots of a looped trajectory ([trajectory] loop = true: copies for up to
-// 24 h, daemon/scene_runner.hpp looped()). The copies are held in memory
+// 24 h, daemon/scene/scene_runner.hpp looped()). The copies are held in memory
 // (~100 B a pose), so 24 h of a dense file (100 k knots 1 ms apart: 86 M
 // knots, 9 GB) is capped to the copies that fit here; the run then restarts
 // after them instead of after 24 h.

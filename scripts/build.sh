@@ -15,7 +15,7 @@ targets=()
 case "$flavour" in
   release) extra=(-DCMAKE_BUILD_TYPE=Release -DIMUEMU_SANITIZE=OFF -DIMUEMU_BUILD_BENCH=ON) ;;
   # clang: compiles the sanitized code 1.8-2.6x faster than GCC 12 (measured
-  # on daemon/status_command.cpp and core/stream.cpp), and libFuzzer needs it,
+  # on daemon/cli/status_command.cpp and core/stream.cpp), and libFuzzer needs it,
   # so the fuzz targets share this tree. -O1 -g1: half the compile time of
   # -O2 -g, still line numbers in every report.
   asan) extra=(-DCMAKE_CXX_COMPILER=clang++ -DCMAKE_BUILD_TYPE=RelWithDebInfo "-DCMAKE_CXX_FLAGS_RELWITHDEBINFO=-O1 -g1 -DNDEBUG"

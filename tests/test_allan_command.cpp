@@ -1,6 +1,6 @@
-// `imuemu allan` (daemon/allan_command.hpp) on files: what io::write_imu_csv
+// `imuemu allan` (daemon/cli/allan_command.hpp) on files: what io::write_imu_csv
 // writes and what `imuemu listen --out` writes (header copied from
-// daemon/listen_command.cpp), the coefficients it reports in datasheet units
+// daemon/cli/listen_command.cpp), the coefficients it reports in datasheet units
 // against the noise put in, and every refusal naming file:line.
 #include <gtest/gtest.h>
 
@@ -16,8 +16,8 @@
 
 #include <nlohmann/json.hpp>
 
-#include "daemon/allan_command.hpp"
-#include "daemon/commands.hpp"
+#include "daemon/cli/allan_command.hpp"
+#include "daemon/cli/commands.hpp"
 #include "io/sample_writers.hpp"
 
 namespace cli = imuemu::cli;

@@ -23,8 +23,8 @@
 #include "core/reference_motion.hpp"
 #include "core/sensor/datasheet.hpp"
 #include "core/sensor/sensor_model.hpp"
-#include "daemon/allan_command.hpp"
-#include "daemon/error_model_config.hpp"
+#include "daemon/cli/allan_command.hpp"
+#include "daemon/scene/error_model_config.hpp"
 
 namespace cli = imuemu::cli;
 namespace allan = imuemu::allan;

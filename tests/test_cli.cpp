@@ -226,11 +226,11 @@ TEST_F(Cli, StreamReplayEqualsGenerate) {
 }
 
 // ------------------------------------------- issue 13: generate streams to its writers
-// Batch generation writes each sample as it is made (daemon/batch_generation.hpp);
+// Batch generation writes each sample as it is made (daemon/cli/batch_generation.hpp);
 // the in-memory path it replaced (run_batch, then the sensor stage over the
 // vector, then the writers) is the reference here, byte for byte.
 #include "core/pipeline.hpp"
-#include "daemon/error_model_config.hpp"
+#include "daemon/scene/error_model_config.hpp"
 #include "io/atomic_file.hpp"
 #include "io/sample_writers.hpp"
 #include "io/scene_poses.hpp"
@@ -617,7 +617,7 @@ TEST_F(Cli, TrapFlatSceneOnEarthScaleCoordinatesWarnsWithNumbers) {
 }
 
 // Trap 4: the --delta help said "two median knot intervals"; the default
-// method (hermite) uses one (daemon/commands.cpp auto_delta), the others two.
+// method (hermite) uses one (daemon/cli/commands.cpp auto_delta), the others two.
 // The summary line shows what the code chose: 1 Hz knots at 400 Hz.
 TEST_F(Cli, TrapDeltaHelpSaysWhatTheCodeDoes) {
   const CliRun h = run("generate --help");

@@ -33,11 +33,11 @@
 #include <boost/asio/post.hpp>
 #include <nlohmann/json.hpp>
 
-#include "daemon/control_socket.hpp"
-#include "daemon/emission.hpp"
+#include "daemon/service/control_socket.hpp"
+#include "daemon/engine/emission.hpp"
 #include "log/log.hpp"
 #include "tests/support/io_thread.hpp"
-#include "daemon/status_command.hpp"
+#include "daemon/cli/status_command.hpp"
 
 namespace svc = imuemu::service;
 using imuemu::test::IoThread;

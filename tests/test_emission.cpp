@@ -1,4 +1,4 @@
-// The real-time emission engine (daemon/emission.hpp): counts, grid, order and
+// The real-time emission engine (daemon/engine/emission.hpp): counts, grid, order and
 // values against the batch pipeline, several devices on one thread, stopping
 // at a packet boundary, the watchdog heartbeat and a starved producer.
 // Timing on this shared machine is not asserted beyond "it was recorded":
@@ -29,7 +29,7 @@
 #include "core/signal_chain/increments.hpp"
 #include "core/pipeline.hpp"
 #include "core/reference_motion.hpp"
-#include "daemon/emission.hpp"
+#include "daemon/engine/emission.hpp"
 #include "drivers/byte_stream_reader.hpp"
 #include "drivers/protocols/can_protocols.hpp"
 #include "drivers/protocols/stream_protocols.hpp"

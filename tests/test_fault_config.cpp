@@ -18,8 +18,8 @@
 
 #include <nlohmann/json.hpp>
 
-#include "daemon/fault_config.hpp"
-#include "daemon/scene_config.hpp"
+#include "daemon/scene/fault_config.hpp"
+#include "daemon/scene/scene_config.hpp"
 
 using namespace imuemu;
 using namespace imuemu::scene;

@@ -1,4 +1,4 @@
-// Issue 18 at the engine level (daemon/emission.hpp, daemon/device_faults.hpp):
+// Issue 18 at the engine level (daemon/engine/emission.hpp, daemon/device/device_faults.hpp):
 // the CAN faults through the CanOutput test double and the drivers' DroneCAN
 // decoder (a vcan end-to-end run needs the HIL kernels, tests/hil/), the
 // run-time mailbox (inject / list / clear, refusals change nothing, a
@@ -23,9 +23,9 @@
 #include "tests/support/recording_transport.hpp"
 #include "core/fault/fault.hpp"
 #include "core/reference_motion.hpp"
-#include "daemon/emission.hpp"
-#include "daemon/fault_control.hpp"
-#include "daemon/fault_log.hpp"
+#include "daemon/engine/emission.hpp"
+#include "daemon/service/fault_control.hpp"
+#include "io/fault_log.hpp"
 #include "drivers/link_fault.hpp"
 #include "drivers/protocols/can_protocols.hpp"
 #include "drivers/protocols/stream_protocols.hpp"

@@ -15,7 +15,7 @@
 
 #include "core/fault/fault.hpp"
 #include "core/fault/timeline.hpp"
-#include "daemon/fault_log.hpp"
+#include "io/fault_log.hpp"
 
 // Counts this binary's allocations while g_counting is set (the timeline's step() must allocate nothing per sample).
 #include "tests/support/allocation_counter.hpp"

@@ -1,4 +1,4 @@
-// imuemud as a process (daemon/imuemud_main.cpp): --check-config on every
+// imuemud as a process (daemon/service/imuemud_main.cpp): --check-config on every
 // example scene, refusals with their exit codes and messages, a missing
 // device (fail fast naming it, or wait with back-off until SIGTERM), a clean
 // stop at the end of the trajectory and on SIGTERM with the final statistics.
@@ -32,7 +32,7 @@
 #include <string>
 #include <thread>
 
-#include "daemon/status_command.hpp"
+#include "daemon/cli/status_command.hpp"
 #include "io/pose_wire.hpp"
 #include "tests/support/sanitizer.hpp"
 #include "tests/support/spawn.hpp"

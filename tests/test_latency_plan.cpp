@@ -7,8 +7,8 @@
 #include <string>
 
 #include "core/stream.hpp"
-#include "daemon/scene_check.hpp"
-#include "daemon/scene_config.hpp"
+#include "daemon/scene/scene_check.hpp"
+#include "daemon/scene/scene_config.hpp"
 
 namespace imuemu::scene {
 namespace {

@@ -1,7 +1,7 @@
 // `imuemu listen` end to end on this host: a PtyTransport publishes a pty at a
 // temporary symlink, an encoder writes an analytic motion's IMU samples into
 // it at 400 Hz from a thread (core/reference_motion.hpp AircraftFlight, flat
-// scene), and the listening loop (daemon/listen_command.hpp) reads the
+// scene), and the listening loop (daemon/cli/listen_command.hpp) reads the
 // symlink like a driver under test would. Checks: sample count, no gaps, no
 // checksum errors, every value equal to what was sent within the protocol's
 // resolution, the rates; with corrupted bytes and flipped CRC bytes between
@@ -29,8 +29,8 @@
 #include <vector>
 
 #include "core/reference_motion.hpp"
-#include "daemon/arrival_jitter.hpp"
-#include "daemon/listen_command.hpp"
+#include "daemon/cli/arrival_jitter.hpp"
+#include "daemon/cli/listen_command.hpp"
 #include "drivers/protocols/stream_protocols.hpp"
 #include "drivers/pty_transport.hpp"
 #include "drivers/protocols/can_protocols.hpp"
@@ -687,7 +687,7 @@ TEST(ListenCan, DroneCanAndJ1939FromAVirtualCanBus) {
 }
 
 // ---------------------------------------------------------------- R3 (issue 13)
-// listen's arrival-jitter statistics in bounded memory (daemon/arrival_jitter.hpp):
+// listen's arrival-jitter statistics in bounded memory (daemon/cli/arrival_jitter.hpp):
 // before, 8 bytes per sample forever (~0.7 GB a day at 1 kHz).
 
 namespace {

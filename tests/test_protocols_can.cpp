@@ -21,7 +21,7 @@
 
 #include "core/attitude.hpp"
 #include "core/earth.hpp"
-#include "daemon/emission.hpp"
+#include "daemon/engine/emission.hpp"
 #include "drivers/protocols/can_protocols.hpp"
 #include "drivers/protocols/dronecan.hpp"
 #include "drivers/protocols/j1939.hpp"

@@ -22,7 +22,7 @@
 #include <vector>
 
 #include "tests/support/spawn.hpp"
-#include "daemon/scene_config.hpp"
+#include "daemon/scene/scene_config.hpp"
 #include "drivers/byte_stream_reader.hpp"
 #include "drivers/protocols/protocol_options.hpp"
 

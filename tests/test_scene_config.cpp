@@ -1,4 +1,4 @@
-// Scene files (daemon/scene_config.hpp, docs/scene-format.md): every example
+// Scene files (daemon/scene/scene_config.hpp, docs/scene-format.md): every example
 // in config/ parses and passes --check-config; bad scenes fail with the file,
 // the line and the dotted key of the offending value; the embedded default is
 // config/default.toml; and the mounting (core/mounting.hpp) turns the body's
@@ -17,10 +17,10 @@
 #include "core/mounting.hpp"
 #include "core/pipeline.hpp"
 #include "core/reference_motion.hpp"
-#include "daemon/default_scene.hpp"
-#include "daemon/scene_check.hpp"
-#include "daemon/scene_config.hpp"
-#include "daemon/scene_runner.hpp"
+#include "daemon/scene/default_scene.hpp"
+#include "daemon/scene/scene_check.hpp"
+#include "daemon/scene/scene_config.hpp"
+#include "daemon/scene/scene_runner.hpp"
 
 using namespace imuemu;
 using namespace imuemu::scene;
@@ -150,7 +150,7 @@ TEST(SceneExamples, ValuesAreReadAsWritten) {
 
 TEST(SceneExamples, EmbeddedDefaultIsConfigDefaultToml) {
   EXPECT_EQ(std::string(default_scene_toml()), read_text(kConfigDir / "default.toml"))
-      << "daemon/default_scene.cpp must hold config/default.toml verbatim";
+      << "daemon/scene/default_scene.cpp must hold config/default.toml verbatim";
   const SceneConfig scene = default_scene();
   EXPECT_EQ(scene.name, "default");
   EXPECT_EQ(scene.file, kDefaultSceneName);

@@ -24,11 +24,11 @@
 #include "core/sensor/sensor_model.hpp"
 #include "core/signal_chain/signal_chain.hpp"
 #include "core/so3.hpp"
-#include "daemon/emission.hpp"
-#include "daemon/error_model_config.hpp"
-#include "daemon/scene_check.hpp"
-#include "daemon/scene_config.hpp"
-#include "daemon/scene_runner.hpp"
+#include "daemon/engine/emission.hpp"
+#include "daemon/scene/error_model_config.hpp"
+#include "daemon/scene/scene_check.hpp"
+#include "daemon/scene/scene_config.hpp"
+#include "daemon/scene/scene_runner.hpp"
 #include "core/reference_motion.hpp"
 #include "drivers/protocols/can_protocols.hpp"
 #include "drivers/protocols/stream_protocols.hpp"
@@ -355,7 +355,7 @@ TEST_F(SensorIntegration, SaturatedFlagReachesTheMipOverrangeField) {
 // 50 deg/s; both within every protocol's own field range, e.g. J1939's
 // +-250 deg/s, so only the sensor's flag can mark the sample), measured by
 // the sensor model, the saturated flag handed to each encoder as the emission
-// engine does (daemon/emission.cpp: saturated_axes != 0 -> kStatusSaturated),
+// engine does (daemon/engine/emission.cpp: saturated_axes != 0 -> kStatusSaturated),
 // and read back from the bytes by hand, from each protocol's document:
 //  * native: status word bit 1 (docs/native-protocol.md), through its decoder;
 //  * MIP: the over-range field's accel/gyro bits, through its decoder;

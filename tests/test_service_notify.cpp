@@ -28,8 +28,8 @@
 #include "drivers/queued_writer.hpp"
 #include "io/pose_admission.hpp"
 #include "tests/support/io_thread.hpp"
-#include "daemon/service_notify.hpp"
-#include "daemon/service_signals.hpp"
+#include "daemon/service/service_notify.hpp"
+#include "daemon/service/service_signals.hpp"
 
 namespace svc = imuemu::service;
 using imuemu::test::IoThread;

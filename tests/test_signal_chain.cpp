@@ -129,7 +129,7 @@ struct StrapdownRun {
 
 // One hour at 200 Hz through DeviceChain::step (compensated increments) and,
 // for comparison, through the trapezoid of the output-rate samples that
-// daemon/emission.cpp used before issue 16. The INS: C_k = C_{k-1} exp(dtheta),
+// daemon/engine/emission.cpp used before issue 16. The INS: C_k = C_{k-1} exp(dtheta),
 // v_k = v_{k-1} + C_{k-1} dv + g h (flat scene: the frame is inertial).
 template <class Motion>
 std::pair<StrapdownRun, StrapdownRun> strapdown_hour(const Motion& motion) {

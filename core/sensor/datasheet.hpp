@@ -1,6 +1,6 @@
 // Sensor-model parameters as datasheets write them (unit in the key name),
 // converted to SI once, and presets made of those keys (docs/sensor-models.md).
-// Pure: no I/O; the TOML reading lives in daemon/error_model_config.cpp.
+// Pure: no I/O; the TOML reading lives in daemon/scene/error_model_config.cpp.
 #pragma once
 
 #include <string>

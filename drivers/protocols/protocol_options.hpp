@@ -1,7 +1,7 @@
 // The ONE table of protocol options: every option a protocol encoder takes,
 // with its name, type, allowed range, default and help. The scene parser
-// (daemon/scene_config.cpp, [imu.<table>] keys) and `imuemu emit`
-// (--<table>-<key> flags, daemon/emit_command.cpp) both read it, so a
+// (daemon/scene/scene_config.cpp, [imu.<table>] keys) and `imuemu emit`
+// (--<table>-<key> flags, daemon/cli/emit_command.cpp) both read it, so a
 // protocol option exists in both or in neither, with the same range.
 //
 // The table only describes and applies values; reading them is the caller's

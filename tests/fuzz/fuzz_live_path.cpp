@@ -2,7 +2,7 @@
 // the live path end to end, datagram sequences, not only single datagrams").
 // A sequence of datagrams goes through what imuemud does with a UDP scene
 // (io/pose_source_net.cpp UdpPoseSource::handle, then
-// daemon/emission.cpp take_live_input and produce), without sockets or
+// daemon/engine/emission.cpp take_live_input and produce), without sockets or
 // clocks: decode (docs/pose-wire-format.md §2) -> admission (ordering, scene
 // conversion, attitude and chart rules, the live-time acquisition and
 // resynchronisation rule) -> StreamPipeline::push (a refused knot counted,
@@ -63,7 +63,7 @@ bool finite(const Kinematics& k) {
          k.attitude.allFinite() && k.angular_rate_rad_s.allFinite();
 }
 
-// daemon/emission.cpp grid_ns: t0 + floor(k * 1e9 / rate) without overflow.
+// daemon/engine/emission.cpp grid_ns: t0 + floor(k * 1e9 / rate) without overflow.
 TimeNs grid_ns(TimeNs t0_ns, std::uint64_t k) {
   const auto r = static_cast<std::uint64_t>(kRateHz);
   const auto offset = static_cast<TimeNs>((k / r) * static_cast<std::uint64_t>(kNsPerSecond) +
@@ -120,7 +120,7 @@ struct LivePath {
       engine.push(p);
       ++pushed;
     } catch (const std::exception&) {
-      ++refused;  // counted, never fatal (daemon/emission.cpp)
+      ++refused;  // counted, never fatal (daemon/engine/emission.cpp)
       if (engine.knots_pushed() != knots_before || engine.last_knot_ns() != last_before ||
           engine.ready() != ready_before)
         __builtin_trap();  // a refused knot must change nothing

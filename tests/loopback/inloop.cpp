@@ -56,7 +56,7 @@
 #include <vector>
 
 #include "core/so3.hpp"
-#include "daemon/status_command.hpp"
+#include "daemon/cli/status_command.hpp"
 #include "drivers/protocol.hpp"
 #include "drivers/protocols/stream_protocols.hpp"
 #include "io/mavlink_pose.hpp"

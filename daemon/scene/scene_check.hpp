@@ -1,0 +1,104 @@
+// `imuemud --check-config FILE`: what a valid scene will cost before it runs.
+// Per device: the engine's look-ahead (how far behind the poses it emits),
+// the link budget (drivers/link_budget.hpp: UART line time, CAN bus time with
+// worst-case stuffing) and a CPU estimate; then the totals.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+#include <string>
+#include <vector>
+
+#include "daemon/scene/scene_config.hpp"
+#include "drivers/link_budget.hpp"
+
+namespace imuemu::scene {
+
+// Measured cost of one output sample of one device (smoothing, IMU equations,
+// encoding) on the development machine: bench/bench_stream.cpp, ~1 us per
+// sample at the default window. An estimate, not a guarantee: a wider window
+// or finite-difference derivatives cost more.
+inline constexpr double kCpuSecondsPerSample = 1e-6;
+// The signal chain's share (bench/bench_signal_chain.cpp, docs/signal-chain.md
+// "Cost"): per internal sample of a non-ideal chain (the icm42688p chain at
+// 8x: 2546 ns per output sample, / 8), and per random-vibration component per
+// internal sample (2883 components at 8x: 142 us per output sample). Without
+// them a vibrating 8 kHz chain was estimated at the ideal chain's 1 us.
+inline constexpr double kCpuSecondsPerInternalSample = 0.32e-6;
+inline constexpr double kCpuSecondsPerVibrationComponentSample = 6.2e-9;
+
+struct ImuCheck {
+  std::string name;
+  std::string protocol;
+  std::string transport;                 // "pty /run/imuemu/ttyIMU0", "serial /dev/ttyUSB0 921600 8N1, flow none", ...
+  std::int64_t rate_hz = 0;
+  int delta_samples = 0;                 // Delta of Eq. 3.68 at this rate
+  TimeNs lookahead_ns = 0;               // StreamPipeline::lookahead_ns for the scene's knot interval
+  TimeNs emission_delay_ns = 0;          // lookahead + live.margin_s, or live.latency_budget_ms: samples go out this long after their pose
+  bool causal = false;                   // the causal Hermite method (live.latency_budget_ms below the smoothing look-ahead)
+  TimeNs smoothing_lookahead_ns = 0;     // what the smoothing method would need
+  TimeNs producer_lead_ns = 0;           // live: the producer computes a tick this long before it is due
+  TimeNs arrival_slack_ns = 0;           // causal: a pose arriving this late after its mapped time is still used exactly
+  // Causal: relative acceleration error bound of the Hermite cubic for a
+  // motion at 1 Hz, (2 pi f h)^2 / 12 with the poses' rates (cubic Hermite
+  // bound |p'' - H''| <= h^2/12 |p''''|), and 2 (2 pi f h)^2 with slopes
+  // estimated from the poses (tests/test_causal_hermite.cpp).
+  double accel_error_1hz_with_rates = 0.0, accel_error_1hz_estimated = 0.0;
+  std::optional<double> bytes_per_second;     // byte-stream protocols: max_bytes_per_sample x rate
+  std::optional<double> can_frames_per_second;
+  std::optional<drivers::LinkBudget> link;    // serial and can transports (pty and null have no line rate)
+  double cpu_fraction = 0.0;             // of one core: rate x (kCpuSecondsPerSample + the chain's share)
+  int oversampling = 1;                  // the signal chain's internal rate / rate_hz
+  std::size_t vibration_components = 0;  // random vibration components (linear and angular)
+  std::vector<std::string> error_model;  // each term with its discrete sigma at rate_hz (daemon/scene/error_model_config.hpp)
+  std::vector<std::string> faults;       // [[imu.fault]] and [imu.random_faults], one line each (daemon/scene/fault_config.hpp)
+};
+
+struct SceneCheck {
+  std::string file;
+  std::string scene;
+  std::string physics;       // flat | ecef
+  std::string source;
+  double knot_interval_s = 0.0;
+  std::vector<ImuCheck> imus;
+  double total_cpu_fraction = 0.0;
+  TimeNs max_emission_delay_ns = 0;
+  // Link budgets per shared link: devices on one CAN interface share its bus.
+  struct SharedLink {
+    std::string link;        // "can vcan0"
+    std::vector<std::string> devices;
+    drivers::LinkBudget budget;
+  };
+  std::vector<SharedLink> shared_links;
+  bool refused = false;      // a link over 100 %: the scene cannot keep its schedule
+  std::vector<std::string> warnings;
+};
+
+struct RunnerOptions;  // daemon/scene/scene_runner.hpp
+
+// What a start would refuse that the parser cannot see, checked without
+// opening a device, by the functions the start path itself runs:
+//  - the trajectory (file or built-in sample): loaded by scene_trajectory()
+//    (a malformed file: io::CsvFormatError naming file:line), its knot count
+//    and output size against core/limits.hpp, and every device's knots
+//    through StreamPipeline::check_trajectory (the engine's own knot rules:
+//    antipodal steps, gaps, end padding, the chart span);
+//  - the published paths (check_start_paths).
+// Throws std::invalid_argument (or CsvFormatError) naming the scene file, the
+// device and what is wrong.
+void check_startable(const SceneConfig& scene, const RunnerOptions& options);
+
+// The paths a start creates: every pty link as published (pty_link_path, so
+// --pty-link-dir included) must name a file (not "/", not a directory), fit
+// PATH_MAX/NAME_MAX, and be distinct from the others and from the control
+// socket after normalisation ("./x", "//x", "a/../x"); the control socket's
+// directory must exist or be creatable. imuemud runs this before it starts.
+void check_start_paths(const SceneConfig& scene, const RunnerOptions& options, const std::string& control_socket);
+
+// Computes the figures; throws std::invalid_argument only for a scene that
+// parse_scene_* would not have produced.
+SceneCheck check_scene(const SceneConfig& scene);
+std::string to_text(const SceneCheck& check);
+std::string to_json(const SceneCheck& check);  // one JSON object, 2-space indented
+
+}  // namespace imuemu::scene
