@@ -10,7 +10,7 @@
 
 #include "daemon/cli/cli_options.hpp"
 #include "daemon/cli/commands.hpp"
-#include "daemon/service/control_socket.hpp"
+#include "daemon/service/imuemud.hpp"
 #include "daemon/cli/status_command.hpp"
 
 namespace imuemu::cli {

@@ -24,7 +24,7 @@
 
 #include "daemon/cli/cli_options.hpp"
 #include "daemon/cli/commands.hpp"
-#include "daemon/service/control_socket.hpp"
+#include "daemon/service/imuemud.hpp"
 
 namespace imuemu::cli {
 

@@ -34,16 +34,12 @@
 #include <boost/asio/local/stream_protocol.hpp>
 #include <nlohmann/json.hpp>
 
+#include "daemon/service/imuemud.hpp"
+
 namespace imuemu::service {
 
-// A fault specification with its parameters fits in well under 1 KiB; 4 KiB
-// leaves room without letting a client make the daemon buffer much.
-inline constexpr std::size_t kMaxCommandBytes = 4096;
-
-// Where imuemud of scene `scene_name` listens unless told otherwise (same
-// rule as the scene file's [daemon] control_socket default):
-// /run/imuemu/<scene_name>.sock (RuntimeDirectory=imuemu of imuemud@.service).
-std::string default_control_socket_path(const std::string& scene_name);
+// kMaxCommandBytes and default_control_socket_path(): daemon/service/imuemud.hpp
+// (the room's public header, what the command-line tool uses).
 
 // Setting up the socket failed; the message names the path or the group.
 class ControlSocketError : public std::runtime_error {
