@@ -41,7 +41,7 @@ struct StatusArgs {
   bool summary = false;  // a few explained lines for a person instead of JSON
 };
 
-// The status reply of imuemud (daemon/service/imuemud_main.cpp status_json) as a few
+// The status reply of imuemud (daemon/service/status_report.hpp status_json) as a few
 // lines, each counter named with what it means. Missing fields print as 0.
 void print_status_summary(const nlohmann::json& status, std::ostream& out);
 

@@ -1,0 +1,106 @@
+#include "daemon/service/status_report.hpp"
+
+#include <sstream>
+
+#include "daemon/service/service_notify.hpp"
+#include "log/log.hpp"
+
+namespace imuemu::service {
+
+namespace {
+
+constexpr auto kSummaryLogPeriod = std::chrono::seconds(60);
+constexpr auto kRefusalLogPeriod = std::chrono::seconds(10);
+
+std::string us_text(TimeNs ns) { return std::to_string(ns / 1000) + " us"; }
+
+}  // namespace
+
+std::string summary_line(const std::string& scene_name, const emission::EngineStats& s, bool alive) {
+  std::ostringstream out;
+  out << "scene " << scene_name << ":";
+  bool first = true;
+  for (const auto& d : s.devices) {
+    out << (first ? " " : "; ") << d.name << " " << d.emitted << " samples";
+    if (d.extrapolated > 0 || d.blending > 0) out << " (" << d.extrapolated << " extrapolated, " << d.blending << " blending)";
+    if (d.producer_late > 0) out << ", " << d.producer_late << " underruns";
+    if (d.deadline_misses > 0) out << ", " << d.deadline_misses << " late";
+    if (d.write_errors > 0) out << ", " << d.write_errors << " not written";
+    if (d.transport.dropped_link_down > 0) out << " (" << d.transport.dropped_link_down << " while no reader/link down)";
+    if (d.faults.active > 0) out << ", " << d.faults.active << " fault" << (d.faults.active == 1 ? "" : "s") << " acting";
+    if (d.faults.silenced > 0) out << ", " << d.faults.silenced << " silenced by faults";
+    first = false;
+  }
+  out << "; lateness p99 " << us_text(s.lateness.p99_ns) << ", max " << us_text(s.lateness.max_ns);
+  if (s.pose_source) {
+    out << "; input " << s.pose_source->accepted << " poses";
+    if (s.pose_source->lost > 0) out << ", " << s.pose_source->lost << " lost";
+    if (s.pose_source->rejected > 0) out << ", " << s.pose_source->rejected << " rejected";
+    if (s.pose_source->accepted == 0) out << " (waiting for the first pose)";
+  }
+  if (s.poses_refused > 0) out << "; " << s.poses_refused << " poses refused by the method";
+  if (!alive) out << "; EMITTER STALLED";
+  return out.str();
+}
+
+nlohmann::json status_json(const DaemonStatus& d) {
+  nlohmann::json status{
+      {"scene", d.scene_name},
+      {"scene_file", d.scene_file},
+      {"pid", d.pid},
+      {"uptime_s", static_cast<double>(d.uptime_ns) / 1e9},
+      {"imus", d.imus},
+      {"waiting_for_device", d.waiting_for_device},
+      {"fault_log", d.fault_log_path.empty() ? nlohmann::json(nullptr) : nlohmann::json(d.fault_log_path)},
+  };
+  if (d.building) {
+    status["building"] = {{"what", d.building->start ? "start" : "reload"},
+                          {"elapsed_s", static_cast<double>(d.building->elapsed_ns) / 1e9}};
+  } else {
+    status["building"] = nullptr;
+  }
+  if (d.engine) {
+    status["samples_emitted"] = d.engine->emitted;
+    status["emitter_progressing"] = d.emitter_progressing;
+    status["engine"] = emission::to_json(*d.engine);
+  } else {
+    status["samples_emitted"] = 0;
+    status["emitter_progressing"] = false;
+    status["engine"] = nullptr;
+  }
+  if (d.watchdog) {
+    status["watchdog"] = {{"interval_s", static_cast<double>(d.watchdog->interval.count()) / 1e6},
+                          {"pets_sent", d.watchdog->pets_sent},
+                          {"pets_withheld", d.watchdog->pets_withheld}};
+  } else {
+    status["watchdog"] = nullptr;
+  }
+  return status;
+}
+
+void StatusReport::log_new_refusals(const emission::EngineStats& s, Clock::time_point now) {
+  if (s.poses_refused < refusals_logged_) refusals_logged_ = 0;  // a new engine (restart, reload)
+  if (s.poses_refused <= refusals_logged_) return;
+  if (refusals_logged_ > 0 && now - last_refusal_log_ < kRefusalLogPeriod) return;
+  log_warning(std::to_string(s.poses_refused - refusals_logged_) + " poses refused by the method (" +
+              std::to_string(s.poses_refused) + " in all); the newest: " +
+              (s.last_pose_refusal.empty() ? std::string("no reason recorded") : s.last_pose_refusal));
+  refusals_logged_ = s.poses_refused;
+  last_refusal_log_ = now;
+}
+
+void StatusReport::publish(const std::string& scene_name, const emission::EngineStats& s, bool alive,
+                           Clock::time_point now, std::chrono::nanoseconds status_period) {
+  if (now - last_status_ < status_period) return;
+  last_status_ = now;
+  const std::string line = summary_line(scene_name, s, alive);
+  notify_status(line);
+  if (now - last_summary_ >= kSummaryLogPeriod) {
+    last_summary_ = now;
+    log_info(line);
+  } else {
+    log_debug(line);
+  }
+}
+
+}  // namespace imuemu::service
