@@ -1,7 +1,10 @@
 // daemon/service_notify, log/log, daemon/service_signals: the sd_notify
 // messages as a service manager receives them (a fake NOTIFY_SOCKET bound
 // here, the protocol of sd_notify(3)), the watchdog petted only while the
-// emitter beats, journald priority prefixes (sd-daemon(3)), rate limiting.
+// emitter beats, journald priority prefixes (sd-daemon(3)), rate limiting;
+// daemon/service/status_report: the STATUS= line (docs/daemon.md
+// "Lifecycle"), how often it is sent and logged, the refusal warnings and the
+// "status" reply, at given instants (no host timing).
 #include <gtest/gtest.h>
 
 #include <poll.h>
@@ -30,6 +33,7 @@
 #include "tests/support/io_thread.hpp"
 #include "daemon/service/service_notify.hpp"
 #include "daemon/service/service_signals.hpp"
+#include "daemon/service/status_report.hpp"
 
 namespace svc = imuemu::service;
 using imuemu::test::IoThread;
@@ -302,4 +306,147 @@ TEST(ServiceSignals, TermStopsOnceHupReloads) {
   EXPECT_EQ(stops.load(), 1);
   EXPECT_EQ(stop_signal.load(), SIGTERM);
   EXPECT_NE(log.find("<6>SIGTERM: stopping"), std::string::npos) << log;
+}
+
+namespace {
+
+// Two devices as docs/daemon.md's STATUS= line names them: imu0 with nothing
+// to report beyond its samples, imu1 with every counter the line can carry.
+imuemu::emission::EngineStats busy_engine() {
+  imuemu::emission::EngineStats s;
+  s.devices.resize(2);
+  s.devices[0].name = "imu0";
+  s.devices[0].emitted = 1000;
+  auto& d = s.devices[1];
+  d.name = "imu1";
+  d.emitted = 400;
+  d.extrapolated = 3;
+  d.blending = 2;
+  d.producer_late = 4;
+  d.deadline_misses = 5;
+  d.write_errors = 6;
+  d.transport.dropped_link_down = 9;
+  d.faults.active = 2;
+  d.faults.silenced = 7;
+  s.lateness.p99_ns = 12'999;    // microseconds, truncated
+  s.lateness.max_ns = 345'000;
+  s.pose_source.emplace();
+  s.pose_source->accepted = 50;
+  s.pose_source->lost = 2;
+  s.pose_source->rejected = 1;
+  s.poses_refused = 8;
+  s.emitted = 1400;
+  return s;
+}
+
+}  // namespace
+
+TEST(StatusReport, SummaryLineNamesEveryNonZeroCounter) {
+  EXPECT_EQ(svc::summary_line("bench", busy_engine(), false),
+            "scene bench: imu0 1000 samples; imu1 400 samples (3 extrapolated, 2 blending), 4 underruns, 5 late, "
+            "6 not written (9 while no reader/link down), 2 faults acting, 7 silenced by faults; "
+            "lateness p99 12 us, max 345 us; input 50 poses, 2 lost, 1 rejected; 8 poses refused by the method; "
+            "EMITTER STALLED");
+  imuemu::emission::EngineStats quiet;
+  quiet.devices.resize(1);
+  quiet.devices[0].name = "imu0";
+  quiet.devices[0].emitted = 7;
+  quiet.devices[0].faults.active = 1;
+  quiet.pose_source.emplace();  // live input, nothing arrived yet
+  EXPECT_EQ(svc::summary_line("car", quiet, true),
+            "scene car: imu0 7 samples, 1 fault acting; lateness p99 0 us, max 0 us; input 0 poses "
+            "(waiting for the first pose)");
+}
+
+TEST(StatusReport, StatusLineOncePerIntervalLoggedAtInfoOnceAMinute) {
+  using Clock = svc::StatusReport::Clock;
+  const Clock::time_point t0 = Clock::time_point{} + std::chrono::hours(1);
+  imuemu::emission::EngineStats s;
+  s.devices.resize(1);
+  s.devices[0].name = "imu0";
+  FakeNotifySocket manager;
+  const svc::LogLevel saved = svc::log_threshold();
+  svc::set_log_threshold(svc::LogLevel::debug);
+  StderrCapture capture;
+  svc::StatusReport report;
+  report.start(t0);
+  const auto publish = [&](std::uint64_t emitted, Clock::duration at) {
+    s.devices[0].emitted = emitted;
+    report.publish("bench", s, true, t0 + at, 1s);
+  };
+  publish(1, 0s);        // the first tick: sent, logged at debug (the minute has not passed)
+  publish(2, 500ms);     // within the interval: nothing
+  publish(3, 1s);        // sent, debug
+  publish(4, 60s);       // sent, info: a minute since the start
+  publish(5, 61s);       // sent, debug: a minute since the last info line
+  publish(6, 120s);      // sent, info
+  const std::string log = capture.finish();
+  svc::set_log_threshold(saved);
+  const std::string line = "scene bench: imu0 N samples; lateness p99 0 us, max 0 us";
+  const auto with = [&](const char* n) { return std::string(line).replace(line.find('N'), 1, n); };
+  EXPECT_EQ(manager.collect(200ms), (std::vector<std::string>{"STATUS=" + with("1"), "STATUS=" + with("3"),
+                                                              "STATUS=" + with("4"), "STATUS=" + with("5"),
+                                                              "STATUS=" + with("6")}));
+  EXPECT_EQ(log, "<7>" + with("1") + "\n<7>" + with("3") + "\n<6>" + with("4") + "\n<7>" + with("5") + "\n<6>" +
+                     with("6") + "\n");
+}
+
+TEST(StatusReport, RefusalsWarnedAtMostEveryTenSecondsAndAgainForANewEngine) {
+  using Clock = svc::StatusReport::Clock;
+  const Clock::time_point t0 = Clock::time_point{} + std::chrono::hours(1);
+  imuemu::emission::EngineStats s;
+  const svc::LogLevel saved = svc::log_threshold();
+  svc::set_log_threshold(svc::LogLevel::info);
+  StderrCapture capture;
+  svc::StatusReport report;
+  report.start(t0);
+  report.log_new_refusals(s, t0);  // none: nothing
+  s.poses_refused = 3;
+  s.last_pose_refusal = "time went back";
+  report.log_new_refusals(s, t0 + 1s);  // the first ones: at once
+  s.poses_refused = 5;
+  report.log_new_refusals(s, t0 + 10s);  // 9 s later: counted, quiet
+  report.log_new_refusals(s, t0 + 11s);  // 10 s later: the 2 new ones
+  report.log_new_refusals(s, t0 + 30s);  // nothing new: quiet
+  s.poses_refused = 1;                   // a new engine (reload, loop restart): at once
+  s.last_pose_refusal.clear();
+  report.log_new_refusals(s, t0 + 31s);
+  const std::string log = capture.finish();
+  svc::set_log_threshold(saved);
+  EXPECT_EQ(log,
+            "<4>3 poses refused by the method (3 in all); the newest: time went back\n"
+            "<4>2 poses refused by the method (5 in all); the newest: time went back\n"
+            "<4>1 poses refused by the method (1 in all); the newest: no reason recorded\n");
+}
+
+TEST(StatusReport, StatusReplyNullsWhatIsAbsent) {
+  svc::DaemonStatus idle;
+  idle.scene_name = "bench";
+  idle.scene_file = "/etc/imuemu/bench.toml";
+  idle.imus = 2;
+  idle.pid = 42;
+  idle.uptime_ns = 2'500'000'000;
+  idle.waiting_for_device = true;
+  idle.building = svc::DaemonStatus::Build{false, 250'000'000};
+  idle.watchdog = svc::DaemonStatus::Watchdog{std::chrono::microseconds(3'000'000), 7, 1};
+  EXPECT_EQ(svc::status_json(idle), nlohmann::json::parse(R"({
+      "scene": "bench", "scene_file": "/etc/imuemu/bench.toml", "pid": 42, "uptime_s": 2.5, "imus": 2,
+      "waiting_for_device": true, "fault_log": null,
+      "building": {"what": "reload", "elapsed_s": 0.25},
+      "samples_emitted": 0, "emitter_progressing": false, "engine": null,
+      "watchdog": {"interval_s": 3.0, "pets_sent": 7, "pets_withheld": 1}})"));
+
+  svc::DaemonStatus running;
+  running.scene_name = "bench";
+  running.fault_log_path = "/var/log/imuemu/faults.jsonl";
+  running.engine = busy_engine();
+  running.emitter_progressing = true;
+  const nlohmann::json status = svc::status_json(running);
+  EXPECT_EQ(status["fault_log"], "/var/log/imuemu/faults.jsonl");
+  EXPECT_EQ(status["building"], nullptr);
+  EXPECT_EQ(status["watchdog"], nullptr);
+  EXPECT_EQ(status["samples_emitted"], 1400u);  // the engine's total
+  EXPECT_EQ(status["emitter_progressing"], true);
+  EXPECT_EQ(status["engine"]["poses_refused"], 8u);
+  EXPECT_EQ(status["engine"]["devices"][1]["name"], "imu1");
 }
