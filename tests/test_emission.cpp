@@ -5,6 +5,7 @@
 // the assertions are on counts, order and values.
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
 #include <chrono>
 #include <cmath>
@@ -25,12 +26,15 @@
 
 #include "tests/support/spawn.hpp"
 #include "core/attitude.hpp"
+#include "core/fault/fault.hpp"
 #include "core/mounting.hpp"
 #include "core/signal_chain/increments.hpp"
 #include "core/pipeline.hpp"
 #include "core/reference_motion.hpp"
+#include "daemon/device/device.hpp"
 #include "daemon/engine/emission.hpp"
 #include "drivers/byte_stream_reader.hpp"
+#include "drivers/link_fault.hpp"
 #include "drivers/protocols/can_protocols.hpp"
 #include "drivers/protocols/stream_protocols.hpp"
 #include "drivers/queued_writer.hpp"
@@ -107,15 +111,15 @@ PipelineOptions flat_pipeline(std::int64_t rate_hz) {
 
 // A device on a recording transport (not owned by the test: the engine owns it).
 DeviceOptions native_device(const std::string& name, std::int64_t rate_hz, RecordingTransport** transport,
-                            int tag = 0, SharedLog* log = nullptr) {
+                            int tag = 0, SharedLog* log = nullptr,
+                            std::unique_ptr<drivers::GpioSyncOutput> gpio = nullptr) {
   DeviceOptions d;
   d.name = name;
   d.rate_hz = rate_hz;
   d.pipeline = flat_pipeline(rate_hz);
-  d.stream_encoder = drivers::make_stream_encoder("native");
   auto t = std::make_unique<RecordingTransport>(tag, log);
   *transport = t.get();
-  d.transport = std::move(t);
+  d.device = device::make_stream_device(drivers::make_stream_encoder("native"), std::move(t), std::move(gpio));
   return d;
 }
 
@@ -389,8 +393,8 @@ TEST(Emission, TwoDevicesEachWithItsExactCount) {
   null_dev.name = "fast";
   null_dev.rate_hz = 1000;
   null_dev.pipeline = flat_pipeline(1000);
-  null_dev.stream_encoder = drivers::make_stream_encoder("mavlink2");
-  null_dev.transport = std::make_unique<drivers::NullTransport>();
+  null_dev.device = device::make_stream_device(drivers::make_stream_encoder("mavlink2"),
+                                               std::make_unique<drivers::NullTransport>());
   devices.push_back(std::move(null_dev));
   EngineOptions eo;
   eo.trajectory = knots;
@@ -414,22 +418,22 @@ TEST(Emission, TwoDevicesEachWithItsExactCount) {
 TEST(Emission, StopsAtAPacketBoundaryFlushesAndReleasesGpio) {
   const std::vector<Pose> knots = circle_knots(30.0);
   RecordingTransport* rec = nullptr;
-  std::vector<DeviceOptions> devices;
-  devices.push_back(native_device("imu0", 400, &rec));
   std::mutex gpio_mutex;
   std::vector<bool> levels;
   drivers::GpioSyncOptions go;
   go.every_n_samples = 4;
   go.pulse_width_ns = 200'000;
   go.sample_period_ns = kNsPerSecond / 400;
-  devices[0].gpio = std::make_unique<drivers::GpioSyncOutput>(
-      go,
-      [&](bool active) {
-        std::lock_guard lock(gpio_mutex);
-        levels.push_back(active);
-        return true;
-      },
-      drivers::GpioSyncOutput::LineWriter{});
+  std::vector<DeviceOptions> devices;
+  devices.push_back(native_device("imu0", 400, &rec, 0, nullptr,
+                                  std::make_unique<drivers::GpioSyncOutput>(
+                                      go,
+                                      [&](bool active) {
+                                        std::lock_guard lock(gpio_mutex);
+                                        levels.push_back(active);
+                                        return true;
+                                      },
+                                      drivers::GpioSyncOutput::LineWriter{})));
   EngineOptions eo;
   eo.trajectory = knots;
   eo.drop_late_ticks = false;  // a late wake-up on this shared machine still sends: counts stay exact
@@ -467,8 +471,7 @@ TEST(Emission, StalledEmissionThreadStopsTheHeartbeat) {
   DeviceOptions d;
   d.rate_hz = 200;
   d.pipeline = flat_pipeline(200);
-  d.stream_encoder = drivers::make_stream_encoder("native");
-  d.transport = std::make_unique<drivers::NullTransport>();
+  d.device = device::make_stream_device(drivers::make_stream_encoder("native"), std::make_unique<drivers::NullTransport>());
   devices.push_back(std::move(d));
   EngineOptions eo;
   eo.trajectory = knots;
@@ -670,7 +673,7 @@ TEST(Emission, LiveProducerSleepsOnThePoseQueueUntilAPoseArrivesOrItsNextTick) {
   ::close(fds[0]);
 }
 
-class RecordingCanOutput final : public CanOutput {
+class RecordingCanOutput final : public device::CanOutput {
  public:
   bool send(const drivers::CanFrame& frame) override {
     std::lock_guard lock(mutex_);
@@ -703,10 +706,9 @@ TEST(Emission, CanDeviceSendsEveryTickAsDroneCanFrames) {
   d.name = "can0";
   d.rate_hz = 100;
   d.pipeline = flat_pipeline(100);
-  d.can_encoder = drivers::make_can_encoder("dronecan");
   auto out = std::make_unique<RecordingCanOutput>();
   RecordingCanOutput* rec = out.get();
-  d.can_output = std::move(out);
+  d.device = device::make_can_device(drivers::make_can_encoder("dronecan"), std::move(out));
   devices.push_back(std::move(d));
   EngineOptions eo;
   eo.trajectory = knots;
@@ -740,8 +742,7 @@ TEST(Emission, RejectsBadConfigurationNamingTheDevice) {
   DeviceOptions d;
   d.name = "left";
   d.rate_hz = 0;
-  d.stream_encoder = drivers::make_stream_encoder("native");
-  d.transport = std::make_unique<drivers::NullTransport>();
+  d.device = device::make_stream_device(drivers::make_stream_encoder("native"), std::make_unique<drivers::NullTransport>());
   devices.push_back(std::move(d));
   EngineOptions eo;
   eo.trajectory = circle_knots(3.0);
@@ -843,6 +844,155 @@ TEST_F(EmitCommand, SecondsLimitsTheTicksToRateTimesSeconds) {
 TEST_F(EmitCommand, RefusesAMismatchedProtocolAndDevice) {
   EXPECT_EQ(exit_status(spawn({"emit", "--sample", "static", "--protocol", "dronecan", "--device", "pty:" + dir_ + "/x"})), 2);
   EXPECT_EQ(exit_status(spawn({"emit", "--trajectory", dir_ + "/missing.csv", "--device", "pty:" + dir_ + "/x"})), 3);
+}
+
+// The device seam (daemon/device/device.hpp): what emit() puts on the wire
+// is what drivers::encode_with_link_faults gives for the sample and its link
+// actions (an independent encoder instance run beside it), one frame per
+// sample; silence writes nothing and raises no pulse; refusals are counted;
+// the counters run from the baseline and survive take_transport().
+drivers::ImuFrameInput seam_sample(std::uint64_t k) {
+  drivers::ImuFrameInput f;
+  f.sample_counter = k;
+  f.t_ns = static_cast<TimeNs>(k) * 5'000'000;
+  f.period_ns = 5'000'000;
+  f.gyro_rad_s = Vec3(0.01 * static_cast<double>(k), -0.02, 0.03);
+  f.accel_m_s2 = Vec3(0.1, 0.2, -9.8);
+  f.delta_theta_rad = f.gyro_rad_s * 0.005;
+  f.delta_velocity_m_s = f.accel_m_s2 * 0.005;
+  return f;
+}
+
+class RefusingTransport final : public drivers::Transport {
+ public:
+  bool write_frame(std::span<const std::byte>) override { return false; }
+  std::string describe() const override { return "refusing"; }
+  drivers::TransportCounters counters() const override {
+    drivers::TransportCounters c;
+    c.frames = 7;
+    c.dropped_link_down = 7;
+    return c;
+  }
+};
+
+TEST(DeviceSeam, StreamDeviceWritesWhatTheEncoderWithItsLinkFaultsWrites) {
+  std::mutex gpio_mutex;
+  std::vector<bool> levels;
+  drivers::GpioSyncOptions go;
+  go.pulse_width_ns = 1'000;
+  auto gpio = std::make_unique<drivers::GpioSyncOutput>(
+      go,
+      [&](bool active) {
+        std::lock_guard lock(gpio_mutex);
+        levels.push_back(active);
+        return true;
+      },
+      drivers::GpioSyncOutput::LineWriter{});
+  auto t = std::make_unique<RecordingTransport>();
+  RecordingTransport* rec = t.get();
+  const std::unique_ptr<device::Device> dev =
+      device::make_stream_device(drivers::make_stream_encoder("mavlink2"), std::move(t), std::move(gpio));
+  EXPECT_EQ(dev->describe(), "mavlink2 -> recording");
+  EXPECT_EQ(dev->needs().increments, signal_chain::IncrementConvention::raw);
+  EXPECT_FALSE(dev->needs().level_attitude);
+  auto reference = drivers::make_stream_encoder("mavlink2");
+  EXPECT_EQ(dev->max_bytes_per_sample(), reference->max_bytes_per_sample());
+
+  std::vector<drivers::LinkActions> actions(4);
+  actions[1].silence = true;  // the encoder runs (MAVLink's seq moves on), nothing is written
+  actions[2].copies = 2;      // the sample's packets twice
+  std::vector<std::vector<std::uint8_t>> expected;
+  for (std::uint64_t k = 0; k < actions.size(); ++k) {
+    std::vector<std::uint8_t> bytes;
+    drivers::encode_with_link_faults(actions[k], *reference, seam_sample(k), bytes);
+    if (!bytes.empty()) expected.push_back(bytes);
+    const TimeNs before = monotonic_now_ns();
+    const device::EmitOutcome out = dev->emit(seam_sample(k), actions[k], seam_sample(k).t_ns);
+    EXPECT_EQ(out.refused, 0u) << k;
+    if (k == 1) EXPECT_EQ(out.accepted_ns, 0) << "silenced: nothing handed over";
+    else EXPECT_GE(out.accepted_ns, before) << k;
+  }
+  EXPECT_EQ(expected.size(), 3u);
+  EXPECT_EQ(rec->frames(), expected);
+  ASSERT_TRUE(dev->gpio_counters().has_value());
+  const drivers::GpioSyncCounters g = *dev->gpio_counters();
+  EXPECT_EQ(g.pulses + g.skipped_pulses, 3u) << "no pulse for the silenced sample";
+  dev->stop(100ms, false);
+  EXPECT_EQ(rec->flushes(), 1);
+  ASSERT_TRUE(dev->gpio_counters().has_value()) << "the counters stay after the lines are released";
+  EXPECT_EQ(dev->gpio_counters()->pulses, g.pulses);
+  std::lock_guard lock(gpio_mutex);
+  ASSERT_FALSE(levels.empty());
+  EXPECT_FALSE(levels.back());  // released inactive
+}
+
+TEST(DeviceSeam, StreamDeviceCountsRefusalsFromItsBaselineAndHandsItsTransportOver) {
+  drivers::TransportCounters baseline;
+  baseline.frames = 3;
+  baseline.dropped_link_down = 3;
+  const std::unique_ptr<device::Device> dev = device::make_stream_device(
+      drivers::make_stream_encoder("native"), std::make_unique<RefusingTransport>(), nullptr, baseline);
+  const device::EmitOutcome out = dev->emit(seam_sample(0), {}, 0);
+  EXPECT_EQ(out.refused, 1u);
+  EXPECT_EQ(out.accepted_ns, 0);
+  EXPECT_EQ(dev->counters().frames, 4u);
+  EXPECT_EQ(dev->counters().dropped_link_down, 4u);
+  EXPECT_FALSE(dev->gpio_counters().has_value());
+  dev->stop(100ms, true);
+  std::unique_ptr<drivers::Transport> taken = dev->take_transport();
+  ASSERT_NE(taken, nullptr);
+  EXPECT_EQ(taken->describe(), "refusing");
+  EXPECT_EQ(dev->describe(), "native -> refusing") << "reported as it was when taken";
+  EXPECT_EQ(dev->counters().frames, 4u);
+  EXPECT_EQ(dev->take_transport(), nullptr);
+  EXPECT_THROW(device::make_stream_device(drivers::make_stream_encoder("native"), nullptr), std::invalid_argument);
+  // The compensated increments and the largest frame are the encoder's.
+  const auto mip = device::make_stream_device(drivers::make_stream_encoder("mip"), std::make_unique<drivers::NullTransport>());
+  EXPECT_EQ(mip->needs().increments, signal_chain::IncrementConvention::compensated);
+  EXPECT_EQ(mip->max_bytes_per_sample(), drivers::make_stream_encoder("mip")->max_bytes_per_sample());
+}
+
+TEST(DeviceSeam, CanDeviceSendsEveryFrameOfTheSample) {
+  auto out = std::make_unique<RecordingCanOutput>();
+  RecordingCanOutput* rec = out.get();
+  const std::unique_ptr<device::Device> dev = device::make_can_device(drivers::make_can_encoder("dronecan"), std::move(out));
+  auto reference = drivers::make_can_encoder("dronecan");
+  std::vector<drivers::CanFrame> expected;
+  drivers::LinkActions missing;
+  missing.can_missing_frame = true;
+  for (std::uint64_t k = 0; k < 3; ++k) {
+    const drivers::LinkActions a = k == 1 ? missing : drivers::LinkActions{};
+    drivers::encode_with_link_faults(a, *reference, seam_sample(k), expected);
+    const device::EmitOutcome o = dev->emit(seam_sample(k), a, seam_sample(k).t_ns);
+    EXPECT_EQ(o.refused, 0u);
+    EXPECT_GT(o.accepted_ns, 0) << "CAN hands over too (the pose latency counts it)";
+  }
+  const std::vector<drivers::CanFrame> sent = rec->frames();
+  ASSERT_EQ(sent.size(), expected.size());
+  for (std::size_t i = 0; i < sent.size(); ++i) {
+    EXPECT_EQ(sent[i].id, expected[i].id) << i;
+    ASSERT_EQ(sent[i].len, expected[i].len) << i;
+    EXPECT_TRUE(std::equal(sent[i].data.begin(), sent[i].data.begin() + sent[i].len, expected[i].data.begin())) << i;
+  }
+  EXPECT_EQ(dev->describe(), "dronecan -> recording can");
+  EXPECT_EQ(dev->max_bytes_per_sample(), 0u) << "bit errors never reach a CAN receiver";
+  try {
+    dev->check_supports("can0", fault::Kind::bit_errors);
+    ADD_FAILURE() << "bit_errors accepted on CAN";
+  } catch (const std::invalid_argument& e) {
+    EXPECT_NE(std::string(e.what()).find("fault type bit_errors on imu 'can0' (dronecan)"), std::string::npos) << e.what();
+  }
+  EXPECT_NO_THROW(dev->check_supports("can0", fault::Kind::can_wrong_id));
+  drivers::CanEncoderOptions slope;
+  slope.j1939.send_slope = true;
+  EXPECT_TRUE(device::make_can_device(drivers::make_can_encoder("j1939", slope), std::make_unique<RecordingCanOutput>())
+                  ->needs()
+                  .level_attitude);
+  EXPECT_FALSE(device::make_can_device(drivers::make_can_encoder("j1939"), std::make_unique<RecordingCanOutput>())
+                   ->needs()
+                   .level_attitude);
+  dev->stop(100ms, true);
+  EXPECT_EQ(dev->take_transport(), nullptr) << "a CAN interface is not handed to the next engine";
 }
 
 }  // namespace

@@ -23,6 +23,7 @@
 #include "tests/support/recording_transport.hpp"
 #include "core/fault/fault.hpp"
 #include "core/reference_motion.hpp"
+#include "daemon/device/device.hpp"
 #include "daemon/engine/emission.hpp"
 #include "daemon/service/fault_control.hpp"
 #include "io/fault_log.hpp"
@@ -38,7 +39,7 @@ namespace {
 
 using namespace std::chrono_literals;
 
-class RecordingCanOutput final : public CanOutput {
+class RecordingCanOutput final : public device::CanOutput {
  public:
   bool send(const drivers::CanFrame& frame) override {
     std::lock_guard lock(mutex_);
@@ -104,10 +105,9 @@ CanRun run_can(std::vector<fault::FaultSpec> faults) {
   d.name = "can0";
   d.rate_hz = 100;
   d.pipeline = flat_pipeline(100);
-  d.can_encoder = drivers::make_can_encoder("dronecan");
   auto out = std::make_unique<RecordingCanOutput>();
   RecordingCanOutput* rec = out.get();
-  d.can_output = std::move(out);
+  d.device = device::make_can_device(drivers::make_can_encoder("dronecan"), std::move(out));
   d.faults.scheduled = std::move(faults);
   std::vector<DeviceOptions> devices;
   devices.push_back(std::move(d));
@@ -237,8 +237,7 @@ TEST(FaultEngine, AFaultTheProtocolCannotShowIsRefusedAtBuild) {
   d.name = "can0";
   d.rate_hz = 100;
   d.pipeline = flat_pipeline(100);
-  d.can_encoder = drivers::make_can_encoder("dronecan");
-  d.can_output = std::make_unique<RecordingCanOutput>();
+  d.device = device::make_can_device(drivers::make_can_encoder("dronecan"), std::make_unique<RecordingCanOutput>());
   d.faults.scheduled.push_back(window(fault::Kind::bit_errors, 10, 10, 100));
   d.faults.scheduled.back().bit_error_rate = 0.01;
   std::vector<DeviceOptions> devices;
@@ -267,10 +266,9 @@ struct NativeEngine {
     d.name = "imu0";
     d.rate_hz = 200;
     d.pipeline = flat_pipeline(200);
-    d.stream_encoder = drivers::make_stream_encoder("native");
     auto t = std::make_unique<RecordingTransport>();
     transport = t.get();
-    d.transport = std::move(t);
+    d.device = device::make_stream_device(drivers::make_stream_encoder("native"), std::move(t));
     d.faults = std::move(plan);
     std::vector<DeviceOptions> devices;
     devices.push_back(std::move(d));
@@ -414,10 +412,10 @@ TEST(FaultEngine, TheEmissionThreadAllocatesNothingWithEveryLinkFault) {
     d.name = "imu0";
     d.rate_hz = 200;
     d.pipeline = flat_pipeline(200);
-    d.stream_encoder = drivers::make_stream_encoder(protocol);
-    d.transport = std::make_unique<drivers::NullTransport>();
+    auto encoder = drivers::make_stream_encoder(protocol);
+    const bool sequence = drivers::link_fault_support(*encoder).sequence;  // MIP has no counter
+    d.device = device::make_stream_device(std::move(encoder), std::make_unique<drivers::NullTransport>());
     std::uint64_t at = 120;
-    const bool sequence = drivers::link_fault_support(*d.stream_encoder).sequence;  // MIP has no counter
     std::uint64_t kinds = 0;
     for (const Kind kind : {Kind::duplicate, Kind::babble, Kind::bad_checksum, Kind::bit_errors, Kind::truncate,
                             Kind::bad_length, Kind::sequence_jump, Kind::sequence_reset, Kind::time_jump,

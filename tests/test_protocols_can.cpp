@@ -21,6 +21,7 @@
 
 #include "core/attitude.hpp"
 #include "core/earth.hpp"
+#include "daemon/device/device.hpp"
 #include "daemon/engine/emission.hpp"
 #include "drivers/protocols/can_protocols.hpp"
 #include "drivers/protocols/dronecan.hpp"
@@ -1182,7 +1183,7 @@ TEST(DroneCanEncoder, KnownSampleTimesAreNeverSentAsUnknownZero) {
 // latency). A body held at heading 30, pitch 10, roll 5 deg (Eq. 1.2), in the
 // flat scene and in the ecef scene near Barcelona.
 namespace {
-class CapturingCanOutput final : public imuemu::emission::CanOutput {
+class CapturingCanOutput final : public imuemu::device::CanOutput {
  public:
   bool send(const CanFrame& frame) override {
     std::lock_guard lock(mutex_);
@@ -1236,10 +1237,9 @@ TEST(J1939Emission, SlopeSensor2CarriesTheSensorAttitudeFromTheEngine) {
     d.pipeline.scene.physics = physics;
     d.pipeline.rate_hz = 50;
     d.pipeline.kernel.delta = 50;
-    d.can_encoder = std::make_unique<jj::J1939Encoder>(options);
     auto out = std::make_unique<CapturingCanOutput>();
     CapturingCanOutput* capture = out.get();
-    d.can_output = std::move(out);
+    d.device = imuemu::device::make_can_device(std::make_unique<jj::J1939Encoder>(options), std::move(out));
     std::vector<em::DeviceOptions> devices;
     devices.push_back(std::move(d));
     em::EngineOptions eo;

@@ -24,6 +24,7 @@
 #include "core/sensor/sensor_model.hpp"
 #include "core/signal_chain/signal_chain.hpp"
 #include "core/so3.hpp"
+#include "daemon/device/device.hpp"
 #include "daemon/engine/emission.hpp"
 #include "daemon/scene/error_model_config.hpp"
 #include "daemon/scene/scene_check.hpp"
@@ -108,11 +109,10 @@ EngineRun run_scene_device(const scene::SceneConfig& sc, std::uint64_t ticks, co
   dev.mounting = imu.mounting;
   dev.sensor_model = imu.error_model.sensor();
   dev.chain = imu.error_model.chain;
-  dev.stream_encoder = drivers::make_stream_encoder(protocol);
   if (adjust) adjust(dev);
   auto rec = std::make_unique<Recording>();
   Recording* recording = rec.get();
-  dev.transport = std::move(rec);
+  dev.device = device::make_stream_device(drivers::make_stream_encoder(protocol), std::move(rec));
   emission::EngineOptions eo;
   eo.trajectory = scene::scene_trajectory(sc);
   eo.drop_late_ticks = false;

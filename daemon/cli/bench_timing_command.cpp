@@ -29,6 +29,7 @@
 #include "core/reference_motion.hpp"
 #include "daemon/cli/cli_options.hpp"
 #include "daemon/cli/commands.hpp"
+#include "daemon/device/device.hpp"
 #include "daemon/engine/emission.hpp"
 #include "drivers/protocols/stream_protocols.hpp"
 
@@ -111,8 +112,8 @@ int bench_timing(const BenchTimingArgs& a) {
     d.pipeline.kernel.delta = static_cast<int>(a.rate_hz);  // one knot interval
     drivers::StreamEncoderOptions so;
     so.nominal_sample_rate_hz = static_cast<double>(a.rate_hz);
-    d.stream_encoder = drivers::make_stream_encoder(a.protocol, so);
-    d.transport = std::make_unique<drivers::NullTransport>();
+    d.device = device::make_stream_device(drivers::make_stream_encoder(a.protocol, so),
+                                          std::make_unique<drivers::NullTransport>());
     devices.push_back(std::move(d));
   }
   emission::EngineStats s;

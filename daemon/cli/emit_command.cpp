@@ -33,6 +33,7 @@
 #include "core/time_arith.hpp"
 #include "daemon/cli/cli_options.hpp"
 #include "daemon/cli/commands.hpp"
+#include "daemon/device/device.hpp"
 #include "daemon/engine/emission.hpp"
 #include "drivers/protocols/can_protocols.hpp"
 #include "drivers/protocols/protocol_options.hpp"
@@ -215,17 +216,19 @@ int emit(const EmitArgs& a) {
     return kUsageError;
   }
 
-  // Encoder and device.
+  // Encoder and device (daemon/device/device.hpp: the encoder, its output, the sync line).
+  std::unique_ptr<drivers::CanEncoder> can_encoder;
+  std::unique_ptr<drivers::StreamEncoder> stream_encoder;
   try {
     const drivers::ProtocolOptions protocol_options = protocol_options_of(a);
     if (can) {
       if (a.device.rfind("can:", 0) != 0)
         throw std::invalid_argument("--device " + a.device + ": protocol " + a.protocol + " needs can:IFACE");
-      dev.can_encoder = drivers::make_can_encoder(a.protocol, protocol_options.can);
+      can_encoder = drivers::make_can_encoder(a.protocol, protocol_options.can);
     } else {
       if (!member(drivers::stream_protocol_names(), a.protocol))
         throw std::invalid_argument("--protocol " + a.protocol + ": expected native, mavlink2, mip, dronecan or j1939");
-      dev.stream_encoder = drivers::make_stream_encoder(a.protocol, protocol_options.stream);
+      stream_encoder = drivers::make_stream_encoder(a.protocol, protocol_options.stream);
       if (a.device.rfind("can:", 0) == 0)
         throw std::invalid_argument("--device " + a.device + ": protocol " + a.protocol + " is a byte stream (pty: or serial:)");
     }
@@ -235,24 +238,27 @@ int emit(const EmitArgs& a) {
   }
   try {
     auto log = [](std::string_view line) { std::cerr << "imuemu emit: " << line << "\n"; };
+    std::unique_ptr<drivers::Transport> transport;
+    std::unique_ptr<device::CanOutput> can_output;
     if (a.device.rfind("pty:", 0) == 0) {
       drivers::PtyTransportOptions po;
       po.link_path = a.device.substr(4);
       po.log = log;
-      dev.transport = std::make_unique<drivers::PtyTransport>(po);
+      transport = std::make_unique<drivers::PtyTransport>(po);
     } else if (a.device.rfind("serial:", 0) == 0) {
       drivers::SerialTransportOptions so = serial_options_of(a.device);
       so.log = log;
-      dev.transport = std::make_unique<drivers::SerialTransport>(so);
+      transport = std::make_unique<drivers::SerialTransport>(so);
     } else if (a.device.rfind("can:", 0) == 0) {
       drivers::CanTransportOptions co;
       co.interface = a.device.substr(4);
       co.fd_frames = a.can_fd;
       co.log = log;
-      dev.can_output = emission::can_transport_output(std::make_unique<drivers::CanTransport>(co));
+      can_output = device::can_transport_output(std::make_unique<drivers::CanTransport>(co));
     } else {
       throw std::invalid_argument("--device '" + a.device + "': expected pty:LINKPATH, serial:PATH[,baud=N] or can:IFACE");
     }
+    std::unique_ptr<drivers::GpioSyncOutput> gpio;
     if (!a.gpio.empty()) {
       drivers::GpioSyncOptions go;
       std::tie(go.chip, go.line) = gpio_of(a.gpio);
@@ -262,8 +268,10 @@ int emit(const EmitArgs& a) {
       go.sample_period_ns = kNsPerSecond / a.rate_hz;
       go.trailing_edge_priority = a.priority;
       go.log = log;
-      dev.gpio = std::make_unique<drivers::GpioSyncOutput>(go);
+      gpio = std::make_unique<drivers::GpioSyncOutput>(go);
     }
+    dev.device = can ? device::make_can_device(std::move(can_encoder), std::move(can_output), std::move(gpio))
+                     : device::make_stream_device(std::move(stream_encoder), std::move(transport), std::move(gpio));
   } catch (const std::invalid_argument& e) {
     std::cerr << "imuemu emit: " << e.what() << "\n";
     return kUsageError;

@@ -10,29 +10,6 @@
 
 namespace imuemu::emission {
 
-void check_protocol_supports(const std::string& device, const drivers::StreamEncoder* stream,
-                             const drivers::CanEncoder* can, fault::Kind kind) {
-  using fault::Kind;
-  const drivers::LinkFaultSupport s =
-      stream != nullptr ? drivers::link_fault_support(*stream) : drivers::link_fault_support(*can);
-  const char* missing = nullptr;
-  switch (kind) {
-    case Kind::sequence_jump:
-    case Kind::sequence_reset: if (!s.sequence) missing = "no sequence counter"; break;
-    case Kind::bad_checksum: if (!s.checksum) missing = "no checksum field"; break;
-    case Kind::bad_length: if (!s.length) missing = "no length field"; break;
-    case Kind::bit_errors: if (!s.bit_errors) missing = "no bit errors on this link (CAN's CRC and retransmission hide them)"; break;
-    case Kind::can_wrong_id: if (!s.can_id) missing = "no CAN identifier"; break;
-    case Kind::can_missing_frame: if (!s.missing_frame) missing = "no multi-frame transfers"; break;
-    default: break;
-  }
-  if (missing != nullptr) {
-    const std::string protocol = stream != nullptr ? stream->name() : can->name();
-    throw std::invalid_argument("fault type " + std::string(fault::kind_name(kind)) + " on imu '" + device + "' (" +
-                                protocol + "): the protocol has " + missing + ", the fault would show nothing");
-  }
-}
-
 const char* state_name(FaultInfo::State state) {
   return state == FaultInfo::State::active ? "active" : "scheduled";
 }

@@ -31,14 +31,6 @@ struct DeviceFaultPlan {
   fault::RandomFaults random;
 };
 
-// A link fault the device's protocol has no field for would do nothing on
-// the wire while the fault log claims it acted (drivers/link_fault.hpp
-// link_fault_support): throws std::invalid_argument naming the device and
-// the protocol. Exactly one of stream / can is set. The engine checks every
-// scheduled, random and injected fault; check-config the scene's.
-void check_protocol_supports(const std::string& device, const drivers::StreamEncoder* stream,
-                             const drivers::CanEncoder* can, fault::Kind kind);
-
 // What `fault-list` shows of one fault: scheduled (not acted yet) or active.
 struct FaultInfo {
   std::uint64_t id = 0;

@@ -7,8 +7,9 @@
 //       LiveEmitter, a bounded lead ahead of each deadline --> ImuFrameInput
 //     --lock-free SPSC ring per device-->
 //   emission thread (optionally SCHED_FIFO): sleeps to absolute deadlines,
-//     pops, encodes, queues on the transport (never blocks), pulses GPIO,
-//     records lateness.
+//     pops, hands the sample to its device (daemon/device/device.hpp:
+//     encodes, queues on the output, pulses GPIO; never blocks), records
+//     lateness.
 //
 // Timeline: the output grid of a device at rate r is the stream's
 //   t_k = t0 + floor(k * 1e9 / r) ns  (core/pipeline.hpp output_grid),
@@ -22,8 +23,9 @@
 // sample through the device's fault timeline after the signal chain (sensor
 // faults change the values, time faults the frame's t_ns) and leaves the
 // sample's drivers::LinkActions in its ring slot; the emission thread hands
-// them to drivers::encode_with_link_faults (no action: encode() + periodic()
-// byte for byte). Run-time inject/list/clear reach the producer through a
+// them with the sample to the device, which applies them in
+// drivers::encode_with_link_faults (no action: encode() + periodic() byte
+// for byte). Run-time inject/list/clear reach the producer through a
 // mailbox; the ground-truth events go the other way through a bounded queue
 // (take_fault_events). The emission thread takes no lock and allocates
 // nothing for any of it.
@@ -48,38 +50,21 @@
 #include "core/sensor/sensor_model.hpp"
 #include "core/signal_chain/signal_chain.hpp"
 #include "core/time_mapping.hpp"
+#include "daemon/device/device.hpp"
 #include "daemon/device/device_faults.hpp"
 #include "daemon/engine/lateness_histogram.hpp"
 #include "drivers/gpio_sync.hpp"
-#include "drivers/protocol.hpp"
 #include "drivers/transport.hpp"
 
 namespace imuemu::io {
 class PoseSource;
 struct PoseSourceCounters;
 }  // namespace imuemu::io
-namespace imuemu::drivers {
-class CanTransport;
-}
 
 namespace imuemu::emission {
 
-// Where a CAN device's frames go: drivers::CanTransport (can_transport_output)
-// or a test double. send() is called from the emission thread and must not block.
-class CanOutput {
- public:
-  virtual ~CanOutput() = default;
-  virtual bool send(const drivers::CanFrame& frame) = 0;
-  virtual std::string describe() const = 0;
-  virtual drivers::TransportCounters counters() const = 0;
-  virtual bool flush(std::chrono::milliseconds timeout) { (void)timeout; return true; }
-  // Bounded drain, then discard counted (drivers::Transport::stop).
-  virtual void stop(std::chrono::milliseconds drain_timeout) { flush(drain_timeout); }
-};
-std::unique_ptr<CanOutput> can_transport_output(std::unique_ptr<drivers::CanTransport> transport);
-
-// One emulated IMU. Exactly one of (stream_encoder + transport) or
-// (can_encoder + can_output).
+// One emulated IMU: its samples (rate, streaming engine, mounting, sensor,
+// signal chain, faults) and the device they go out of.
 struct DeviceOptions {
   std::string name = "imu0";
   std::int64_t rate_hz = 400;  // output rate, integer Hz (sets pipeline.rate_hz)
@@ -88,14 +73,10 @@ struct DeviceOptions {
   PipelineOptions pipeline;
   live::UnderrunPolicy underrun = live::UnderrunPolicy::extrapolate;
   TimeNs blend_ns = 200'000'000;
-  std::unique_ptr<drivers::StreamEncoder> stream_encoder;
-  std::unique_ptr<drivers::Transport> transport;
-  // A transport reused from a previous engine (imuemud reload): its counters
-  // when this engine got it; the engine's statistics count from there.
-  drivers::TransportCounters transport_baseline;
-  std::unique_ptr<drivers::CanEncoder> can_encoder;
-  std::unique_ptr<CanOutput> can_output;
-  std::unique_ptr<drivers::GpioSyncOutput> gpio;  // optional: pulse(k, t_k) after each sent sample
+  // What the navigation computer sees on the port (daemon/device/device.hpp):
+  // device::make_stream_device (encoder, transport, optional GPIO sync) or
+  // device::make_can_device (encoder, CAN output, optional GPIO sync).
+  std::unique_ptr<device::Device> device;
   // Where this IMU sits on the body (core/mounting.hpp): the device smooths
   // and differentiates the sensor's own poses, sensor_pose(pose, mounting).
   Mounting mounting;
@@ -150,9 +131,6 @@ struct EngineOptions {
   // after a stall the backlog would go out as a burst no real IMU produces.
   // The receiver sees a gap in sample_counter instead. false: send it late.
   bool drop_late_ticks = true;
-  // Encoder output buffers reserved up front, so the emission thread never allocates.
-  std::size_t reserve_bytes = 4096;
-  std::size_t reserve_can_frames = 64;
   // Ground-truth fault events waiting for take_fault_events() (all devices);
   // beyond this they are dropped and counted (faults.dropped_events).
   std::size_t fault_event_capacity = 4096;
@@ -242,7 +220,8 @@ nlohmann::json to_json(const EngineStats& stats);
 class EmissionEngine {
  public:
   // Validates (throws std::invalid_argument naming the device and option):
-  // devices present with one output each, rate 1..1'000'000, input given.
+  // devices present with a device each, rate 1..1'000'000, input given, the
+  // scene's faults ones the device's protocol can show.
   EmissionEngine(EngineOptions options, std::vector<DeviceOptions> devices);
   ~EmissionEngine();  // stops if running
   EmissionEngine(const EmissionEngine&) = delete;
@@ -258,8 +237,9 @@ class EmissionEngine {
   // Waits until every device has reached its end or a stop was requested;
   // true if finished. timeout < 0: no limit.
   bool wait(std::chrono::milliseconds timeout = std::chrono::milliseconds(-1));
-  // request_stop + join + stop the transports (each a bounded drain of up to
-  // flush_timeout, then what is left counted as dropped_at_stop) + release GPIO.
+  // request_stop + join + stop the devices (each output a bounded drain of up
+  // to flush_timeout, then what is left counted as dropped_at_stop; GPIO
+  // released).
   void stop(std::chrono::milliseconds flush_timeout = std::chrono::milliseconds(500));
   // As stop(), but the byte-stream transports are only flushed (bounded by
   // flush_timeout), not stopped: take_transports() then hands them to the

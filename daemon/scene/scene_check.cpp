@@ -1,6 +1,6 @@
 #include "daemon/scene/scene_check.hpp"
 
-#include "daemon/device/device_faults.hpp"
+#include "daemon/device/device.hpp"
 #include "daemon/scene/error_model_config.hpp"
 #include "daemon/scene/fault_config.hpp"
 
@@ -191,13 +191,14 @@ SceneCheck check_scene(const SceneConfig& scene) {
     const auto rate = static_cast<double>(imu.rate_hz);
     c.faults = fault_lines(imu.faults, imu.random_faults);
     // A scene fault the protocol cannot show is what a start would refuse.
-    auto check_faults = [&](const drivers::StreamEncoder* stream, const drivers::CanEncoder* can) {
+    // (daemon/device/device.hpp check_supports, from the encoder alone: no port opened.)
+    auto check_faults = [&](const auto& encoder) {
       std::vector<fault::Kind> kinds;
       for (const fault::FaultSpec& f : imu.faults) kinds.push_back(f.kind);
       kinds.insert(kinds.end(), imu.random_faults.kinds.begin(), imu.random_faults.kinds.end());
       for (const fault::Kind kind : kinds) {
         try {
-          emission::check_protocol_supports(imu.name, stream, can, kind);
+          device::check_supports(imu.name, encoder, kind);
         } catch (const std::invalid_argument& e) {
           check.refused = true;
           check.warnings.push_back(std::string("fault refused: ") + e.what());
@@ -206,7 +207,7 @@ SceneCheck check_scene(const SceneConfig& scene) {
     };
     if (is_can_protocol(imu.protocol)) {
       const auto encoder = drivers::make_can_encoder(imu.protocol, imu.can_options);
-      check_faults(nullptr, encoder.get());
+      check_faults(*encoder);
       can_traffic[i] = drivers::measure_can_traffic(*encoder, rate,
                                                     imu.transport.type == TransportType::can && imu.transport.can.bitrate_switch);
       double frames = 0.0;
@@ -218,7 +219,7 @@ SceneCheck check_scene(const SceneConfig& scene) {
       }
     } else {
       const auto encoder = drivers::make_stream_encoder(imu.protocol, imu.stream_options);
-      check_faults(encoder.get(), nullptr);
+      check_faults(*encoder);
       c.bytes_per_second = static_cast<double>(encoder->max_bytes_per_sample()) * rate;
       if (imu.transport.type == TransportType::serial)
         c.link = drivers::uart_budget(*encoder, rate, imu.transport.serial.settings);

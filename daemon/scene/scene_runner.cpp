@@ -10,6 +10,7 @@
 
 #include "core/limits.hpp"
 #include "core/time_arith.hpp"
+#include "daemon/device/device.hpp"
 #include "drivers/gpio_sync.hpp"
 #include "drivers/pty_transport.hpp"
 #include "drivers/serial_transport.hpp"
@@ -159,12 +160,19 @@ BuiltEngine build_engine(const SceneConfig& scene, const RunnerOptions& options,
     max_emission_delay_ns = std::max(max_emission_delay_ns, plan.emission_delay_ns);
     producer_lead_ns = std::min(producer_lead_ns, plan.producer_lead_ns);
     try {
+      // The device's parts (daemon/device/device.hpp): its encoder, its
+      // output, its sync line.
+      std::unique_ptr<drivers::StreamEncoder> stream_encoder;
+      std::unique_ptr<drivers::CanEncoder> can_encoder;
+      std::unique_ptr<drivers::Transport> transport;
+      drivers::TransportCounters transport_baseline;
+      std::unique_ptr<device::CanOutput> can_output;
       if (is_can_protocol(imu.protocol)) {
-        dev.can_encoder = drivers::make_can_encoder(imu.protocol, imu.can_options);
+        can_encoder = drivers::make_can_encoder(imu.protocol, imu.can_options);
       } else {
         drivers::StreamEncoderOptions so = imu.stream_options;
         so.nominal_sample_rate_hz = static_cast<double>(imu.rate_hz);
-        dev.stream_encoder = drivers::make_stream_encoder(imu.protocol, so);
+        stream_encoder = drivers::make_stream_encoder(imu.protocol, so);
       }
       const TransportConfig& t = imu.transport;
       switch (t.type) {
@@ -174,9 +182,9 @@ BuiltEngine build_engine(const SceneConfig& scene, const RunnerOptions& options,
             // its reader sees no hang-up; the engine counts from here.
             const auto kept = reuse->find(reuse_key(imu, options));
             if (kept != reuse->end() && kept->second) {
-              dev.transport = std::move(kept->second);
+              transport = std::move(kept->second);
               reuse->erase(kept);
-              dev.transport_baseline = dev.transport->counters();
+              transport_baseline = transport->counters();
               break;
             }
           }
@@ -187,7 +195,7 @@ BuiltEngine build_engine(const SceneConfig& scene, const RunnerOptions& options,
           po.log = options.log;
           std::error_code ec;
           std::filesystem::create_directories(std::filesystem::path(po.link_path).parent_path(), ec);
-          dev.transport = std::make_unique<drivers::PtyTransport>(po);
+          transport = std::make_unique<drivers::PtyTransport>(po);
           break;
         }
         case TransportType::serial: {
@@ -196,7 +204,7 @@ BuiltEngine build_engine(const SceneConfig& scene, const RunnerOptions& options,
           so.settings = t.serial.settings;
           so.queue_bytes = t.serial.queue_bytes;
           so.log = options.log;
-          dev.transport = std::make_unique<drivers::SerialTransport>(so);
+          transport = std::make_unique<drivers::SerialTransport>(so);
           break;
         }
         case TransportType::can: {
@@ -205,14 +213,22 @@ BuiltEngine build_engine(const SceneConfig& scene, const RunnerOptions& options,
           co.fd_frames = t.can.fd;
           co.fd_bitrate_switch = t.can.bitrate_switch;
           co.log = options.log;
-          dev.can_output = emission::can_transport_output(std::make_unique<drivers::CanTransport>(co));
+          can_output = device::can_transport_output(std::make_unique<drivers::CanTransport>(co));
           break;
         }
         case TransportType::null:
-          dev.transport = std::make_unique<drivers::NullTransport>();
+          transport = std::make_unique<drivers::NullTransport>();
           break;
       }
-      if (imu.sync) dev.gpio = std::make_unique<drivers::GpioSyncOutput>(gpio_options(*imu.sync, imu, options));
+      std::unique_ptr<drivers::GpioSyncOutput> gpio;
+      if (imu.sync) gpio = std::make_unique<drivers::GpioSyncOutput>(gpio_options(*imu.sync, imu, options));
+      // A CAN protocol on transport null has no CAN output: no device, which
+      // the engine refuses (as before the device seam).
+      if (can_encoder && can_output)
+        dev.device = device::make_can_device(std::move(can_encoder), std::move(can_output), std::move(gpio));
+      else if (stream_encoder && transport)
+        dev.device = device::make_stream_device(std::move(stream_encoder), std::move(transport), std::move(gpio),
+                                                transport_baseline);
     } catch (const std::exception& e) {
       throw DeviceOpenError(imu.name, e.what());
     }

@@ -420,7 +420,7 @@ def check(args):
 
 
 def emit_device(stats):
-    """The one device of `imuemu emit --stats-json` (daemon/engine/emission.cpp to_json)."""
+    """The one device of `imuemu emit --stats-json` (daemon/engine/engine_stats.cpp to_json)."""
     devices = stats.get("devices")
     return devices[0] if isinstance(devices, list) and len(devices) == 1 and isinstance(devices[0], dict) else {}
 
