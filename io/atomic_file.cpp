@@ -3,7 +3,9 @@
 #include <dirent.h>
 #include <fcntl.h>
 #include <signal.h>
+#include <linux/magic.h>
 #include <sys/stat.h>
+#include <sys/vfs.h>
 #include <unistd.h>
 
 #include <cerrno>
@@ -65,6 +67,73 @@ void fsync_directory(const std::string& path) {
 
 // This thread's open OutputTransaction (AtomicFileWriter::commit defers to it).
 thread_local OutputTransaction* t_transaction = nullptr;
+
+// Where an output goes (see "Paths that are not plain files" in the header).
+struct Destination {
+  bool stream = false;  // open `path` and write it directly
+  int open_flags = 0;   // for a stream
+  std::string path;     // the file to replace atomically, or the path to open
+};
+
+std::string read_link(const std::string& path) {
+  std::string target(256, '\0');
+  for (;;) {
+    const ssize_t n = ::readlink(path.c_str(), target.data(), target.size());
+    if (n < 0) throw_errno(errno, "cannot read the symbolic link '" + path + "'");
+    if (static_cast<std::size_t>(n) < target.size()) {
+      target.resize(static_cast<std::size_t>(n));
+      return target;
+    }
+    target.resize(target.size() * 2);
+  }
+}
+
+// A link in /proc/<pid>/fd (what /dev/stdout and /dev/fd/N lead to) names an
+// open file description, not a path: its text ("pipe:[1234]") cannot be
+// followed, but open() through it reaches the descriptor's object.
+bool in_procfs(const std::string& directory) {
+  struct statfs fs {};
+  return ::statfs(directory.c_str(), &fs) == 0 && fs.f_type == PROC_SUPER_MAGIC;
+}
+
+// A file that is neither replaced nor streamed: why not.
+[[noreturn]] void refuse(const std::string& output, const std::string& path, mode_t mode) {
+  const std::string through = path == output ? "" : " (through its links: '" + path + "')";
+  if (S_ISDIR(mode)) throw_errno(EISDIR, "output '" + output + "'" + through + " is a directory, not a file");
+  if (S_ISBLK(mode))
+    throw_errno(ENOTSUP, "output '" + output + "'" + through + " is a block device: imuemu writes files, not disks");
+  if (S_ISSOCK(mode))
+    throw_errno(ENXIO, "output '" + output + "'" + through +
+                           " is a socket, which cannot be opened as a file (a service's journal stream?): give a "
+                           "file, a FIFO or a pipe");
+  throw_errno(ENOTSUP, "output '" + output + "'" + through + " is not a regular file, FIFO or character device");
+}
+
+Destination destination_of(const std::string& output) {
+  constexpr int kMaxLinks = 40;  // as the kernel's path walk (ELOOP)
+  std::string path = output;
+  for (int links = 0;; ++links) {
+    struct stat info {};
+    if (::lstat(path.c_str(), &info) != 0) {
+      // A new file (a missing directory is reported by mkstemp, naming it).
+      if (errno == ENOENT) return {false, 0, path};
+      throw_errno(errno, "cannot examine output '" + output + "'" + (path == output ? "" : " at '" + path + "'"));
+    }
+    if (S_ISREG(info.st_mode)) return {false, 0, path};
+    if (S_ISFIFO(info.st_mode) || S_ISCHR(info.st_mode)) return {true, O_WRONLY, path};
+    if (!S_ISLNK(info.st_mode)) refuse(output, path, info.st_mode);
+    if (links == kMaxLinks) throw_errno(ELOOP, "output '" + output + "': more than 40 symbolic links");
+    if (in_procfs(directory_of(path))) {
+      struct stat object {};
+      if (::stat(path.c_str(), &object) != 0) throw_errno(errno, "cannot examine output '" + output + "'");
+      if (S_ISREG(object.st_mode)) return {true, O_WRONLY | O_APPEND, path};
+      if (S_ISFIFO(object.st_mode) || S_ISCHR(object.st_mode)) return {true, O_WRONLY, path};
+      refuse(output, path, object.st_mode);
+    }
+    const std::string target = read_link(path);
+    path = !target.empty() && target.front() == '/' ? target : directory_of(path) + "/" + target;
+  }
+}
 
 }  // namespace
 
@@ -171,13 +240,25 @@ void OutputTransaction::commit() {
 AtomicFileWriter::AtomicFileWriter(std::string target_path, std::size_t buffer_bytes)
     : target_path_(std::move(target_path)), buffer_bytes_(buffer_bytes == 0 ? 1 : buffer_bytes) {
   if (target_path_.empty()) throw std::invalid_argument("AtomicFileWriter: empty output path");
-  std::vector<char> name(target_path_.begin(), target_path_.end());
-  remove_stale_temp_files(target_path_);
+  const Destination destination = destination_of(target_path_);
+  file_path_ = destination.path;
+  if (destination.stream) {
+    do {
+      fd_ = ::open(file_path_.c_str(), destination.open_flags | O_CLOEXEC);  // a FIFO waits here for its reader
+    } while (fd_ < 0 && errno == EINTR);
+    if (fd_ < 0) throw_errno(errno, "cannot open output '" + target_path_ + "' for writing");
+    streaming_ = true;
+    buffer_.reserve(buffer_bytes_);
+    return;
+  }
+  std::vector<char> name(file_path_.begin(), file_path_.end());
+  remove_stale_temp_files(file_path_);
   const std::string suffix = ".tmp." + std::to_string(::getpid()) + ".XXXXXX";
   name.insert(name.end(), suffix.c_str(), suffix.c_str() + suffix.size() + 1);  // includes the NUL
   fd_ = ::mkostemp(name.data(), O_CLOEXEC);
   if (fd_ < 0) {
-    throw_errno(errno, "cannot create a temporary file next to '" + target_path_ + "'");
+    throw_errno(errno, "cannot create a temporary file next to '" + file_path_ + "'" +
+                           (file_path_ == target_path_ ? "" : " (where the link '" + target_path_ + "' leads)"));
   }
   temp_path_.assign(name.data());
   buffer_.reserve(buffer_bytes_);
@@ -203,7 +284,7 @@ void AtomicFileWriter::write_all(const char* data, std::size_t size) {
     const ssize_t written = ::write(fd_, data, size);
     if (written < 0) {
       if (errno == EINTR) continue;
-      throw_errno(errno, "cannot write '" + temp_path_ + "'");
+      throw_errno(errno, "cannot write '" + (streaming_ ? target_path_ : temp_path_) + "'");
     }
     data += written;
     size -= static_cast<std::size_t>(written);
@@ -232,10 +313,17 @@ void AtomicFileWriter::commit() {
   if (committed_) return;
   if (fd_ < 0) throw std::logic_error("AtomicFileWriter::commit after discard: " + target_path_);
   flush();
+  if (streaming_) {  // nothing to rename (and a transaction has nothing to take back)
+    const int fd = fd_;
+    fd_ = -1;
+    committed_ = true;
+    if (::close(fd) != 0 && errno != EINTR) throw_errno(errno, "cannot close '" + target_path_ + "'");
+    return;
+  }
   // mkstemp creates 0600; give the file the mode an ordinary open() would have
   // produced, or keep the replaced file's mode.
   struct stat old_target {};
-  const mode_t mode = ::stat(target_path_.c_str(), &old_target) == 0
+  const mode_t mode = ::stat(file_path_.c_str(), &old_target) == 0
                           ? static_cast<mode_t>(old_target.st_mode & 07777)
                           : static_cast<mode_t>(0666 & ~current_umask());
   if (::fchmod(fd_, mode) != 0) throw_errno(errno, "cannot set the mode of '" + temp_path_ + "'");
@@ -244,17 +332,17 @@ void AtomicFileWriter::commit() {
   fd_ = -1;
   if (::close(fd) != 0) throw_errno(errno, "cannot close '" + temp_path_ + "'");
   if (t_transaction != nullptr) {  // the transaction renames it with the others
-    t_transaction->adopt(temp_path_, target_path_);
+    t_transaction->adopt(temp_path_, file_path_);
     committed_ = true;
     temp_path_.clear();
     return;
   }
-  if (::rename(temp_path_.c_str(), target_path_.c_str()) != 0) {
-    throw_errno(errno, "cannot rename '" + temp_path_ + "' to '" + target_path_ + "'");
+  if (::rename(temp_path_.c_str(), file_path_.c_str()) != 0) {
+    throw_errno(errno, "cannot rename '" + temp_path_ + "' to '" + file_path_ + "'");
   }
   committed_ = true;
   temp_path_.clear();
-  fsync_directory(target_path_);
+  fsync_directory(file_path_);
 }
 
 void write_file_atomically(const std::string& path, std::string_view content) {

@@ -18,6 +18,22 @@
 // longer. Processes of other pid namespaces writing the same directory are
 // not told apart (the files of a dead writer there may stay).
 //
+// Paths that are not plain files (issue 26 N16: as root, `--out /dev/stdout`
+// once replaced the system's /dev/stdout symlink with a regular file). The
+// writer never replaces anything but a regular file:
+//  - a symbolic link is followed (up to 40 links, relative ones from the
+//    link's directory) and the file it names is written atomically, beside
+//    that file; the link stays. A dangling link creates the file it names.
+//  - a FIFO or character device (a pipe, a tty, /dev/null), or a descriptor
+//    link of /proc (/dev/stdout, /dev/fd/N, /proc/self/fd/N) to one of them
+//    or to a regular file, is opened and written as a stream: not atomic
+//    (a failure leaves what was written; a transaction cannot take it back),
+//    the file behind a descriptor link is appended to as the descriptor's
+//    owner left it (`> file` truncated it, `>> file` keeps it). Opening a
+//    FIFO waits for its reader, as a shell's `> fifo` does.
+//  - a directory, block device or socket is refused (std::system_error
+//    naming the path and what it is) before anything is created or written.
+//
 // Several outputs of one command (an IMU file and a trajectory file) are
 // committed together with an OutputTransaction: while one is open on a
 // thread, AtomicFileWriter::commit() on that thread only prepares its file
@@ -37,8 +53,10 @@ class AtomicFileWriter {
  public:
   static constexpr std::size_t kDefaultBufferBytes = std::size_t{1} << 20;
 
-  // Creates the temporary file next to target_path. Throws std::system_error
-  // (naming the path) if it cannot (missing directory, no permission, ...).
+  // Creates the temporary file next to target_path (or next to the file a
+  // link names), or opens a stream (see the top of this file). Throws
+  // std::system_error (naming the path) if it cannot (missing directory, no
+  // permission, a directory or other file that cannot be written, ...).
   explicit AtomicFileWriter(std::string target_path,
                             std::size_t buffer_bytes = kDefaultBufferBytes);
   // Uncommitted: closes and deletes the temporary file. Never throws.
@@ -54,7 +72,8 @@ class AtomicFileWriter {
   void write(std::string_view bytes);
 
   // Flush, set the mode (the old target's mode, or 0666 & ~umask for a new
-  // file), fsync, close, rename over the target, fsync the directory.
+  // file), fsync, close, rename over the target, fsync the directory. A
+  // stream: flush and close.
   // Throws std::system_error; on failure the temporary file is still removed
   // by the destructor and the old target (if any) is left as it was.
   // Inside an OutputTransaction (same thread): everything but the rename;
@@ -66,18 +85,22 @@ class AtomicFileWriter {
 
   bool committed() const noexcept { return committed_; }
   const std::string& target_path() const noexcept { return target_path_; }
-  const std::string& temp_path() const noexcept { return temp_path_; }
+  const std::string& temp_path() const noexcept { return temp_path_; }  // empty for a stream
+  // Written directly (FIFO, character device, descriptor link): not atomic.
+  bool streaming() const noexcept { return streaming_; }
 
  private:
   void flush();
   void write_all(const char* data, std::size_t size);
 
   std::string target_path_;
+  std::string file_path_;  // the file replaced: target_path_ with its symbolic links followed
   std::string temp_path_;
   std::string buffer_;
   std::size_t buffer_bytes_;
   int fd_ = -1;
   bool committed_ = false;
+  bool streaming_ = false;
 };
 
 // The outputs of one command, replaced together (see the top of this file).

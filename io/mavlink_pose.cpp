@@ -236,10 +236,29 @@ bool to_record(const HilStateQuaternion& m, TrajectoryRecord& r, DatagramDecodeE
   if (!rate.allFinite())
     return fail(error, DatagramError::bad_value, "rollspeed/pitchspeed/yawspeed: expected finite body rates", true);
   r.rates.angular_rate_rad_s = rate;
-  r.rates.velocity_m_s = Vec3(m.vx_cm_s, m.vy_cm_s, m.vz_cm_s) * 1e-2;  // NED ground velocity
+  r.rates.velocity_m_s = Vec3(m.vx_cm_s, m.vy_cm_s, m.vz_cm_s) * 1e-2;  // NED ground velocity (int16: < 328 m/s)
+  // A float rate up to FLT_MAX is finite but no motion (io/pose_wire.hpp kMaxLive*).
+  if (!check_live_rates(r.rates, error)) {
+    error.message = "rollspeed/pitchspeed/yawspeed as " + error.message;
+    return false;
+  }
   // xacc..zacc (mG, body frame, specific force or kinematic acceleration
   // depending on the bridge) are not used as the kinematic acceleration.
   return true;
+}
+
+SenderFilter::SenderFilter(std::optional<std::uint8_t> system_id, std::optional<std::uint8_t> component_id)
+    : system_id_(system_id), component_id_(component_id) {}
+
+SenderFilter::Verdict SenderFilter::judge(const PacketInfo& info) noexcept {
+  if (taken_) {
+    return info.system_id == taken_->system_id && info.component_id == taken_->component_id ? Verdict::taken
+                                                                                            : Verdict::other;
+  }
+  if ((system_id_ && info.system_id != *system_id_) || (component_id_ && info.component_id != *component_id_))
+    return Verdict::other;
+  taken_ = PacketInfo{0, info.system_id, info.component_id};
+  return Verdict::taken_now;
 }
 
 std::uint64_t SequenceWidener::widen(const PacketInfo& info) {

@@ -14,6 +14,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <map>
+#include <optional>
 #include <span>
 #include <string>
 #include <vector>
@@ -80,8 +81,34 @@ Outcome decode_datagram(std::span<const std::uint8_t> bytes, HilStateQuaternion&
 // rates of docs/pose-wire-format.md §4.2). time_usec becomes t_ns. False (with
 // error.intact set) for values a pose cannot have: non-unit or non-finite
 // quaternion, latitude beyond +-90 deg, longitude beyond +-180 deg,
-// non-finite rates, time beyond int64 ns.
+// non-finite rates or rates beyond the physical bounds of io/pose_wire.hpp
+// (check_live_rates), time beyond int64 ns.
 bool to_record(const HilStateQuaternion& message, TrajectoryRecord& record, DatagramDecodeError& error);
+
+// Which sender a live source takes (issue 26 N4): one vehicle. Every
+// (sysid, compid) on the port sends its own pose stream; merged, two
+// vehicles 1 km apart became a 1-km jump every packet. The configured
+// system and component ids (either may be left free), else the first intact
+// HIL_STATE_QUATERNION's sender, is taken for the source's lifetime (a
+// reload builds a new source); every other sender's packet is `other`.
+class SenderFilter {
+ public:
+  SenderFilter(std::optional<std::uint8_t> system_id, std::optional<std::uint8_t> component_id);
+  enum class Verdict {
+    taken_now,  // the first packet of the sender taken from now on
+    taken,      // the taken sender's
+    other,      // another sender's (or, before one is taken, one the configuration does not match)
+  };
+  // For an intact packet (its checksum matched: a corrupted header must not choose).
+  Verdict judge(const PacketInfo& info) noexcept;
+  // The sender taken (sequence unused), if any yet.
+  const std::optional<PacketInfo>& taken() const noexcept { return taken_; }
+  bool configured() const noexcept { return system_id_ || component_id_; }
+
+ private:
+  std::optional<std::uint8_t> system_id_, component_id_;
+  std::optional<PacketInfo> taken_;
+};
 
 // Widens MAVLink's 8-bit sequence to the 64-bit numbering the loss
 // statistics use (io::SequenceTracker), one counter per (system, component):

@@ -177,7 +177,13 @@ PoseAdmission::PoseAdmission(const PoseSourceOptions& options)
       max_chart_angle_rad_(options.max_chart_angle_rad),
       max_time_step_ns_(std::max<TimeNs>(1, options.max_time_step_ns)),
       max_gap_ns_(std::max<TimeNs>(0, options.max_gap_ns)),
-      resync_poses_(std::max<std::size_t>(1, options.resync_poses)) {}
+      resync_poses_(std::max<std::size_t>(1, options.resync_poses)),
+      mavlink_sender_(options.mavlink_system_id, options.mavlink_component_id) {}
+
+void PoseAdmission::publish() noexcept {
+  const std::lock_guard lock(published_mutex_);
+  published_ = counting_;
+}
 
 void PoseAdmission::log(std::string_view key, std::string_view message) {
   std::string line = name_;
@@ -192,11 +198,13 @@ void PoseAdmission::reject(Slot slot, std::string_view key, const std::string& m
 }
 
 void PoseAdmission::reject_line(LineError reason, std::string_view message) {
+  const Unit unit(*this);
   add(kLineErrorsFirst + static_cast<std::size_t>(reason));
   log(to_string(reason), "dropped line (" + std::string(to_string(reason)) + "): " + std::string(message));
 }
 
 void PoseAdmission::reject_datagram(DatagramError reason, std::string_view message) {
+  const Unit unit(*this);
   add(kDatagramErrorsFirst + static_cast<std::size_t>(reason));
   log(to_string(reason), "dropped datagram (" + std::string(to_string(reason)) + "): " + std::string(message));
 }
@@ -204,10 +212,10 @@ void PoseAdmission::reject_datagram(DatagramError reason, std::string_view messa
 void PoseAdmission::observe_sequence(std::uint64_t sequence, TimeNs t_ns) {
   const std::uint64_t highest_before = sequence_.highest();
   const SequenceTracker::Arrival arrival = sequence_.observe(sequence, t_ns);
-  counters_[kSequenceGaps].store(sequence_.gaps(), std::memory_order_relaxed);
-  counters_[kLate].store(sequence_.late(), std::memory_order_relaxed);
-  counters_[kStale].store(sequence_.stale(), std::memory_order_relaxed);
-  counters_[kSequenceRestarts].store(sequence_.restarts(), std::memory_order_relaxed);
+  set(kSequenceGaps, sequence_.gaps());
+  set(kLate, sequence_.late());
+  set(kStale, sequence_.stale());
+  set(kSequenceRestarts, sequence_.restarts());
   if (arrival == SequenceTracker::Arrival::jump) {
     log("sequence_gap", std::to_string(sequence - highest_before - 1) + " datagram(s) missing before sequence " +
                             std::to_string(sequence));
@@ -219,6 +227,7 @@ void PoseAdmission::observe_sequence(std::uint64_t sequence, TimeNs t_ns) {
 
 bool PoseAdmission::receive_datagram(std::span<const std::uint8_t> bytes, TimeNs receive_ns, std::string_view from,
                                      SourcedPose& out) {
+  const Unit unit(*this);
   received();
   PoseDatagram datagram;
   DatagramDecodeError error;
@@ -235,6 +244,7 @@ bool PoseAdmission::receive_datagram(std::span<const std::uint8_t> bytes, TimeNs
 
 bool PoseAdmission::receive_mavlink_datagram(std::span<const std::uint8_t> bytes, TimeNs receive_ns,
                                              std::string_view from, SourcedPose& out) {
+  const Unit unit(*this);
   received();
   mavlink::HilStateQuaternion message;
   mavlink::PacketInfo info;
@@ -248,8 +258,23 @@ bool PoseAdmission::receive_mavlink_datagram(std::span<const std::uint8_t> bytes
     reject_datagram(error.reason, "from " + std::string(from) + ": " + error.message);
     return false;
   }
-  // The checksum matched: the packet arrived intact and counts for the loss
-  // statistics even if its values are refused.
+  // The checksum matched: the header is the sender's own. One vehicle per
+  // source (mavlink::SenderFilter); another sender's packet is counted and
+  // logged, and enters neither the stream nor its loss statistics.
+  switch (mavlink_sender_.judge(info)) {
+    case mavlink::SenderFilter::Verdict::taken: break;
+    case mavlink::SenderFilter::Verdict::taken_now:
+      log("mavlink_sender",
+          "takes sysid " + std::to_string(info.system_id) + " compid " + std::to_string(info.component_id) + " (from " +
+              std::string(from) +
+              (mavlink_sender_.configured() ? ": the configured sender)"
+                                            : ": the first HIL_STATE_QUATERNION sender; [trajectory] mavlink_system_id "
+                                              "and mavlink_component_id choose one); other senders are not used"));
+      break;
+    case mavlink::SenderFilter::Verdict::other: other_sender(info, from); return false;
+  }
+  // The packet arrived intact and counts for the loss statistics even if its
+  // values are refused.
   const std::uint64_t sequence = mavlink_sequences_.widen(info);
   TrajectoryRecord record;
   const bool valid = mavlink::to_record(message, record, error);
@@ -259,6 +284,24 @@ bool PoseAdmission::receive_mavlink_datagram(std::span<const std::uint8_t> bytes
     return false;
   }
   return admit(record, sequence, receive_ns, out);
+}
+
+void PoseAdmission::other_sender(const mavlink::PacketInfo& info, std::string_view from) {
+  add(kOtherSender);
+  // One log key per sender, so each is named at least once a second; the
+  // first few only, so a flood of forged ids cannot grow the log's key map.
+  constexpr std::size_t kNamedOtherSenders = 16;
+  const auto id = static_cast<std::uint16_t>(std::uint16_t{info.system_id} << 8 | info.component_id);
+  const std::string sender = "sysid " + std::to_string(info.system_id) + " compid " + std::to_string(info.component_id);
+  const bool named = named_other_senders_.count(id) != 0 ||
+                     (named_other_senders_.size() < kNamedOtherSenders && named_other_senders_.insert(id).second);
+  std::string message = "dropped HIL_STATE_QUATERNION of another sender, " + sender + " from " + std::string(from) +
+                        ": this source takes ";
+  if (const auto& taken = mavlink_sender_.taken())
+    message += "sysid " + std::to_string(taken->system_id) + " compid " + std::to_string(taken->component_id);
+  else
+    message += "the configured sender (none seen yet)";
+  log(named ? "other_sender " + sender : std::string("other_sender"), message);
 }
 
 namespace {
@@ -281,7 +324,7 @@ bool PoseAdmission::consistent(const Pose& from, const Pose& to) const {
 void PoseAdmission::drop_candidates() {
   if (candidates_.empty()) return;
   add(kTimeJump, candidates_.size());
-  counters_[kHeld].store(0, std::memory_order_relaxed);
+  set(kHeld, 0);
   candidates_.clear();
 }
 
@@ -317,7 +360,7 @@ bool PoseAdmission::release_candidates(TimeNs offset_ns, SourcedPose& out) {
   }
   last_sender_ns_ = candidates_.back().pose.t_ns;
   candidates_.clear();
-  counters_[kHeld].store(0, std::memory_order_relaxed);
+  set(kHeld, 0);
   return take_released(out);
 }
 
@@ -330,6 +373,7 @@ bool PoseAdmission::take_released(SourcedPose& out) {
 
 bool PoseAdmission::admit(const TrajectoryRecord& record, std::optional<std::uint64_t> sequence, TimeNs receive_ns,
                           SourcedPose& out) {
+  const Unit unit(*this);
   // A time the live path cannot map (time 0 is fine; INT64_MIN or near
   // INT64_MAX is not): refused before any work on it.
   if (record.t_ns > kMaxPoseTimeNs || record.t_ns < -kMaxPoseTimeNs) {
@@ -401,7 +445,7 @@ bool PoseAdmission::admit(const TrajectoryRecord& record, std::optional<std::uin
   sender_pose.t_ns = record.t_ns;
   if (!candidates_.empty() && !consistent(candidates_.back().pose, sender_pose)) drop_candidates();
   candidates_.push_back({sender_pose, sequence, receive_ns, record.line, rates});
-  counters_[kHeld].store(candidates_.size(), std::memory_order_relaxed);
+  set(kHeld, candidates_.size());
   if (candidates_.size() < resync_poses_) {
     if (locked_)
       log("time_jump", where(record.line, sequence) + ": time " + format_decimal_seconds(record.t_ns) +
@@ -434,7 +478,12 @@ bool PoseAdmission::admit(const TrajectoryRecord& record, std::optional<std::uin
 }
 
 PoseSourceCounters PoseAdmission::counters() const noexcept {
-  auto get = [this](std::size_t slot) { return counters_[slot].load(std::memory_order_relaxed); };
+  std::array<std::uint64_t, kSlotCount> snapshot;
+  {
+    const std::lock_guard lock(published_mutex_);
+    snapshot = published_;
+  }
+  auto get = [&snapshot](std::size_t slot) { return snapshot[slot]; };
   PoseSourceCounters c;
   c.received = get(kReceived);
   c.ignored = get(kIgnored);
@@ -448,6 +497,7 @@ PoseSourceCounters PoseAdmission::counters() const noexcept {
   c.chart_span = get(kChartSpan);
   c.time_out_of_range = get(kTimeRange);
   c.time_jump = get(kTimeJump);
+  c.other_sender = get(kOtherSender);
   c.held = get(kHeld);
   c.resyncs = get(kResyncs);
   c.overflow_dropped = get(kOverflowDropped);

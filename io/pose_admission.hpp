@@ -5,13 +5,14 @@
 #pragma once
 
 #include <array>
-#include <atomic>
 #include <bitset>
 #include <deque>
 #include <vector>
 #include <cstddef>
 #include <cstdint>
 #include <map>
+#include <mutex>
+#include <set>
 #include <optional>
 #include <span>
 #include <string>
@@ -109,9 +110,14 @@ class PoseAdmission {
   explicit PoseAdmission(const PoseSourceOptions& options);
 
   // Every unit that arrives is counted received, then ends in exactly one of
-  // ignored(), admit() (accepted or rejected) or a reject_*().
+  // ignored(), admit() (accepted, rejected or held) or a reject_*(). The
+  // counters are published (counters()) when the unit ends, never between
+  // received() and its classification: see Unit.
   void received() noexcept { add(kReceived); }
-  void ignored() noexcept { add(kIgnored); }
+  void ignored() noexcept {
+    const Unit unit(*this);
+    add(kIgnored);
+  }
   void reject_line(LineError reason, std::string_view message);
   void reject_datagram(DatagramError reason, std::string_view message);
 
@@ -140,16 +146,36 @@ class PoseAdmission {
   bool receive_mavlink_datagram(std::span<const std::uint8_t> bytes, TimeNs receive_ns, std::string_view from,
                                 SourcedPose& out);
 
-  void overflow_dropped() noexcept { add(kOverflowDropped); }
-  void backpressure_event() noexcept { add(kBackpressureEvents); }
-  void connection() noexcept { add(kConnections); }
-  void connection_refused() noexcept { add(kConnectionsRefused); }
-  void connection_idle_closed() noexcept { add(kConnectionsIdleClosed); }
-  void connection_replaced() noexcept { add(kConnectionsReplaced); }
+  void overflow_dropped() noexcept { count_now(kOverflowDropped); }
+  void backpressure_event() noexcept { count_now(kBackpressureEvents); }
+  void connection() noexcept { count_now(kConnections); }
+  void connection_refused() noexcept { count_now(kConnectionsRefused); }
+  void connection_idle_closed() noexcept { count_now(kConnectionsIdleClosed); }
+  void connection_replaced() noexcept { count_now(kConnectionsReplaced); }
+
+  // While a Unit lives, counting is not published; the last one to end
+  // publishes one snapshot of everything counted (issue 26: a reader saw
+  // `received` of a datagram before its classification, so `accepted` one
+  // short). Every public counting call holds one; the UDP source holds one
+  // across a datagram and the queueing of its pose, so a snapshot's
+  // accepted poses are all queued. Single-threaded: the source's thread.
+  class Unit {
+   public:
+    explicit Unit(PoseAdmission& admission) noexcept : admission_(admission) { ++admission_.open_units_; }
+    ~Unit() {
+      if (--admission_.open_units_ == 0) admission_.publish();
+    }
+    Unit(const Unit&) = delete;
+    Unit& operator=(const Unit&) = delete;
+
+   private:
+    PoseAdmission& admission_;
+  };
 
   void log(std::string_view key, std::string_view message);  // rate limited, prefixed with the source name
   void flush_log() { log_.flush(); }
 
+  // The last published snapshot (any thread; a mutex held for one copy).
   PoseSourceCounters counters() const noexcept;
   const std::string& name() const noexcept { return name_; }
   void set_name(std::string name) { name_ = std::move(name); }
@@ -166,6 +192,7 @@ class PoseAdmission {
     kChartSpan,
     kTimeRange,
     kTimeJump,
+    kOtherSender,
     kHeld,
     kResyncs,
     kOverflowDropped,
@@ -182,10 +209,15 @@ class PoseAdmission {
     kDatagramErrorsFirst = kLineErrorsFirst + kLineErrorCount,
     kSlotCount = kDatagramErrorsFirst + kDatagramErrorCount,
   };
-  void add(std::size_t slot, std::uint64_t n = 1) noexcept {
-    counters_[slot].fetch_add(n, std::memory_order_relaxed);
+  void add(std::size_t slot, std::uint64_t n = 1) noexcept { counting_[slot] += n; }
+  void set(std::size_t slot, std::uint64_t value) noexcept { counting_[slot] = value; }
+  void count_now(std::size_t slot) noexcept {
+    const Unit unit(*this);
+    add(slot);
   }
+  void publish() noexcept;
   void reject(Slot slot, std::string_view key, const std::string& message);
+  void other_sender(const mavlink::PacketInfo& info, std::string_view from);
 
   std::string name_;
   double max_attitude_step_rad_;
@@ -218,8 +250,15 @@ class PoseAdmission {
   std::vector<Candidate> candidates_;
   std::deque<SourcedPose> released_;
   std::optional<Pose> last_accepted_;  // output time
-  std::array<std::atomic<std::uint64_t>, kSlotCount> counters_{};
+  // Counted by the source's thread (counting_), published for readers
+  // (published_, under published_mutex_) when the outermost Unit ends.
+  std::array<std::uint64_t, kSlotCount> counting_{};
+  int open_units_ = 0;
+  mutable std::mutex published_mutex_;
+  std::array<std::uint64_t, kSlotCount> published_{};
   mavlink::SequenceWidener mavlink_sequences_;
+  mavlink::SenderFilter mavlink_sender_;
+  std::set<std::uint16_t> named_other_senders_;  // with their own log key (at most kNamedOtherSenders)
 };
 
 // One line stream (a TCP connection, stdin) through framer, decoder and

@@ -136,7 +136,7 @@ std::size_t PoseQueue::size() const {
 std::uint64_t PoseSourceCounters::rejected() const noexcept {
   return std::accumulate(line_errors.begin(), line_errors.end(), std::uint64_t{0}) +
          std::accumulate(datagram_errors.begin(), datagram_errors.end(), std::uint64_t{0}) + scene_refused +
-         duplicate + out_of_order + attitude_step + chart_span + time_out_of_range + time_jump;
+         duplicate + out_of_order + attitude_step + chart_span + time_out_of_range + time_jump + other_sender;
 }
 
 // ---------------------------------------------------------------- source base

@@ -101,6 +101,10 @@ class PoseQueue {
 };
 
 // A snapshot of a source's counters (definitions in docs/pose-wire-format.md §3).
+// The source's thread publishes one snapshot per unit, once the unit is
+// classified (UDP: once its pose is queued), so the counters of one snapshot
+// are consistent with each other: received == ignored + accepted +
+// rejected() + held.
 struct PoseSourceCounters {
   std::uint64_t received = 0;  // datagrams / lines (incl. blank, comment, header) / file records
   std::uint64_t ignored = 0;   // blank, comment, version and header lines
@@ -114,6 +118,7 @@ struct PoseSourceCounters {
   std::uint64_t chart_span = 0;      // rotation from the last accepted pose > max_chart_angle_rad (a glitch)
   std::uint64_t time_out_of_range = 0;  // |t| > kMaxPoseTimeNs
   std::uint64_t time_jump = 0;       // more than max_time_step_ns from the stream and never confirmed (stray)
+  std::uint64_t other_sender = 0;    // MAVLink: intact HIL_STATE_QUATERNION of a sender other than the one taken
   std::uint64_t held = 0;            // now: poses waiting for resync_poses consistent ones (a gauge)
   std::uint64_t resyncs = 0;         // the stream re-acquired after a jump or restart of its times
 
@@ -132,7 +137,7 @@ struct PoseSourceCounters {
   std::uint64_t connections_idle_closed = 0;  // TCP clients closed after tcp_idle_timeout_ns of silence
   std::uint64_t connections_replaced = 0;     // idle TCP clients closed for a new client (tcp_takeover_idle_ns)
 
-  std::uint64_t rejected() const noexcept;  // every rejection counter above (wire + admission)
+  std::uint64_t rejected() const noexcept;  // every rejection counter above (wire + admission + other_sender)
   // Datagrams that never arrived intact (exact when reordering stays within kSequenceWindow).
   std::uint64_t lost() const noexcept { return sequence_gaps - late; }
 };
@@ -172,6 +177,10 @@ struct PoseSourceOptions {
   // interpolates across the discontinuity and output resumes about this long
   // after a sender restart, not max_time_step_ns later.
   TimeNs max_gap_ns = 10 * kNsPerSecond;
+  // MAVLink sources: the one sender taken (issue 26 N4; docs/pose-wire-format.md
+  // §4.5). Empty: the first intact HIL_STATE_QUATERNION's system (component);
+  // either may be set alone. Other senders' packets count other_sender.
+  std::optional<std::uint8_t> mavlink_system_id, mavlink_component_id;
   // Receives each log line (without '\n'); empty: written to stderr.
   std::function<void(std::string_view)> log;
   // At most one log line per rejection reason per interval; the next line

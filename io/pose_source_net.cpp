@@ -120,6 +120,10 @@ class UdpPoseSource final : public PoseSource {
   }
 
   void handle(std::size_t size, TimeNs receive_ns) {
+    // One published snapshot per datagram, after its pose is queued: a
+    // reader that sees it received sees it classified and its pose queued
+    // (overflow_dropped included).
+    const PoseAdmission::Unit unit(*admission_);
     SourcedPose pose;
     if (sender_ != named_sender_) {  // the sender's name only for log lines: no allocation per datagram
       named_sender_ = sender_;

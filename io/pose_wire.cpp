@@ -339,6 +339,35 @@ bool decode_pose_datagram(std::span<const std::uint8_t> bytes, PoseDatagram& out
       }
       *f.into = v;
     }
+    if (!check_live_rates(r.rates, error)) return false;
+  }
+  return true;
+}
+
+bool check_live_rates(const PoseRates& rates, DatagramDecodeError& error) {
+  struct Bound {
+    const std::optional<Vec3>& value;
+    double max;
+    const char* name;
+    const char* unit;
+    const char* reason;
+  };
+  const Bound bounds[] = {
+      {rates.velocity_m_s, kMaxLiveSpeed_m_s, "velocity_m_s", "m/s",
+       "above escape speed plus the ECEF frame's rotation at the 1e9-m position bound"},
+      {rates.angular_rate_rad_s, kMaxLiveAngularRate_rad_s, "angular_rate_rad_s", "rad/s",
+       "1600 rev/s: no vehicle turns and no gyro measures that fast"},
+      {rates.acceleration_m_s2, kMaxLiveAcceleration_m_s2, "acceleration_m_s2", "m/s^2",
+       "1e5 g: beyond a gun launch"}};
+  for (const Bound& b : bounds) {
+    if (!b.value) continue;
+    // The norm of finite components may overflow to inf: still beyond.
+    const double magnitude = b.value->norm();
+    if (b.value->allFinite() && magnitude <= b.max) continue;
+    return fail(error, DatagramError::bad_value,
+                std::string(b.name) + ": magnitude " + detail::format_double(magnitude) + " " + b.unit +
+                    " is beyond " + detail::format_double(b.max) + " " + b.unit + " (" + b.reason + ")",
+                true);
   }
   return true;
 }

@@ -119,6 +119,23 @@ enum class DatagramError : std::uint8_t {
 inline constexpr std::size_t kDatagramErrorCount = 8;
 std::string_view to_string(DatagramError error) noexcept;
 
+// Physical bounds of the rates a live input may carry (pose datagram v2,
+// MAVLink HIL_STATE_QUATERNION; docs/pose-wire-format.md §2.5). A value
+// beyond them is no motion of anything and would only become the end slope
+// of the causal method's cubics (core/causal_hermite.hpp), so it is refused
+// at the door (bad_value), like a latitude beyond 90 deg:
+//  - |angular rate| <= 1e4 rad/s (1600 rev/s, 5.7e5 deg/s): a spin-
+//    stabilised shell turns at ~300 rev/s (1900 rad/s), the widest gyro
+//    ranges are +-4000..+-20000 deg/s (70..350 rad/s);
+//  - |velocity| <= 1e5 m/s: above Earth's escape speed (11.2 km/s) plus what
+//    the ECEF frame's own rotation adds at the position bound of the
+//    trajectory format (omega_ie * 1e9 m = 72.9 km/s);
+//  - |acceleration| <= 1e6 m/s^2 (1e5 g): a gun launch is 1.5..3e4 g, shock
+//    accelerometers are rated to 6e4 g.
+inline constexpr double kMaxLiveAngularRate_rad_s = 1e4;
+inline constexpr double kMaxLiveSpeed_m_s = 1e5;
+inline constexpr double kMaxLiveAcceleration_m_s2 = 1e6;
+
 struct DatagramDecodeError {
   DatagramError reason = DatagramError::too_short;
   std::string message;  // e.g. "position component 0 (lat_deg): expected a latitude in [-90, 90] degrees, got 91.5"
@@ -138,6 +155,11 @@ std::array<std::uint8_t, kPoseDatagramV1Size> encode_pose_datagram(const PoseDat
 // Writes a v2 datagram: the rates present in d.record.rates are written and
 // flagged in the mask, absent ones are zeros. Does not validate.
 std::array<std::uint8_t, kPoseDatagramV2Size> encode_pose_datagram_v2(const PoseDatagram& datagram) noexcept;
+
+// The rates of a decoded record against the bounds above (and finite): false
+// with error (bad_value, intact, naming the field, its magnitude and the
+// bound) for the first one beyond.
+bool check_live_rates(const PoseRates& rates, DatagramDecodeError& error);
 
 // Validates and decodes a datagram (v1 or v2). On failure returns false and fills
 // `error`; `out` is then only meaningful as error.intact says.

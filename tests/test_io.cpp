@@ -790,25 +790,27 @@ TEST(AtomicFile, TransactionReplacesNoOutputWhenOneFails) {
   EXPECT_EQ(dir.files().size(), 2u);
 }
 
-// A rename that fails at commit (the second target is a non-empty
-// directory): the first target, already renamed, gets its old content back.
+// A rename that fails at commit (the second target became a directory after
+// its writer started; one that already is a directory is refused at once,
+// tests/test_output_paths.cpp): the first target, already renamed, gets its
+// old content back.
 TEST(AtomicFile, TransactionRenameFailureRestoresTheTargetsRenamed) {
   TempDir dir;
   const std::string first = dir.file("a.csv"), blocked = dir.file("b.csv");
   write_file_atomically(first, "old a\n");
-  ASSERT_EQ(::mkdir(blocked.c_str(), 0755), 0);
-  write_file_atomically(blocked + "/inside", "x");
   {
     OutputTransaction outputs;
     write_file_atomically(first, "new a\n");
-    write_file_atomically(blocked, "new b\n");
+    AtomicFileWriter second(blocked);
+    ASSERT_EQ(::mkdir(blocked.c_str(), 0755), 0);
+    second.write("new b\n");
+    second.commit();
     EXPECT_THROW(outputs.commit(), std::system_error);
   }
   EXPECT_EQ(slurp(first), "old a\n");
   std::vector<std::string> names = dir.files();
   std::sort(names.begin(), names.end());
   EXPECT_EQ(names, (std::vector<std::string>{"a.csv", "b.csv"}));
-  ::unlink((blocked + "/inside").c_str());
   ::rmdir(blocked.c_str());
 }
 

@@ -292,21 +292,35 @@ TEST_P(ListenLoopback, DecodesEverySampleOfALiveStreamExactlyAndMeasuresItsRate)
   EXPECT_EQ(s.bytes_received, run.writer.counters.bytes_sent);
   for (std::size_t k = 0; k < kSamples; ++k) expect_values_match(protocol, samples[k], run.received[k].sample);
 
-  // Rates: from the sample times exactly 400 Hz ((n - 1) intervals of 2.5 ms);
-  // from arrival times 400 Hz within the scheduling of a shared machine.
+  // Rates: from the sample times exactly 400 Hz ((n - 1) intervals of 2.5 ms),
+  // and so the rate verdict, whatever the host does. From arrival times: what
+  // this host delivered, which a stall makes anything (issue 26: 260 Hz after
+  // the host stalled 1.25 s), so it is checked against the arrival times the
+  // hook saw, and the longest gap (the stall, if any) is the jitter maximum.
+  // The arrival rate within 1 % of the device's on an idle machine is the
+  // loopback label's (loopback_pty_emit_listen, 30 s, RUN_SERIAL).
   ASSERT_TRUE(s.first_sample_t_ns && s.last_sample_t_ns);
   EXPECT_EQ(*s.first_sample_t_ns, samples.front().t_ns);
   EXPECT_EQ(*s.last_sample_t_ns, samples.back().t_ns);
   ASSERT_TRUE(s.rate_from_sample_time_hz.has_value());
   EXPECT_NEAR(*s.rate_from_sample_time_hz, kRateHz, 1e-9);
-  ASSERT_TRUE(s.rate_from_arrival_hz.has_value());
-  EXPECT_NEAR(*s.rate_from_arrival_hz, kRateHz, 0.25 * kRateHz);
   ASSERT_TRUE(s.rate_ok.has_value());
   EXPECT_TRUE(*s.rate_ok);
+  const TimeNs arrival_span_ns = run.received.back().arrival_ns - run.received.front().arrival_ns;
+  TimeNs longest_gap_ns = 0;
+  for (std::size_t k = 1; k < run.received.size(); ++k)
+    longest_gap_ns = std::max(longest_gap_ns, run.received[k].arrival_ns - run.received[k - 1].arrival_ns);
+  ASSERT_TRUE(s.rate_from_arrival_hz.has_value());
+  const double arrival_rate_hz = static_cast<double>(kSamples - 1) / (static_cast<double>(arrival_span_ns) * 1e-9);
+  EXPECT_NEAR(*s.rate_from_arrival_hz, arrival_rate_hz, 1e-9 * arrival_rate_hz);
   ASSERT_TRUE(s.jitter_p50_us && s.jitter_p99_us && s.jitter_max_us);
   EXPECT_LE(*s.jitter_p50_us, *s.jitter_p99_us);
   EXPECT_LE(*s.jitter_p99_us, *s.jitter_max_us);
   EXPECT_GE(*s.jitter_p50_us, 0.0);
+  EXPECT_GE(*s.jitter_max_us + 1e-6, static_cast<double>(longest_gap_ns - kPeriodNs) * 1e-3);  // exact (arrival_jitter.hpp)
+  std::printf("arrivals: %.3f Hz over %.3f s, longest gap %.3f ms%s\n", arrival_rate_hz,
+              static_cast<double>(arrival_span_ns) * 1e-9, static_cast<double>(longest_gap_ns) * 1e-6,
+              longest_gap_ns > 20 * kPeriodNs ? " (the host stalled: not asserted here)" : "");
 
   // Human lines: every 100th sample, i.e. samples 0, 100, 200, 300.
   std::istringstream lines(run.output);

@@ -26,7 +26,10 @@ int main(int argc, char** argv) {
   gen_in->excludes(gen_scene);
   g->add_option("--imu", gen.imu_name, "--scene-file: the [[imu]] name (default: the first)");
   g->add_option("--max-seconds", gen.max_seconds, "--scene-file: only the first seconds of output")->check(seconds_in(0.0, kMaxDurationS, true));
-  g->add_option("--out", gen.out_path, "IMU CSV to write (time_ns, gyro rad/s, accel m/s^2)")->required();
+  g->add_option("--out", gen.out_path,
+                "IMU CSV to write (time_ns, gyro rad/s, accel m/s^2): replaced atomically, through a symbolic link to "
+                "the file it names; a FIFO, character device or /dev/stdout is written as a stream (not atomic); "
+                "a directory is refused")->required();
   g->add_option("--trajectory-out", gen.trajectory_out_path, "Also write the smoothed trajectory CSV");
   g->add_option("--rate", gen.rate_hz, "Output rate in Hz (integer)")->capture_default_str()->check(CLI::Range(1, 1000000));
   g->add_option("--delta", gen.delta, "Window half-length Delta of Eq. 3.68, in output samples (default: one median knot interval of output samples with --method hermite, the default, two with the other methods; 0 only with --derivatives finite-difference)")->check(CLI::Range(std::int64_t{0}, imuemu::limits::kMaxWindowSamples));
@@ -72,7 +75,7 @@ int main(int argc, char** argv) {
 
   SampleArgs smp;
   auto* s = app.add_subcommand("sample-trajectory", "Write a built-in sample trajectory CSV (geodetic + heading/pitch/roll)");
-  s->add_option("--out", smp.out_path, "CSV to write")->required();
+  s->add_option("--out", smp.out_path, "CSV to write (as generate --out: atomic, or a stream to a FIFO or /dev/stdout)")->required();
   s->add_option("--kind", smp.kind, "flight (aircraft-like, Barcelona), circle, static")->capture_default_str()
       ->check(CLI::IsMember({"flight", "circle", "static"}));
   s->add_option("--duration-s", smp.duration_s, "Duration")->capture_default_str()->check(seconds_in(0.0, kMaxDurationS, true));

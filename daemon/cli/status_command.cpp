@@ -170,6 +170,11 @@ void print_status_summary(const nlohmann::json& status, std::ostream& out) {
         << " re-acquisitions (the sender's times jumped or restarted; the new stream placed on the running timeline), "
         << count_of(*source, "time_jump") << " stray poses dropped (far from the stream, never confirmed), "
         << count_of(*source, "held") << " held now (waiting for consistent poses)\n";
+    // A MAVLink source takes one vehicle; the others' packets are dropped
+    // (docs/pose-wire-format.md §4.5).
+    if (text_of(*source, "name").rfind("mavlink", 0) == 0 && count_of(*source, "other_sender") > 0)
+      out << "    other MAVLink senders: " << count_of(*source, "other_sender")
+          << " packets dropped (this source takes one vehicle; the log names them)\n";
     // Connections are a TCP source's (one client at a time).
     if (text_of(*source, "name").rfind("tcp", 0) == 0)
       out << "    connections: " << count_of(*source, "connections") << " accepted, "

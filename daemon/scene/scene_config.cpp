@@ -271,7 +271,8 @@ void parse_endpoint(const Table& t, const std::string& rest, TrajectoryConfig& o
 }
 
 void parse_trajectory_section(const Table& t, const SceneConfig& scene, TrajectoryConfig& out) {
-  t.allow_only({"source", "duration_s", "speed", "knot_interval_s", "loop", "start", "tcp_idle_timeout_s"});
+  t.allow_only({"source", "duration_s", "speed", "knot_interval_s", "loop", "start", "tcp_idle_timeout_s",
+                "mavlink_system_id", "mavlink_component_id"});
   const std::string usage =
       "expected file:PATH, udp:ADDR:PORT, mavlink:ADDR:PORT, tcp:ADDR:PORT, stdin or sample:flight|circle|static";
   out.source = t.required_string("source", usage);
@@ -353,6 +354,16 @@ void parse_trajectory_section(const Table& t, const SceneConfig& scene, Trajecto
   out.loop = t.boolean("loop", false);
   if (out.kind == SourceKind::tcp) out.tcp_idle_timeout_s = t.number("tcp_idle_timeout_s", 5.0, 0.0, 86400.0);
   else t.forbid("tcp_idle_timeout_s", "applies to tcp: sources only");
+  if (out.kind == SourceKind::mavlink_udp) {
+    // MAVLink ids 1..255: 0 addresses everyone (MAV_COMP_ID_ALL, broadcast)
+    // and is never a sender's own (MAVLink guide, "Routing").
+    if (const auto id = t.opt_int("mavlink_system_id", 1, 255)) out.mavlink_system_id = static_cast<std::uint8_t>(*id);
+    if (const auto id = t.opt_int("mavlink_component_id", 1, 255))
+      out.mavlink_component_id = static_cast<std::uint8_t>(*id);
+  } else {
+    t.forbid("mavlink_system_id", "applies to mavlink: sources only");
+    t.forbid("mavlink_component_id", "applies to mavlink: sources only");
+  }
   out.start = t.choice("start", "now", {"now", "next-second"}) == "now" ? StartAlignment::now : StartAlignment::next_second;
 }
 

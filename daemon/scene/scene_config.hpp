@@ -69,6 +69,9 @@ struct TrajectoryConfig {
   double knot_interval_s = 1.0;  // expected pose spacing (sample: the knot period)
   bool loop = false;             // file, sample: replay again from the start at the end
   double tcp_idle_timeout_s = 5.0;  // tcp: a client silent this long is closed (0: never; io/pose_source.hpp)
+  // mavlink: the one vehicle taken (io/pose_source.hpp PoseSourceOptions);
+  // empty: the first HIL_STATE_QUATERNION sender's.
+  std::optional<std::uint8_t> mavlink_system_id, mavlink_component_id;
   StartAlignment start = StartAlignment::now;
 };
 

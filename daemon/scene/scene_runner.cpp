@@ -110,18 +110,26 @@ std::string reuse_key(const ImuConfig& imu, const RunnerOptions& options) {
          std::to_string(imu.transport.pty.mode);
 }
 
+io::PoseSourceOptions pose_source_options(const SceneConfig& scene, const RunnerOptions& options) {
+  io::PoseSourceOptions so;
+  so.physics = scene.physics.physics;
+  so.log = options.log;
+  // A re-acquired stream is placed just beyond the engine's own gap limit
+  // (io/pose_source.hpp max_gap_ns): output resumes about max_gap_s after a
+  // sender restart.
+  so.max_gap_ns = seconds_to_ns(scene.smoothing.max_gap_s);
+  // One vehicle per MAVLink source (docs/pose-wire-format.md §4.5).
+  so.mavlink_system_id = scene.trajectory.mavlink_system_id;
+  so.mavlink_component_id = scene.trajectory.mavlink_component_id;
+  return so;
+}
+
 BuiltEngine build_engine(const SceneConfig& scene, const RunnerOptions& options, ReusableTransports* reuse) {
   BuiltEngine built;
   emission::EngineOptions eo;
   const bool live_input = is_live(scene.trajectory.kind);
   if (live_input) {
-    io::PoseSourceOptions so;
-    so.physics = scene.physics.physics;
-    so.log = options.log;
-    // A re-acquired stream is placed just beyond the engine's own gap limit
-    // (io/pose_source.hpp max_gap_ns): output resumes about max_gap_s after a
-    // sender restart.
-    so.max_gap_ns = seconds_to_ns(scene.smoothing.max_gap_s);
+    const io::PoseSourceOptions so = pose_source_options(scene, options);
     io::NetEndpoint endpoint{scene.trajectory.address, scene.trajectory.port, 0};
     endpoint.tcp_idle_timeout_ns = seconds_to_ns(scene.trajectory.tcp_idle_timeout_s);
     if (scene.trajectory.kind == SourceKind::udp) built.source = io::make_udp_pose_source(endpoint, so);

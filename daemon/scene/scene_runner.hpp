@@ -17,6 +17,7 @@
 #include "core/trajectory.hpp"
 #include "daemon/engine/emission.hpp"
 #include "daemon/scene/scene_config.hpp"
+#include "io/pose_source.hpp"
 
 namespace imuemu::io {
 class PoseSource;
@@ -63,6 +64,10 @@ inline constexpr TimeNs kLoopSpanNs = 24LL * 3600 * kNsPerSecond;
 
 // A pty link as published: the scene's, or moved into options.pty_link_dir.
 std::string pty_link_path(const ImuConfig& imu, const RunnerOptions& options);
+
+// The live pose source's options a scene asks for (physics, the gap limit a
+// re-acquired stream is placed beyond, the MAVLink vehicle, the log).
+io::PoseSourceOptions pose_source_options(const SceneConfig& scene, const RunnerOptions& options);
 
 struct BuiltEngine {
   std::unique_ptr<io::PoseSource> source;  // live input (declared first: outlives the engine)

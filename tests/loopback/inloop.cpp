@@ -62,6 +62,7 @@
 #include "io/mavlink_pose.hpp"
 #include "io/pose_source.hpp"
 #include "tests/support/spawn.hpp"
+#include "tests/support/udp_sender.hpp"
 
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
@@ -220,12 +221,7 @@ class Daemon {
 
 class Sender {
  public:
-  explicit Sender(std::uint16_t port) : fd_(::socket(AF_INET, SOCK_DGRAM, 0)) {
-    to_.sin_family = AF_INET;
-    to_.sin_port = htons(port);
-    to_.sin_addr.s_addr = htonl(INADDR_LOOPBACK);
-  }
-  ~Sender() { ::close(fd_); }
+  explicit Sender(std::uint16_t port) : socket_(port) {}
   // The vehicle's state at simulation time t_us: hovering at a fixed point,
   // attitude R (body FRD to NED), body rate omega.
   void send(std::uint64_t t_us, const Mat3& R, const Vec3& omega) {
@@ -240,12 +236,11 @@ class Sender {
     m.lon_degE7 = 22500000;
     m.alt_mm = 100000;
     const std::vector<std::uint8_t> d = io::mavlink::encode_hil_state_quaternion(m, {seq_++, 1, 1});
-    ::sendto(fd_, d.data(), d.size(), 0, reinterpret_cast<const sockaddr*>(&to_), sizeof to_);
+    (void)socket_.send(d);  // a datagram lost on loopback is what the daemon must cope with
   }
 
  private:
-  int fd_;
-  sockaddr_in to_{};
+  test::LoopbackUdpSender socket_;
   std::uint8_t seq_ = 0;
 };
 
