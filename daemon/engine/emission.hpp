@@ -184,6 +184,8 @@ struct PoseSourceStats {
   std::uint64_t time_jump = 0, resyncs = 0, held = 0;
   // TCP: clients accepted, refused (slot taken), closed idle, replaced while idle.
   std::uint64_t connections = 0, connections_refused = 0, connections_idle_closed = 0, connections_replaced = 0;
+  // MAVLink: packets of a vehicle other than the one the source took (also in rejected).
+  std::uint64_t other_sender = 0;
 };
 
 struct EngineStats {

@@ -80,6 +80,7 @@ EngineStats EmissionEngine::stats() const {
     p.connections_refused = c.connections_refused;
     p.connections_idle_closed = c.connections_idle_closed;
     p.connections_replaced = c.connections_replaced;
+    p.other_sender = c.other_sender;
   }
   s.realtime_priority = m.realtime_priority;
   s.memory_locked = m.memory_locked;
@@ -211,7 +212,8 @@ nlohmann::json to_json(const EngineStats& s) {
                         {"connections", s.pose_source->connections},
                         {"connections_refused", s.pose_source->connections_refused},
                         {"connections_idle_closed", s.pose_source->connections_idle_closed},
-                        {"connections_replaced", s.pose_source->connections_replaced}};
+                        {"connections_replaced", s.pose_source->connections_replaced},
+                        {"other_sender", s.pose_source->other_sender}};
   return j;
 }
 
