@@ -65,6 +65,19 @@ struct EmitOutcome {
   TimeNs accepted_ns = 0;
 };
 
+// What a device that answers its driver counted, and its current settings
+// (status JSON "commands", `imuemu status --summary`).
+struct CommandStatus {
+  std::uint64_t received = 0;        // whole commands taken (valid framing and checksum)
+  std::uint64_t answered = 0;        // acknowledged / replied to with data
+  std::uint64_t nacked = 0;          // refused with the protocol's own error code
+  std::uint64_t not_command_bytes = 0;  // input bytes that were not part of a valid command
+  std::uint64_t replies_dropped = 0; // replies the output could not take
+  std::string mode;                  // e.g. "streaming", "idle"
+  std::string format;                // what it streams: messages, fields, decimation
+  std::uint32_t baud = 0;            // the serial rate it was told to use (0: not a UART setting)
+};
+
 class Device {
  public:
   virtual ~Device() = default;
@@ -103,6 +116,10 @@ class Device {
   virtual drivers::TransportCounters counters() const = 0;
   // The sync pulses' counters; empty without GPIO sync.
   virtual std::optional<drivers::GpioSyncCounters> gpio_counters() const = 0;
+  // A device that reads its port (its driver's commands): what it took and
+  // answered, and the settings its driver left it in; empty for a device
+  // that only sends. Never called on the emission thread.
+  virtual std::optional<CommandStatus> command_status() const { return std::nullopt; }
 
   // --- The emission thread, once per tick with a sample to send ---
   // Encodes the sample with its link faults applied (encode() then

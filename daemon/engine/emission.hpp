@@ -164,6 +164,7 @@ struct DeviceStats {
   std::uint64_t packets = 0, bytes = 0, queue_overflows = 0;  // the transport's own counters
   drivers::TransportCounters transport;
   std::optional<drivers::GpioSyncCounters> gpio;
+  std::optional<device::CommandStatus> commands;  // a device that answers its driver
   live::LiveCounters live;
   LatenessSummary lateness;
   // Live input, causal method: pose arrival -> its first dependent sample

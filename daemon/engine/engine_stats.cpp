@@ -34,6 +34,7 @@ EngineStats EmissionEngine::stats() const {
     ds.bytes = ds.transport.bytes_sent;
     ds.queue_overflows = ds.transport.dropped_queue_full;
     ds.gpio = d.options.device->gpio_counters();
+    ds.commands = d.options.device->command_status();
     {
       std::lock_guard lock(d.live_mutex);
       ds.live = d.live_counters;
@@ -175,6 +176,15 @@ nlohmann::json to_json(const EngineStats& s) {
                    {"max_trailing_edge_delay_ns", d.gpio->max_trailing_edge_delay_ns},
                    {"helper_faults", d.gpio->helper_faults},
                    {"down", d.gpio->down}};
+    if (d.commands)
+      j["commands"] = {{"received", d.commands->received},
+                       {"answered", d.commands->answered},
+                       {"nacked", d.commands->nacked},
+                       {"not_command_bytes", d.commands->not_command_bytes},
+                       {"replies_dropped", d.commands->replies_dropped},
+                       {"mode", d.commands->mode},
+                       {"format", d.commands->format},
+                       {"baud", d.commands->baud}};
     devices.push_back(std::move(j));
   }
   nlohmann::json j{{"devices", std::move(devices)},
