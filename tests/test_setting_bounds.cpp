@@ -295,6 +295,36 @@ TEST(SettingBounds, EveryVibrationSettingAtItsBoundsStaysFinite) {
   }
 }
 
+// Values beyond the part's range saturate and set the flag wherever they
+// come from: a vibration of 3000 deg/s and 30 g on the ICM-42688-P (+-2000
+// deg/s, +-16 g) through its own chain. The sensor saturates each internal
+// sample; the filters' overshoot on the clipped signal (a second-order
+// Butterworth's step response rises ~4 % above its final value) saturates
+// again at the output register: no output beyond the full scale, and every
+// output at it flagged.
+TEST(SettingBounds, VibrationBeyondThePartsRangeSaturatesThroughItsFiltersAndIsFlagged) {
+  using namespace signal_chain;
+  ChainSpec spec;
+  spec.preset = "icm42688p";
+  spec.vibration.sinusoids.push_back(
+      {.frequency_hz = 40.0, .linear_m_s2 = Vec3(0, 30.0 * 9.80665, 0), .angular_rad_s = Vec3(3000.0 * kDeg, 0, 0)});
+  const sensor::SensorModelSpec icm = sensor::preset_spec("icm42688p");
+  DeviceChain chain(SceneModel{}, icm, spec, 1000, "a");
+  int saturated = 0;
+  for (const ChainOutput& o : run_chain(chain, 400, IncrementConvention::raw)) {
+    ASSERT_LE(std::abs(o.gyro_rad_s.x()), icm.gyro.range);
+    ASSERT_LE(std::abs(o.accel_m_s2.y()), icm.accel.range);
+    if (std::abs(o.gyro_rad_s.x()) == icm.gyro.range) {
+      EXPECT_NE(o.saturated_axes & sensor::kGyroX, 0);
+      ++saturated;
+    }
+    if (std::abs(o.accel_m_s2.y()) == icm.accel.range) {
+      EXPECT_NE(o.saturated_axes & sensor::kAccelY, 0);
+    }
+  }
+  EXPECT_GT(saturated, 40);  // 3000 deg/s peaks: clipped for about a third of each period
+}
+
 // ---------------------------------------------------------------- N6
 
 // N6: compensate_delay with a 1e-12 Hz low-pass stamped every sample

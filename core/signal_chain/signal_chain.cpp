@@ -197,7 +197,11 @@ DeviceChain::DeviceChain(const SceneModel& scene, const std::optional<sensor::Se
       chain_(resolve(chain, output_rate_hz)),
       period_s_(1.0 / static_cast<double>(output_rate_hz)),
       filter_(chain_.design) {
-  if (sensor && !sensor->is_ideal()) sensor_.emplace(*sensor, static_cast<double>(chain_.internal_rate_hz), device);
+  if (sensor && !sensor->is_ideal()) {
+    sensor_.emplace(*sensor, static_cast<double>(chain_.internal_rate_hz), device);
+    gyro_range_ = sensor->gyro.range;
+    accel_range_ = sensor->accel.range;
+  }
   if (!chain.vibration.empty()) {
     vibration_.emplace(chain.vibration, device);
     vibration_->set_grid_step(period_s_ / chain_.oversampling);
@@ -285,6 +289,17 @@ ChainOutput DeviceChain::step(std::uint64_t k, const Kinematics& now, const ImuS
         y = filter_.step(y);
       }
     }
+    // The output register holds the part's full scale: a filter's overshoot
+    // on a saturated input (a Butterworth's step response rises ~4 % above
+    // its final value at order 2) saturates there again, flagged.
+    if (!filter_.empty() && (gyro_range_ > 0.0 || accel_range_ > 0.0))
+      for (unsigned c = 0; c < 6; ++c) {
+        const double range = c < 3 ? gyro_range_ : accel_range_;
+        if (range > 0.0 && std::abs(y[c]) > range) {
+          y[c] = std::copysign(range, y[c]);
+          out.saturated_axes = static_cast<std::uint8_t>(out.saturated_axes | (1u << c));
+        }
+      }
     out.gyro_rad_s = Vec3(y[0], y[1], y[2]);
     out.accel_m_s2 = Vec3(y[3], y[4], y[5]);
   }

@@ -118,7 +118,9 @@ struct ChainOutput {
   Vec3 accel_m_s2 = Vec3::Zero();
   Vec3 delta_theta_rad = Vec3::Zero();
   Vec3 delta_velocity_m_s = Vec3::Zero();
-  std::uint8_t saturated_axes = 0;  // any internal sample of the interval saturated (sensor::SaturatedAxis)
+  // Any internal sample of the interval saturated, or the filtered output
+  // reached the sensor's full scale (sensor::SaturatedAxis bits).
+  std::uint8_t saturated_axes = 0;
   bool has_temperature = false;     // a sensor model runs
   double temperature_c = 0.0;
   TimeNs stamp_shift_ns = 0;        // delay compensation: the sample represents t_k - stamp_shift_ns
@@ -158,6 +160,7 @@ class DeviceChain {
   std::uint64_t last_k_ = 0;
   TimeNs stamp_shift_ns_ = 0;
   std::uint64_t ticks_ = 0, internal_samples_ = 0, increment_nodes_ = 0;
+  double gyro_range_ = 0.0, accel_range_ = 0.0;  // the sensor's full scale (0: none)
 };
 
 }  // namespace imuemu::signal_chain
