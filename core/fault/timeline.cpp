@@ -318,7 +318,6 @@ SampleFaults FaultTimeline::step(std::uint64_t k, TimeNs t, SampleValues& values
     out.link.restart = true;
     pending_restart_ = false;
   }
-  std::uint8_t moved = 0;  // axes a fault added to or scaled (bits 0-2 gyro, 3-5 accel)
   std::size_t keep = 0;
   for (std::size_t i = 0; i < entries_.size(); ++i) {
     Entry& e = entries_[i];
@@ -342,7 +341,7 @@ SampleFaults FaultTimeline::step(std::uint64_t k, TimeNs t, SampleValues& values
       ++out.active;
       if (e.spec.flag_status) out.flags |= kFlagFault;
       if (is_sensor_fault(e.spec.kind))
-        apply_sensor(e, k, t, h_s, v, out.flags, moved);
+        apply_sensor(e, k, t, h_s, v, out.flags);
       else
         decide_link(e, k, t, h_s, out.link);
     } else if (e.resolved && t >= e.end_t) {
@@ -358,30 +357,6 @@ SampleFaults FaultTimeline::step(std::uint64_t k, TimeNs t, SampleValues& values
     }
   }
   entries_.erase(entries_.begin() + static_cast<std::ptrdiff_t>(keep), entries_.end());
-  // What a fault moved beyond the part's range saturates there, flagged, as
-  // the sensor model saturates the motion (issue 26, N11: a 1e5 deg/s
-  // bias_step on a +-2000 deg/s part sent 1745 rad/s unflagged, 256
-  // overlapping steps 7.7e6 rad/s): the rate at +-range, the increment at
-  // +-range h, the most a saturated sensor integrates over the period.
-  if (moved != 0) {
-    const DeviceContext& c = options_.context;
-    for (int tri = 0; tri < 2; ++tri) {
-      const double range = tri == 0 ? c.gyro_range_rad_s : c.accel_range_m_s2;
-      for (int a = 0; a < 3; ++a) {
-        if ((moved & (1u << (3 * tri + a))) == 0) continue;
-        double& rate = v[tri][a];
-        double& inc = v[tri + 2][a];
-        if (std::abs(rate) > range) {
-          rate = std::copysign(range, rate);
-          out.flags |= kFlagSaturated;
-        }
-        if (std::abs(inc) > range * h_s) {
-          inc = std::copysign(range * h_s, inc);
-          out.flags |= kFlagSaturated;
-        }
-      }
-    }
-  }
   // Never NaN/Inf out: only a non-finite input gets here (the parameters are
   // bounded, the sums saturate above). Sent as 0, flagged saturated and
   // fault, as the encoders flag a NaN they replace (docs/native-protocol.md
@@ -429,8 +404,8 @@ const FaultTimeline::History* FaultTimeline::delayed(std::uint64_t k_wanted) con
   return best != nullptr ? best : oldest;
 }
 
-void FaultTimeline::apply_sensor(Entry& e, std::uint64_t k, TimeNs t, double h, Vec3 (&v)[4], std::uint32_t& flags,
-                                 std::uint8_t& moved) noexcept {
+void FaultTimeline::apply_sensor(Entry& e, std::uint64_t k, TimeNs t, double h, Vec3 (&v)[4],
+                                 std::uint32_t& flags) noexcept {
   const FaultSpec& s = e.spec;
   const DeviceContext& c = options_.context;
   const bool first = k == e.first_k;
@@ -473,7 +448,6 @@ void FaultTimeline::apply_sensor(Entry& e, std::uint64_t k, TimeNs t, double h, 
                       s.kind == Kind::scale_step || s.kind == Kind::noise_gain || s.kind == Kind::spikes;
     for (int a = 0; a < 3; ++a) {
       if ((s.axes & (1u << a)) == 0) continue;
-      if (adds) moved = static_cast<std::uint8_t>(moved | (1u << (3 * tri + a)));
       const std::uint64_t axis_draw = static_cast<std::uint64_t>(3 * tri + a);
       switch (s.kind) {
         case Kind::stuck:
@@ -543,6 +517,23 @@ void FaultTimeline::apply_sensor(Entry& e, std::uint64_t k, TimeNs t, double h, 
           break;
         default:
           break;
+      }
+      // What this fault moved beyond the part's range saturates there,
+      // flagged, as the sensor model saturates the motion (issue 26, N11: a
+      // 1e5 deg/s bias_step on a +-2000 deg/s part sent 1745 rad/s
+      // unflagged, 256 overlapping steps 7.7e6 rad/s): the rate at +-range,
+      // the increment at +-range h, the most a saturated sensor integrates
+      // over the period. Here, after each fault, so the next one (a stuck or
+      // slow fault holding this sample) never sees a value beyond the range.
+      if (adds) {
+        if (std::abs(rate[a]) > range) {
+          rate[a] = std::copysign(range, rate[a]);
+          flags |= kFlagSaturated;
+        }
+        if (std::abs(inc[a]) > range * h) {
+          inc[a] = std::copysign(range * h, inc[a]);
+          flags |= kFlagSaturated;
+        }
       }
     }
   }

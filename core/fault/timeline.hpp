@@ -254,9 +254,8 @@ class FaultTimeline {
   void draw_random_window(std::uint64_t window);
   void push_event(FaultEvent::Phase phase, const Entry& e, std::uint64_t k, TimeNs t) noexcept;
   void check_fits(const FaultSpec& spec) const;
-  // moved: the axes a fault added to or scaled (they saturate at the range).
-  void apply_sensor(Entry& e, std::uint64_t k, TimeNs t, double h_s, Vec3 (&v)[4], std::uint32_t& flags,
-                    std::uint8_t& moved) noexcept;
+  // A fault that adds or scales saturates the values it moved at the range.
+  void apply_sensor(Entry& e, std::uint64_t k, TimeNs t, double h_s, Vec3 (&v)[4], std::uint32_t& flags) noexcept;
   void decide_link(const Entry& e, std::uint64_t k, TimeNs t, double h_s, LinkDecision& d) const noexcept;
   const History* delayed(std::uint64_t k_wanted) const noexcept;
 
