@@ -83,10 +83,12 @@ TEST(SceneExamples, EveryExampleParsesAndPassesTheCheck) {
       const double window_s = static_cast<double>(c.delta_samples) / static_cast<double>(c.rate_hz);
       EXPECT_GE(static_cast<double>(c.lookahead_ns) * 1e-9, window_s - 1e-9);
       EXPECT_EQ(c.emission_delay_ns - c.lookahead_ns, std::llround(scene.live.margin_s * 1e9));
-      // Stated basis: 1 us per sample per device; a signal chain adds its
-      // internal samples and random vibration components.
+      // Stated basis: 1 us per sample per device plus the chain's work
+      // (increment nodes; internal samples with a sensor model or a chain;
+      // random vibration components).
+      EXPECT_DOUBLE_EQ(c.cpu_fraction, static_cast<double>(scene.imus[i].rate_hz) * (1e-6 + chain_cpu_seconds(c.work)));
       if (scene.imus[i].error_model.chain.is_ideal()) {
-        EXPECT_DOUBLE_EQ(c.cpu_fraction, static_cast<double>(scene.imus[i].rate_hz) * 1e-6);
+        EXPECT_EQ(c.work.vibration_rotations + c.work.vibration_direct, 0.0);
       } else {
         EXPECT_GT(c.oversampling, 1);
         EXPECT_GT(c.cpu_fraction, static_cast<double>(scene.imus[i].rate_hz) * 1e-6 * c.oversampling * 0.3);

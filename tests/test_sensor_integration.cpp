@@ -512,7 +512,8 @@ TEST(ErrorModelConfig, RefusesUnknownUnitlessAndAmbiguousKeysNamingFileLineAndKe
        "imu[0].error_model.gyro.noise_density_dps_rt_hz", "ambiguous", 15},
       {"accel key in gyro", "[imu.error_model.gyro]\nrange_g = 16\n", "imu[0].error_model.gyro.range_g", "unknown key", 14},
       {"bad preset", "preset = \"mpu6050\"\n", "imu[0].error_model.preset", "unknown sensor preset", 13},
-      {"negative", "[imu.error_model.accel]\nvrw_m_s_rt_h = -1\n", "imu[0].error_model", "expected finite values >= 0", 12},
+      {"negative", "[imu.error_model.accel]\nvrw_m_s_rt_h = -1\n", "imu[0].error_model.accel.vrw_m_s_rt_h",
+       "accel.white noise (x) -0.0166667 m/s^2/sqrt(Hz) is not in [0, 0.980665]", 14},
       {"string value", "[imu.error_model.accel]\nrange_g = \"16\"\n", "imu[0].error_model.accel.range_g", "expected a number", 14},
       {"seed", "seed = -3\n", "imu[0].error_model.seed", "integer >= 0", 13},
   };
@@ -572,7 +573,7 @@ TEST(SignalChainConfig, RefusesUnknownKeysAndChainsTheRateCannotRunNamingFileLin
       {"adis at 300 Hz", "preset = \"adis16470\"\n", "imu[0].error_model.signal_chain",
        "does not divide 2000 (at rate_hz 300)", 12},
       {"beyond half the internal rate", "oversampling = 2\n[[imu.error_model.signal_chain.stage]]\nkind = \"butterworth\"\nfrequency_hz = 400\n",
-       "imu[0].error_model.signal_chain", "stage 1 (butterworth): frequency_hz 400", 12},
+       "imu[0].error_model.signal_chain.stage[0].frequency_hz", "stage 1 (butterworth): frequency_hz 400", 16},
       {"stage kind", "[[imu.error_model.signal_chain.stage]]\nkind = \"kalman\"\n",
        "imu[0].error_model.signal_chain.stage[0].kind", "unknown filter kind 'kalman'", 14},
       {"vibration key", "[imu.error_model.signal_chain.vibration]\nbump = 1\n",
@@ -586,12 +587,14 @@ TEST(SignalChainConfig, RefusesUnknownKeysAndChainsTheRateCannotRunNamingFileLin
        "imu[0].error_model.signal_chain.vibration.random_angular.psd_g2_per_hz", "unknown key 'psd_g2_per_hz'", 14},
       {"amplitude scale order", "[imu.error_model.signal_chain.vibration.random]\npsd_g2_per_hz = [[20, 0.01], [500, 0.01]]\n"
        "amplitude_scale = [[5, 1], [2, 3]]\n",
-       "imu[0].error_model.signal_chain.vibration", "amplitude_scale point 2 must have a time after the previous one", 13},
+       "imu[0].error_model.signal_chain.vibration.random.amplitude_scale[1]",
+       "amplitude_scale point 2 must have a time after the previous one", 15},
       {"shock duration", "[[imu.error_model.signal_chain.vibration.shock]]\ntime_s = 2\npeak_g = [0, 0, 20]\nduration_ms = 0\n",
-       "imu[0].error_model.signal_chain.vibration", "shock 1: time_s must be >= 0, duration and return > 0", 13},
+       "imu[0].error_model.signal_chain.vibration.shock[0].duration_ms", "shock 1: duration_s 0 s is not in [1e-05, 10] s", 16},
       {"rotor speed order", "[[imu.error_model.signal_chain.vibration.rotor]]\nspeed_rpm = [[0, 3000], [0, 4000]]\n"
        "[[imu.error_model.signal_chain.vibration.rotor.harmonic]]\norder = 1\n",
-       "imu[0].error_model.signal_chain.vibration", "rotor 1: speed point 2 must have a time after the previous one", 13},
+       "imu[0].error_model.signal_chain.vibration.rotor[0].speed_rpm[1]",
+       "rotor 1: speed point 2 must have a time after the previous one", 14},
       {"rotor harmonic key", "[[imu.error_model.signal_chain.vibration.rotor]]\nspeed_rpm = 6000\n"
        "[[imu.error_model.signal_chain.vibration.rotor.harmonic]]\norder = 2\namplitude = 1\n",
        "imu[0].error_model.signal_chain.vibration.rotor[0].harmonic[0].amplitude", "unknown key 'amplitude'", 17},
@@ -599,9 +602,10 @@ TEST(SignalChainConfig, RefusesUnknownKeysAndChainsTheRateCannotRunNamingFileLin
        "imu[0].error_model.signal_chain.vibration.rotor[0].harmonic", "expected [[...harmonic]] tables", 13},
       {"rotor jitter", "[[imu.error_model.signal_chain.vibration.rotor]]\nspeed_rpm = 600\njitter_rpm = 100\n"
        "[[imu.error_model.signal_chain.vibration.rotor.harmonic]]\norder = 1\n",
-       "imu[0].error_model.signal_chain.vibration", "rotor 1: jitter_rpm 100", 13},
+       "imu[0].error_model.signal_chain.vibration.rotor[0].jitter_rpm", "rotor 1: jitter_rpm 100", 15},
       {"psd order", "[imu.error_model.signal_chain.vibration.random]\npsd_g2_per_hz = [[100, 0.01], [50, 0.02]]\n",
-       "imu[0].error_model.signal_chain.vibration", "PSD point 2 must have a frequency above the previous one", 13},
+       "imu[0].error_model.signal_chain.vibration.random.psd_g2_per_hz[1]",
+       "PSD point 2 must have a frequency above the previous one", 14},
   };
   expect_refused(head, cases);
   const scene::SceneConfig ok = scene::parse_scene_text(

@@ -357,10 +357,16 @@ SampleFaults FaultTimeline::step(std::uint64_t k, TimeNs t, SampleValues& values
     }
   }
   entries_.erase(entries_.begin() + static_cast<std::ptrdiff_t>(keep), entries_.end());
-  // Never NaN/Inf out (finite input, bounded parameters; a guard all the same).
+  // Never NaN/Inf out: only a non-finite input gets here (the parameters are
+  // bounded, the sums saturate above). Sent as 0, flagged saturated and
+  // fault, as the encoders flag a NaN they replace (docs/native-protocol.md
+  // section 5), so zeroing it here hides nothing from the receiver.
   for (Vec3& x : v)
     for (int a = 0; a < 3; ++a)
-      if (!std::isfinite(x[a])) x[a] = 0.0;
+      if (!std::isfinite(x[a])) {
+        x[a] = 0.0;
+        out.flags |= kFlagSaturated | kFlagFault;
+      }
   values.gyro_rad_s = v[0];
   values.accel_m_s2 = v[1];
   values.delta_theta_rad = v[2];
@@ -437,6 +443,9 @@ void FaultTimeline::apply_sensor(Entry& e, std::uint64_t k, TimeNs t, double h, 
     const double bias = tri == 0 ? s.gyro_bias_rad_s : s.accel_bias_m_s2;
     const double ramp = tri == 0 ? s.gyro_ramp_rad_s2 : s.accel_ramp_m_s3;
     const Vec3& density = tri == 0 ? c.gyro_noise_density : c.accel_noise_density;
+    // The kinds that add to or scale the value can take it beyond the range.
+    const bool adds = s.kind == Kind::bias_step || s.kind == Kind::bias_ramp || s.kind == Kind::plausible_drift ||
+                      s.kind == Kind::scale_step || s.kind == Kind::noise_gain || s.kind == Kind::spikes;
     for (int a = 0; a < 3; ++a) {
       if ((s.axes & (1u << a)) == 0) continue;
       const std::uint64_t axis_draw = static_cast<std::uint64_t>(3 * tri + a);
@@ -508,6 +517,23 @@ void FaultTimeline::apply_sensor(Entry& e, std::uint64_t k, TimeNs t, double h, 
           break;
         default:
           break;
+      }
+      // What this fault moved beyond the part's range saturates there,
+      // flagged, as the sensor model saturates the motion (issue 26, N11: a
+      // 1e5 deg/s bias_step on a +-2000 deg/s part sent 1745 rad/s
+      // unflagged, 256 overlapping steps 7.7e6 rad/s): the rate at +-range,
+      // the increment at +-range h, the most a saturated sensor integrates
+      // over the period. Here, after each fault, so the next one (a stuck or
+      // slow fault holding this sample) never sees a value beyond the range.
+      if (adds) {
+        if (std::abs(rate[a]) > range) {
+          rate[a] = std::copysign(range, rate[a]);
+          flags |= kFlagSaturated;
+        }
+        if (std::abs(inc[a]) > range * h) {
+          inc[a] = std::copysign(range * h, inc[a]);
+          flags |= kFlagSaturated;
+        }
       }
     }
   }

@@ -60,13 +60,18 @@ namespace imuemu::fault {
 // (imuemud: kFlagFault -> drivers::kStatusFault, kFlagSaturated ->
 // drivers::kStatusSaturated). Core does not know the drivers.
 enum FaultFlag : std::uint32_t {
-  kFlagSaturated = 1u << 0,  // a saturation fault forced a value to the range
+  // A value at the range: a saturation fault forced it there, or a fault that
+  // adds or scales (bias_step, bias_ramp, plausible_drift, scale_step,
+  // noise_gain, spikes) moved it beyond and it saturated (also with
+  // kFlagFault: a non-finite input sent as 0).
+  kFlagSaturated = 1u << 0,
   kFlagFault = 1u << 1,      // an active fault with flag_status
 };
 
-// garbage and saturation act within the sensor's range: the sensor model's
-// range where it has one, else these (a common MEMS IMU's widest setting,
-// e.g. ICM-42688-P: +-2000 deg/s, +-16 g).
+// garbage and saturation act within the sensor's range, and the faults that
+// add or scale saturate at it: the sensor model's range where it has one,
+// else these (a common MEMS IMU's widest setting, e.g. ICM-42688-P:
+// +-2000 deg/s, +-16 g).
 inline constexpr double kDefaultGyroRangeRadS = 2000.0 * 3.14159265358979323846 / 180.0;
 inline constexpr double kDefaultAccelRangeMS2 = 16.0 * 9.80665;
 
@@ -249,6 +254,7 @@ class FaultTimeline {
   void draw_random_window(std::uint64_t window);
   void push_event(FaultEvent::Phase phase, const Entry& e, std::uint64_t k, TimeNs t) noexcept;
   void check_fits(const FaultSpec& spec) const;
+  // A fault that adds or scales saturates the values it moved at the range.
   void apply_sensor(Entry& e, std::uint64_t k, TimeNs t, double h_s, Vec3 (&v)[4], std::uint32_t& flags) noexcept;
   void decide_link(const Entry& e, std::uint64_t k, TimeNs t, double h_s, LinkDecision& d) const noexcept;
   const History* delayed(std::uint64_t k_wanted) const noexcept;

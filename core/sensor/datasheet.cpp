@@ -116,26 +116,10 @@ std::string term_of(Triad triad, const std::string& key) {
   return "";
 }
 
-void apply_key(SensorModelSpec& spec, Triad triad, const std::string& key, const std::vector<double>& values) {
-  const KeyInfo* info = nullptr;
-  for (const KeyInfo& k : datasheet_keys())
-    if (k.triad == triad && k.key == key) info = &k;
-  if (info == nullptr) {
-    // A key naming a term without its unit ("noise_density", "bias_instability")
-    // is refused with the keys that carry one: a number without a unit is ambiguous.
-    std::string with_units;
-    for (const KeyInfo& k : datasheet_keys())
-      if (k.triad == triad && k.key.rfind(key + "_", 0) == 0) {
-        if (!with_units.empty()) with_units += ", ";
-        with_units += k.key;
-      }
-    if (!with_units.empty())
-      throw std::invalid_argument("'" + key + "' has no unit; write one of " + with_units);
-    throw std::invalid_argument("unknown key '" + key + "'; allowed: " + join_keys(triad));
-  }
-  for (double v : values)
-    if (!std::isfinite(v)) throw std::invalid_argument(key + ": expected finite numbers");
-  TriadSpec& s = triad == Triad::gyro ? spec.gyro : spec.accel;
+namespace {
+
+// Sets the term of one key (values finite, the key known).
+void set_term(TriadSpec& s, const KeyInfo* info, const std::string& key, const std::vector<double>& values) {
   const double f = info->to_si;
   auto one = [&]() {
     if (values.size() != 1) throw std::invalid_argument(key + ": expected one number (" + info->unit + ")");
@@ -165,9 +149,45 @@ void apply_key(SensorModelSpec& spec, Triad triad, const std::string& key, const
   else throw std::invalid_argument(key + ": expected one number (all axes) or three (x, y, z), " + info->unit);
 }
 
+}  // namespace
+
+void apply_key(SensorModelSpec& spec, Triad triad, const std::string& key, const std::vector<double>& values) {
+  const KeyInfo* info = nullptr;
+  for (const KeyInfo& k : datasheet_keys())
+    if (k.triad == triad && k.key == key) info = &k;
+  if (info == nullptr) {
+    // A key naming a term without its unit ("noise_density", "bias_instability")
+    // is refused with the keys that carry one: a number without a unit is ambiguous.
+    std::string with_units;
+    for (const KeyInfo& k : datasheet_keys())
+      if (k.triad == triad && k.key.rfind(key + "_", 0) == 0) {
+        if (!with_units.empty()) with_units += ", ";
+        with_units += k.key;
+      }
+    if (!with_units.empty())
+      throw std::invalid_argument("'" + key + "' has no unit; write one of " + with_units);
+    throw std::invalid_argument("unknown key '" + key + "'; allowed: " + join_keys(triad));
+  }
+  for (double v : values)
+    if (!std::isfinite(v)) throw std::invalid_argument(key + ": expected finite numbers");
+  TriadSpec& s = triad == Triad::gyro ? spec.gyro : spec.accel;
+  // The term set, then checked against its bounds (validate_term: the check
+  // validate() makes, reported here at the key that set it). A refused value
+  // leaves the spec as it was.
+  const TriadSpec before = s;
+  try {
+    set_term(s, info, key, values);
+    validate_term(s, triad == Triad::gyro, info->term);
+  } catch (...) {
+    s = before;
+    throw;
+  }
+}
+
 void apply_temperature_key(SensorModelSpec& spec, const std::string& key, double value) {
   if (!std::isfinite(value)) throw std::invalid_argument(key + ": expected a finite number");
   TemperatureSpec& t = spec.temperature;
+  const TemperatureSpec before = t;
   if (key == "reference_c") t.reference_c = value;
   else if (key == "constant_c") t.start_c = t.end_c = value, t.warmup_tau_s = 0.0;
   else if (key == "start_c") t.start_c = value;
@@ -177,6 +197,12 @@ void apply_temperature_key(SensorModelSpec& spec, const std::string& key, double
     t.warmup_tau_s = value;
   } else {
     throw std::invalid_argument("unknown key '" + key + "'; allowed: reference_c, constant_c, start_c, end_c, warmup_tau_s");
+  }
+  try {
+    validate_temperature(t);  // the bounds validate() checks
+  } catch (...) {
+    t = before;
+    throw;
   }
 }
 

@@ -7,6 +7,8 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "core/setting_error.hpp"
+
 namespace imuemu::sensor {
 namespace {
 
@@ -67,35 +69,22 @@ std::string fmt3(const Vec3& v) {
   return out;
 }
 
-bool finite(const Vec3& v) { return v.allFinite(); }
-bool nonneg(const Vec3& v) { return (v.array() >= 0.0).all(); }
 
-void validate_triad(const TriadSpec& s, const std::string& who) {
+void validate_triad(const TriadSpec& s, bool gyro) {
+  const std::string who = gyro ? "gyro" : "accel";
   auto need = [&](bool ok, const std::string& field, const std::string& what) {
     if (!ok) throw std::invalid_argument(who + "." + field + ": " + what);
   };
-  const Vec3* nonneg_fields[] = {&s.white_density, &s.bias_instability, &s.random_walk, &s.gauss_markov_sigma,
-                                 &s.turn_on_bias_sigma};
-  const char* nonneg_names[] = {"white noise density", "bias instability", "random walk", "Gauss-Markov sigma",
-                                "turn-on bias sigma"};
-  for (int i = 0; i < 5; ++i)
-    need(finite(*nonneg_fields[i]) && nonneg(*nonneg_fields[i]), nonneg_names[i], "expected finite values >= 0");
-  for (const Vec3* v : {&s.ramp, &s.turn_on_bias, &s.scale_factor, &s.scale_factor_asymmetry, &s.nonlinearity,
-                        &s.misalignment_rad, &s.non_orthogonality_rad, &s.bias_temperature_coeff,
-                        &s.scale_factor_temperature_coeff})
-    need(finite(*v), "terms", "expected finite values");
-  need(s.g_sensitivity.allFinite(), "g sensitivity", "expected finite values");
-  need((s.gauss_markov_tau_s.array() > 0.0).all() && finite(s.gauss_markov_tau_s), "Gauss-Markov tau",
-       "expected finite values > 0 s");
-  need(std::isfinite(s.lsb) && s.lsb >= 0.0, "lsb", "expected a finite value >= 0");
-  need(std::isfinite(s.range) && s.range >= 0.0, "range", "expected a finite value >= 0");
+  for (const char* term : {"white noise", "bias instability", "flicker tau min", "flicker tau max", "random walk", "ramp",
+                           "Gauss-Markov sigma", "Gauss-Markov tau", "turn-on bias", "turn-on bias sigma",
+                           "scale factor", "scale factor asymmetry", "nonlinearity", "misalignment",
+                           "non-orthogonality", "g-sensitivity", "bias temperature coefficient",
+                           "scale factor temperature coefficient", "quantisation", "saturation"})
+    validate_term(s, gyro, term);
   need(s.range == 0.0 || s.lsb <= s.range, "lsb", "is larger than the range");
   need(s.nonlinearity.isZero() || s.range > 0.0, "nonlinearity", "is a fraction of full scale: needs a range");
-  need((s.scale_factor.array() > -1.0).all(), "scale factor", "must stay above -100 %");
   if (!s.bias_instability.isZero()) {
-    need(std::isfinite(s.flicker_tau_min_s) && std::isfinite(s.flicker_tau_max_s) && s.flicker_tau_min_s > 0.0 &&
-             s.flicker_tau_min_s < s.flicker_tau_max_s,
-         "bias instability tau range", "expected 0 < tau_min < tau_max");
+    need(s.flicker_tau_min_s < s.flicker_tau_max_s, "bias instability tau range", "expected 0 < tau_min < tau_max");
     need(std::log10(s.flicker_tau_max_s / s.flicker_tau_min_s) <= kMaxFlickerDecades + 1e-9, "bias instability tau range",
          "spans more than " + std::to_string(kMaxFlickerDecades) + " decades");
   }
@@ -124,14 +113,83 @@ bool SensorModelSpec::is_ideal() const {
   return same(gyro, ideal.gyro) && same(accel, ideal.accel);
 }
 
+void validate_term(const TriadSpec& s, bool gyro, const std::string& term) {
+  const TriadBounds& b = gyro ? kGyroBounds : kAccelBounds;
+  const std::string key = std::string(gyro ? "gyro." : "accel.") + term;
+  const char* unit = gyro ? "rad/s" : "m/s^2";
+  // One bound per term: [0, hi] (a sigma or density) or |x| <= hi (signed).
+  auto at_most = [&](const Vec3& v, double hi, const char* u, const char* why) {
+    require_within(key, key, v, {0.0, hi, u, why});
+  };
+  auto signed_within = [&](const Vec3& v, double hi, const char* u, const char* why) {
+    require_magnitude(key, key, v, {0.0, hi, u, why});
+  };
+  const char* full_scale_why = gyro ? "the widest gyro, ADXRS649, reads +-20,000 deg/s"
+                                    : "the widest accelerometer, H3LIS331DL, reads +-400 g";
+  const char* bias_why = gyro ? "within the widest gyro's full scale, +-20,000 deg/s"
+                              : "within the widest accelerometer's full scale, +-400 g";
+  if (term == "white noise") {
+    at_most(s.white_density, b.white_density, gyro ? "rad/s/sqrt(Hz)" : "m/s^2/sqrt(Hz)",
+            gyro ? "10 deg/s/sqrt(Hz): ~300x the noisiest consumer MEMS gyro"
+                 : "100 mg/sqrt(Hz): ~300x the noisiest consumer MEMS accelerometer");
+  } else if (term == "bias instability" || term == "Gauss-Markov sigma") {
+    at_most(term == "bias instability" ? s.bias_instability : s.gauss_markov_sigma, b.bias, unit, bias_why);
+  } else if (term == "random walk") {
+    at_most(s.random_walk, b.bias, gyro ? "rad/s/sqrt(s)" : "m/s^2/sqrt(s)", bias_why);
+  } else if (term == "ramp") {
+    signed_within(s.ramp, b.ramp, gyro ? "rad/s^2" : "m/s^3", gyro ? "1 deg/s per s" : "10 mg per s");
+  } else if (term == "flicker tau min" || term == "flicker tau max") {
+    require_within(key, key, term == "flicker tau min" ? s.flicker_tau_min_s : s.flicker_tau_max_s,
+                   {kMinTauS, kMaxTauS, "s", "Allan floors lie at 1..1e5 s"});
+  } else if (term == "Gauss-Markov tau") {
+    require_within(key, key, s.gauss_markov_tau_s, {kMinTauS, kMaxTauS, "s", "a bias process' correlation time"});
+  } else if (term == "turn-on bias") {
+    signed_within(s.turn_on_bias, b.full_scale, unit, full_scale_why);
+  } else if (term == "turn-on bias sigma") {
+    at_most(s.turn_on_bias_sigma, b.full_scale, unit, full_scale_why);
+  } else if (term == "scale factor") {
+    signed_within(s.scale_factor, kMaxScaleFactor, "", "+-100 %; MEMS parts: 0.5..3 %");
+    if (!(s.scale_factor.array() > -1.0).all()) throw SettingError(key, key + ": must stay above -100 %");
+  } else if (term == "scale factor asymmetry" || term == "nonlinearity") {
+    signed_within(term == "nonlinearity" ? s.nonlinearity : s.scale_factor_asymmetry, kMaxScaleFactor, "",
+                  "+-100 %");
+  } else if (term == "misalignment" || term == "non-orthogonality") {
+    signed_within(term == "misalignment" ? s.misalignment_rad : s.non_orthogonality_rad, kMaxMisalignmentRad, "rad",
+                  "5.7 deg: datasheets give +-1 deg, and the model is first order in the angles");
+  } else if (term == "g-sensitivity") {
+    for (int r = 0; r < 3; ++r)
+      signed_within(s.g_sensitivity.row(r).transpose(), kMaxGSensitivity, "rad/s per m/s^2",
+                    "56 deg/s/g; MEMS gyros: 0.005..0.1 deg/s/g");
+  } else if (term == "bias temperature coefficient") {
+    signed_within(s.bias_temperature_coeff, b.bias_temperature_coeff, gyro ? "rad/s/K" : "m/s^2/K",
+                  gyro ? "1 deg/s per K; MEMS: ~0.01" : "10 mg per K; MEMS: ~0.15 mg");
+  } else if (term == "scale factor temperature coefficient") {
+    signed_within(s.scale_factor_temperature_coeff, kMaxScaleFactorTemperatureCoeff, "1/K",
+                  "10,000 ppm/K; MEMS: 100..300 ppm/K");
+  } else if (term == "quantisation" || term == "saturation") {
+    const double v = term == "quantisation" ? s.lsb : s.range;
+    if (v != 0.0)
+      require_within(key, key, v, {kMinLsb, b.full_scale, unit,
+                                   term == "quantisation" ? "0 for none; from 1e-12 (the rounding stays exact) to the widest full scale"
+                                                          : full_scale_why});
+  }
+}
+
+void validate_temperature(const TemperatureSpec& t) {
+  const SettingBound degrees{kMinTemperatureC, kMaxTemperatureC, "degC",
+                             "above absolute zero, below solder reflow's 260 degC peak (J-STD-020)"};
+  require_within("temperature.reference_c", "temperature: reference_c", t.reference_c, degrees);
+  require_within("temperature.start_c", "temperature: start_c", t.start_c, degrees);
+  require_within("temperature.end_c", "temperature: end_c", t.end_c, degrees);
+  require_within("temperature.warmup_tau_s", "temperature: warmup_tau_s", t.warmup_tau_s,
+                 {0.0, kMaxTauS, "s", "0 for a constant temperature"});
+}
+
 void validate(const SensorModelSpec& spec) {
-  validate_triad(spec.gyro, "gyro");
-  validate_triad(spec.accel, "accel");
+  validate_triad(spec.gyro, true);
+  validate_triad(spec.accel, false);
   if (!spec.accel.g_sensitivity.isZero()) throw std::invalid_argument("accel.g sensitivity: applies to the gyro only");
-  const TemperatureSpec& t = spec.temperature;
-  if (!std::isfinite(t.reference_c) || !std::isfinite(t.start_c) || !std::isfinite(t.end_c) ||
-      !std::isfinite(t.warmup_tau_s) || t.warmup_tau_s < 0.0)
-    throw std::invalid_argument("temperature: expected finite temperatures and warmup tau >= 0 s");
+  validate_temperature(spec.temperature);
 }
 
 std::uint64_t Stream::next() noexcept { return mix64(state += kGamma); }
@@ -372,7 +430,14 @@ Vec3 SensorModel::finish(const Triad& tr, const Vec3& in_axes, const Vec3& bias,
   if (tr.nonlinear) y += (tr.nonlinear_k2.array() * in_axes.array().square()).matrix();
   y += bias + tr.turn_on + s.ramp * t_s + s.bias_temperature_coeff * dT;
   for (int a = 0; a < 3; ++a) {
-    if (!std::isfinite(y[a])) y[a] = 0.0;  // never NaN/Inf downstream (only reachable from a non-finite input)
+    if (!std::isfinite(y[a])) {
+      // Every term is bounded (validate), so only a non-finite input gets
+      // here: never NaN/Inf downstream, and never a silent 0 (issue 26, N5:
+      // a level unit read 0 g with status 0): 0 with the axis flagged.
+      sat = static_cast<std::uint8_t>(sat | (1u << (sat_shift + static_cast<unsigned>(a))));
+      y[a] = 0.0;
+      continue;
+    }
     if (tr.saturation > 0.0 && std::abs(y[a]) > tr.saturation) {
       // Beyond the range: exactly the largest value the sensor can report
       // (the range, or its largest multiple of the LSB), flagged.

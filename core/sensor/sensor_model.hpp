@@ -97,11 +97,64 @@ struct SensorModelSpec {
   bool is_ideal() const;  // no term on: callers skip the stage entirely
 };
 
+// Bounds of the terms (issue 26, N12: a bias instability of 1e308 deg/s or a
+// temperature of 1e308 degC made every output non-finite, then zero; a noise
+// density of 1e308 was accepted). Each is far beyond any datasheet, so it
+// refuses only what no part is, and within them every term the model
+// computes is finite (docs/sensor-models.md "Bounds"). Per triad, SI:
+struct TriadBounds {
+  // The widest full scale of any part: ADXRS649 +-20,000 deg/s (349 rad/s),
+  // H3LIS331DL +-400 g. Range, turn-on bias and its sigma stay within it.
+  double full_scale;
+  // White noise density: ~300x the noisiest consumer MEMS (gyro ~0.03
+  // deg/s/sqrt(Hz), MPU-6050 accel 400 ug/sqrt(Hz); the ICM-42688-P has
+  // 2.8 mdps/sqrt(Hz), 70 ug/sqrt(Hz)): 10 deg/s/sqrt(Hz), 100 mg/sqrt(Hz).
+  double white_density;
+  // Bias instability, Gauss-Markov sigma and random walk (per sqrt(s)):
+  // within the widest full scale (a bias process beyond it reads nothing
+  // but saturation; a consumer MEMS's in-run stability is ~1e-5 of it).
+  double bias;
+  // Rate ramp: 1 deg/s per s, 10 mg per s.
+  double ramp;
+  // Bias temperature coefficient: 1 deg/s per K, 10 mg per K (MEMS: ~0.01
+  // deg/s/K, ~0.15 mg/K).
+  double bias_temperature_coeff;
+};
+inline constexpr TriadBounds kGyroBounds{20000.0 * 3.14159265358979323846 / 180.0, 10.0 * 3.14159265358979323846 / 180.0,
+                                         20000.0 * 3.14159265358979323846 / 180.0, 3.14159265358979323846 / 180.0,
+                                         3.14159265358979323846 / 180.0};
+inline constexpr TriadBounds kAccelBounds{400.0 * 9.80665, 0.1 * 9.80665, 400.0 * 9.80665, 0.01 * 9.80665, 0.01 * 9.80665};
+// Dimensionless terms: scale factor in (-1, 1] and its asymmetry and the
+// nonlinearity within +-1 (100 %; MEMS: 0.5..3 %); scale factor temperature
+// coefficient within +-1e-2 per K (MEMS: 100..300 ppm/K); misalignment and
+// non-orthogonality within +-0.1 rad (5.7 deg; datasheets give +-1 deg, and
+// the first-order model of the axes holds for small angles only); the
+// gyro's g-sensitivity within +-0.1 rad/s per m/s^2 (56 deg/s/g; MEMS: 0.005..0.1 deg/s/g).
+inline constexpr double kMaxScaleFactor = 1.0, kMaxScaleFactorTemperatureCoeff = 1e-2, kMaxMisalignmentRad = 0.1,
+                        kMaxGSensitivity = 0.1;
+// Time constants: flicker range and Gauss-Markov tau in [1e-3, 1e8] s (Allan
+// floors lie at 1..1e5 s; the HG9900 preset's reaches 1e5 s).
+inline constexpr double kMinTauS = 1e-3, kMaxTauS = 1e8;
+// Quantisation step: at least 1e-12 unit, so y / lsb stays below 2^53 (the
+// rounding exact) for any value within full_scale.
+inline constexpr double kMinLsb = 1e-12;
+// Temperatures: above absolute zero and below 300 degC (solder reflow peaks
+// at 260 degC, J-STD-020; parts operate within -40..+125 degC).
+inline constexpr double kMinTemperatureC = -273.15, kMaxTemperatureC = 300.0;
+
 // Throws std::invalid_argument naming the field for a spec the model refuses
-// (negative sigma, tau <= 0, tau_min >= tau_max, a flicker range of more than
-// kMaxFlickerDecades decades, nonlinearity without a range, non-finite
-// values, lsb > range).
+// (a term outside its bounds above, negative sigma, tau_min >= tau_max, a
+// flicker range of more than kMaxFlickerDecades decades, nonlinearity
+// without a range, non-finite values, lsb > range).
 void validate(const SensorModelSpec& spec);
+// One term of one triad against its bounds (term as core/sensor/datasheet.hpp
+// names them: "white noise", "bias instability", "flicker tau min", ...,
+// "saturation"; an unknown term is not checked): the check validate() makes,
+// so a parser can report it at the key that set the term. Throws
+// SettingError (core/setting_error.hpp), key "gyro.<term>" or "accel.<term>".
+void validate_term(const TriadSpec& spec, bool gyro, const std::string& term);
+// The temperature profile against its bounds (what validate() checks).
+void validate_temperature(const TemperatureSpec& spec);
 
 // Flicker: kFlickerPerDecade processes per decade over the range plus
 // kFlickerBelow below tau_min and kFlickerAbove above tau_max.

@@ -4,6 +4,8 @@
 #include <numbers>
 #include <stdexcept>
 
+#include "core/setting_error.hpp"
+
 namespace imuemu::signal_chain {
 
 namespace {
@@ -97,15 +99,28 @@ Design design(const std::vector<Stage>& stages, double fs_hz) {
   for (std::size_t i = 0; i < stages.size(); ++i) {
     const Stage& s = stages[i];
     const std::string where = stage_name(i) + " (" + to_string(s.kind) + "): ";
+    const std::string key = "stage[" + std::to_string(i) + "].";
     const bool recursive = s.kind != StageKind::average && s.kind != StageKind::bartlett;
-    if (recursive && !(s.frequency_hz > 0.0 && s.frequency_hz < 0.5 * fs_hz))
-      throw std::invalid_argument(where + "frequency_hz " + std::to_string(s.frequency_hz) +
-                                  " is not in (0, " + std::to_string(0.5 * fs_hz) +
-                                  ") (half the internal rate; raise oversampling)");
-    if (!(s.q >= 0.0) || !std::isfinite(s.q)) throw std::invalid_argument(where + "q must be >= 0");
+    const double lowest_hz = kMinCornerFraction * fs_hz;
+    if (recursive && !(s.frequency_hz >= lowest_hz && s.frequency_hz < 0.5 * fs_hz))
+      throw SettingError(key + "frequency_hz",
+                         where + "frequency_hz " + setting_number(s.frequency_hz) + " Hz is not in [" +
+                             setting_number(lowest_hz) + ", " + setting_number(0.5 * fs_hz) + ") Hz (" +
+                             (s.frequency_hz >= lowest_hz ? "below half the internal rate; raise oversampling"
+                                                          : "at least 1e-5 of the internal rate: below it the design's "
+                                                            "rounding moves its DC gain by more than 0.1 ppm") +
+                             ")");
+    if (!(s.q >= 0.0) || !std::isfinite(s.q)) throw SettingError(key + "q", where + "q must be >= 0");
+    // Where q is read: the anti-alias stage (0: Butterworth) and the notch.
+    const bool reads_q = (s.kind == StageKind::anti_alias && s.q != 0.0) || s.kind == StageKind::notch;
+    if (reads_q && !(s.q >= kMinQ && s.q <= kMaxQ))
+      throw SettingError(key + "q", where + "q " + setting_number(s.q) + " is not in [" + setting_number(kMinQ) + ", " +
+                                        setting_number(kMaxQ) +
+                                        "] (the ICM-42688-P notch spans Q 0.7..300; above 1000 a resonator, below "
+                                        "0.05 two real poles a decade apart)");
     switch (s.kind) {
       case StageKind::low_pass:
-        if (s.order < 1 || s.order > 3) throw std::invalid_argument(where + "order must be 1, 2 or 3");
+        if (s.order < 1 || s.order > 3) throw SettingError(key + "order", where + "order must be 1, 2 or 3");
         for (const Biquad& b : butterworth(s.order, s.frequency_hz, fs_hz)) d.sections.push_back(b);
         break;
       case StageKind::anti_alias:
@@ -113,17 +128,16 @@ Design design(const std::vector<Stage>& stages, double fs_hz) {
         break;
       case StageKind::butterworth:
         if (s.order < 1 || s.order > kMaxButterworthOrder)
-          throw std::invalid_argument(where + "order must be in 1.." + std::to_string(kMaxButterworthOrder));
+          throw SettingError(key + "order", where + "order must be in 1.." + std::to_string(kMaxButterworthOrder));
         for (const Biquad& b : butterworth(s.order, s.frequency_hz, fs_hz)) d.sections.push_back(b);
         break;
       case StageKind::notch:
-        if (!(s.q > 0.0)) throw std::invalid_argument(where + "q must be > 0 (centre frequency / -3 dB width)");
         d.sections.push_back(notch(s.frequency_hz, s.q, fs_hz));
         break;
       case StageKind::average:
       case StageKind::bartlett:
         if (s.length < 1 || s.length > kMaxAverageLength)
-          throw std::invalid_argument(where + "length must be in 1.." + std::to_string(kMaxAverageLength));
+          throw SettingError(key + "length", where + "length must be in 1.." + std::to_string(kMaxAverageLength));
         if (s.length > 1) {
           d.averages.push_back(s.length);
           if (s.kind == StageKind::bartlett) d.averages.push_back(s.length);

@@ -49,6 +49,24 @@ struct Stage {
 
 inline constexpr int kMaxButterworthOrder = 16;
 inline constexpr int kMaxAverageLength = 4096;
+// The lowest corner (or notch centre) a recursive stage takes, as a fraction
+// of the internal rate fs. The bilinear design's denominator at DC,
+// 1 + a1 + a2 = 4 K^2 / (1 + K/Q + K^2) with K = tan(pi fc / fs), is the
+// difference of numbers near 2 and 1: rounded to eps = 2.2e-16 it moves the
+// stage's DC gain by about eps / (4 K^2), 0.1 ppm at fc = 1e-5 fs (below
+// the 5 ppm scale factor of a navigation-grade gyro, HG9900), 100 % at
+// 3e-9 fs, and 0/0 (NaN) once K^2 underflows (issue 26, N5: a low-pass at
+// 1e-300 Hz). No datasheet filter comes near: the ICM-42688-P's narrowest UI
+// filter is max(400 Hz, ODR)/40 (GYRO_UI_FILT_BW = 7, GYRO_ACCEL_CONFIG0),
+// 10 Hz, 1.25e-3 of its 8 kHz preset rate; the ADIS16470's Bartlett and
+// decimation filters are FIR.
+inline constexpr double kMinCornerFraction = 1e-5;
+// Quality factor of the anti-alias and notch stages: the ICM-42688-P's notch
+// (DS-000347 §5.1, GYRO_NF_BW_SEL) spans bandwidths of 1449 Hz to 10 Hz
+// at centres of 1-3 kHz, Q of 0.7 to 300; a second-order low-pass above
+// Q = 1000 is a resonator 60 dB above its DC gain, below 0.05 two real poles
+// more than a decade apart (and K/Q overflows at Q = 1e-300).
+inline constexpr double kMinQ = 0.05, kMaxQ = 1000.0;
 
 // A chain designed at one sampling rate.
 struct Design {
@@ -58,9 +76,10 @@ struct Design {
   bool empty() const { return sections.empty() && averages.empty(); }
 };
 
-// Designs `stages` at fs. Throws std::invalid_argument naming "stage N" and
-// the field for a stage the design refuses (frequency not in (0, fs/2),
-// order or length out of range, q < 0).
+// Designs `stages` at fs. Throws SettingError (core/setting_error.hpp; key
+// "stage[i].field") naming "stage N" and the field for a stage the design
+// refuses (frequency not in [kMinCornerFraction fs, fs/2), order or length
+// out of range, q outside [kMinQ, kMaxQ] where it is read, q < 0).
 Design design(const std::vector<Stage>& stages, double sample_rate_hz);
 
 // Single designs (exposed for tests and presets).

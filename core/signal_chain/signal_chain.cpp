@@ -5,6 +5,8 @@
 #include <cstdio>
 #include <stdexcept>
 
+#include "core/setting_error.hpp"
+
 namespace imuemu::signal_chain {
 
 namespace {
@@ -99,8 +101,8 @@ ResolvedChain resolve(const ChainSpec& spec, std::int64_t output_rate_hz) {
   c.preset = spec.preset;
   c.oversampling = spec.oversampling.value_or(p.oversampling);
   if (c.oversampling < 1 || c.oversampling > kMaxOversampling)
-    throw std::invalid_argument("signal chain: oversampling " + std::to_string(c.oversampling) + " is not in 1.." +
-                                std::to_string(kMaxOversampling));
+    throw SettingError("oversampling", "signal chain: oversampling " + std::to_string(c.oversampling) + " is not in 1.." +
+                                           std::to_string(kMaxOversampling));
   if (output_rate_hz > 1'000'000 / c.oversampling)
     throw std::invalid_argument("signal chain: internal rate " + std::to_string(output_rate_hz) + " Hz x " +
                                 std::to_string(c.oversampling) + " is above 1 MHz");
@@ -110,6 +112,13 @@ ResolvedChain resolve(const ChainSpec& spec, std::int64_t output_rate_hz) {
   c.compensate_delay = spec.compensate_delay;
   c.has_vibration = !spec.vibration.empty();
   c.group_delay_s = group_delay_samples(c.design, 0.0) / static_cast<double>(c.internal_rate_hz);
+  // The stamp shift t_k - delay must be an int64 ns that means something.
+  if (c.compensate_delay && !(std::abs(c.group_delay_s) <= kMaxCompensatedDelayS))
+    throw SettingError("compensate_delay", "signal chain: compensate_delay: the chain's group delay at DC, " +
+                                               setting_number(c.group_delay_s) + " s, is beyond " +
+                                               setting_number(kMaxCompensatedDelayS) +
+                                               " s (the ADIS16470's slowest decimation delays 0.5 s); raise the "
+                                               "stages' frequencies or compensate nothing");
   return c;
 }
 
@@ -150,13 +159,49 @@ std::vector<std::string> describe(const ResolvedChain& c, std::int64_t output_ra
   return out;
 }
 
+ChainWork predict_work(const ResolvedChain& chain, bool sensor, std::size_t random_components,
+                       std::optional<IncrementConvention> increments, Physics physics) {
+  ChainWork w;
+  w.ticks = 1.0;
+  const double M = chain.oversampling;
+  if (sensor || !chain.is_ideal()) w.internal_samples = M;
+  const bool raw = increments == IncrementConvention::raw;
+  if (raw)
+    w.increment_nodes = 4.0;
+  else if (increments && physics == Physics::ecef)
+    w.increment_nodes = 3.0;
+  if (chain.has_vibration && random_components > 0) {
+    const double n = static_cast<double>(random_components);
+    const double resync = M / static_cast<double>(Vibration::kResyncSteps + 1);
+    w.vibration_rotations = (M - resync) * n;
+    w.vibration_direct = (resync + (raw ? 4.0 : 0.0)) * n;
+  }
+  return w;
+}
+
+ChainWork DeviceChain::work() const {
+  ChainWork w;
+  w.ticks = static_cast<double>(ticks_);
+  w.internal_samples = static_cast<double>(internal_samples_);
+  w.increment_nodes = static_cast<double>(increment_nodes_);
+  if (vibration_) {
+    w.vibration_rotations = static_cast<double>(vibration_->work().rotations);
+    w.vibration_direct = static_cast<double>(vibration_->work().direct);
+  }
+  return w;
+}
+
 DeviceChain::DeviceChain(const SceneModel& scene, const std::optional<sensor::SensorModelSpec>& sensor,
                          const ChainSpec& chain, std::int64_t output_rate_hz, const std::string& device)
     : scene_(scene),
       chain_(resolve(chain, output_rate_hz)),
       period_s_(1.0 / static_cast<double>(output_rate_hz)),
       filter_(chain_.design) {
-  if (sensor && !sensor->is_ideal()) sensor_.emplace(*sensor, static_cast<double>(chain_.internal_rate_hz), device);
+  if (sensor && !sensor->is_ideal()) {
+    sensor_.emplace(*sensor, static_cast<double>(chain_.internal_rate_hz), device);
+    gyro_range_ = sensor->gyro.range;
+    accel_range_ = sensor->accel.range;
+  }
   if (!chain.vibration.empty()) {
     vibration_.emplace(chain.vibration, device);
     vibration_->set_grid_step(period_s_ / chain_.oversampling);
@@ -168,6 +213,7 @@ ChainOutput DeviceChain::step(std::uint64_t k, const Kinematics& now, const ImuS
                               const Kinematics* previous, std::optional<IncrementConvention> increments,
                               const IntervalMotion* motion) {
   ChainOutput out;
+  ++ticks_;
   out.gyro_rad_s = ideal_now.gyro_rad_s;
   out.accel_m_s2 = ideal_now.accel_m_s2;
   out.stamp_shift_ns = stamp_shift_ns_;
@@ -216,6 +262,7 @@ ChainOutput DeviceChain::step(std::uint64_t k, const Kinematics& now, const ImuS
     // is exactly the output-rate model.
     const std::uint64_t first_i = k == 0 ? static_cast<std::uint64_t>(M) : 1;
     const double dt_s = period_s_ / M;
+    internal_samples_ += static_cast<std::uint64_t>(M) - first_i + 1;
     Filter::Channels y{};
     for (std::uint64_t i = first_i; i <= static_cast<std::uint64_t>(M); ++i) {
       if (vibration_ && previous && i == static_cast<std::uint64_t>(M)) vibrate_now();
@@ -242,6 +289,17 @@ ChainOutput DeviceChain::step(std::uint64_t k, const Kinematics& now, const ImuS
         y = filter_.step(y);
       }
     }
+    // The output register holds the part's full scale: a filter's overshoot
+    // on a saturated input (a Butterworth's step response rises ~4 % above
+    // its final value at order 2) saturates there again, flagged.
+    if (!filter_.empty() && (gyro_range_ > 0.0 || accel_range_ > 0.0))
+      for (unsigned c = 0; c < 6; ++c) {
+        const double range = c < 3 ? gyro_range_ : accel_range_;
+        if (range > 0.0 && std::abs(y[c]) > range) {
+          y[c] = std::copysign(range, y[c]);
+          out.saturated_axes = static_cast<std::uint8_t>(out.saturated_axes | (1u << c));
+        }
+      }
     out.gyro_rad_s = Vec3(y[0], y[1], y[2]);
     out.accel_m_s2 = Vec3(y[3], y[4], y[5]);
   }
@@ -250,6 +308,7 @@ ChainOutput DeviceChain::step(std::uint64_t k, const Kinematics& now, const ImuS
     if (previous) {
       // motion is set whenever this convention and scene read it (needs_motion).
       inc = increment(*increments, scene_, *previous, now_k, period_s_, motion);
+      increment_nodes_ += *increments == IncrementConvention::raw ? 4 : scene_.physics == Physics::ecef ? 3 : 0;
     } else {
       // Nothing to integrate over: the rectangle of the sample at t_k.
       inc.delta_theta_rad = ideal_k.gyro_rad_s * period_s_;

@@ -53,6 +53,12 @@ struct ChainSpec {
 };
 
 inline constexpr int kMaxOversampling = 1024;
+// The longest group delay compensate_delay stamps away (issue 26, N6: a
+// 1e-12 Hz low-pass stamped every sample INT64_MAX). The slowest datasheet
+// chain, the ADIS16470's decimation at DEC_RATE 1999 (2000 SPS to 1 Hz),
+// delays by 0.5 s; a compensation beyond 10 s would stamp samples before
+// any pose the look-ahead holds.
+inline constexpr double kMaxCompensatedDelayS = 10.0;
 
 // A chain at one output rate.
 struct ResolvedChain {
@@ -71,19 +77,50 @@ struct ResolvedChain {
 std::vector<std::string> chain_presets();
 // Throws std::invalid_argument (unknown preset, oversampling out of
 // 1..kMaxOversampling, a stage the design refuses, a preset that cannot run
-// at this output rate, e.g. adis16470 needs 2000 / rate to be an integer).
+// at this output rate, e.g. adis16470 needs 2000 / rate to be an integer, a
+// compensated group delay beyond kMaxCompensatedDelayS); SettingError
+// (core/setting_error.hpp) where one key is at fault: "oversampling",
+// "stage[i].field", "compensate_delay".
 ResolvedChain resolve(const ChainSpec& spec, std::int64_t output_rate_hz);
 
 // One line per fact for check-config / generate: internal rate, each stage,
 // group delay at DC (and at a quarter of the output rate), compensation.
 std::vector<std::string> describe(const ResolvedChain& chain, std::int64_t output_rate_hz);
 
+// The work of output ticks (issue 26, N9: a chain estimated at 12 % of a
+// core fell behind), in units of known CPU cost (measured in
+// daemon/scene/scene_check.hpp, kCpuSecondsPer*): what DeviceChain counts
+// as it runs, and what predict_work() expects of contiguous ticks.
+struct ChainWork {
+  double ticks = 0.0;
+  // Samples at the internal rate through the motion, the sensor model and
+  // the filters (0 for the ideal chain with the ideal sensor: it passes the
+  // sample through).
+  double internal_samples = 0.0;
+  // Quadrature nodes of the increments: the raw integrals' 4 motion
+  // evaluations, the ecef gravitation's 3 positions.
+  double increment_nodes = 0.0;
+  // Random vibration components advanced by a rotation (on the internal
+  // grid) and evaluated by a sine and a cosine (the raw increments' nodes
+  // between grid instants, a resynchronisation, a start or a gap).
+  double vibration_rotations = 0.0;
+  double vibration_direct = 0.0;
+};
+// Per contiguous tick: M internal samples (M = oversampling) unless the chain
+// and the sensor are both ideal; 4 nodes for raw increments, 3 for
+// compensated ones in ecef; per random component M grid evaluations, one in
+// Vibration::kResyncSteps + 1 of them direct, plus the 4 raw nodes direct.
+ChainWork predict_work(const ResolvedChain& chain, bool sensor, std::size_t random_components,
+                       std::optional<IncrementConvention> increments, Physics physics);
+
 struct ChainOutput {
   Vec3 gyro_rad_s = Vec3::Zero();
   Vec3 accel_m_s2 = Vec3::Zero();
   Vec3 delta_theta_rad = Vec3::Zero();
   Vec3 delta_velocity_m_s = Vec3::Zero();
-  std::uint8_t saturated_axes = 0;  // any internal sample of the interval saturated (sensor::SaturatedAxis)
+  // Any internal sample of the interval saturated, or the filtered output
+  // reached the sensor's full scale (sensor::SaturatedAxis bits).
+  std::uint8_t saturated_axes = 0;
   bool has_temperature = false;     // a sensor model runs
   double temperature_c = 0.0;
   TimeNs stamp_shift_ns = 0;        // delay compensation: the sample represents t_k - stamp_shift_ns
@@ -108,6 +145,9 @@ class DeviceChain {
   // No sensor errors and the ideal chain: outputs are the ideal samples.
   bool ideal() const { return !sensor_ && chain_.is_ideal(); }
   const ResolvedChain& chain() const { return chain_; }
+  // The work done so far (counted in step(): no allocation, no lock).
+  ChainWork work() const;
+  std::size_t random_components() const { return vibration_ ? vibration_->random_components() : 0; }
 
  private:
   SceneModel scene_;
@@ -119,6 +159,8 @@ class DeviceChain {
   bool have_last_ = false;
   std::uint64_t last_k_ = 0;
   TimeNs stamp_shift_ns_ = 0;
+  std::uint64_t ticks_ = 0, internal_samples_ = 0, increment_nodes_ = 0;
+  double gyro_range_ = 0.0, accel_range_ = 0.0;  // the sensor's full scale (0: none)
 };
 
 }  // namespace imuemu::signal_chain

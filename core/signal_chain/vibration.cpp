@@ -6,6 +6,7 @@
 #include <stdexcept>
 
 #include "core/sensor/sensor_model.hpp"
+#include "core/setting_error.hpp"
 #include "core/so3.hpp"
 
 namespace imuemu::signal_chain {
@@ -47,65 +48,194 @@ Scale scale_at(const std::vector<ScalePoint>& sc, double t) {
 }
 constexpr double kRpmToRad_s = kTwoPi / 60.0;
 
+// "name[i]": an entry of a list in a SettingError key.
+std::string item(const std::string& name, std::size_t i) { return name + "[" + std::to_string(i) + "]"; }
+
+// A profile's times (speed points, scale points): finite, within
+// +-kMaxVibrationTimeS, increasing by at least kMinProfileSpacingS.
+template <class Point>
+void check_profile_times(const std::vector<Point>& points, double Point::*time, const std::string& key,
+                         const std::string& label) {
+  for (std::size_t i = 0; i < points.size(); ++i) {
+    const double t = points[i].*time;
+    require_magnitude(item(key, i), label + " point " + std::to_string(i + 1) + ": time_s", t,
+                      {0.0, kMaxVibrationTimeS, "s", "31 years"});
+    if (i > 0 && !(t >= points[i - 1].*time + kMinProfileSpacingS))
+      throw SettingError(item(key, i), label + " point " + std::to_string(i + 1) +
+                                                   " must have a time after the previous one (by at least 1 ms: "
+                                                   "the profile's slope divides by the spacing)");
+  }
+}
+
+constexpr SettingBound kFrequencyBound{kMinVibrationHz, kMaxVibrationHz, "Hz",
+                                       "vibration from 0.01 Hz (slower is the trajectory's motion) to 100 kHz "
+                                       "(above MIL-STD-810H pyroshock and MEMS drive resonances)"};
+constexpr SettingBound kAccelBound{0.0, kMaxVibrationAccelM_s2, "m/s^2",
+                                   "about 10^4 g; the widest MEMS accelerometer reads +-200 g"};
+constexpr SettingBound kRateBound{0.0, kMaxVibrationRateRad_s, "rad/s",
+                                  "57,000 deg/s; the widest MEMS gyro reads +-20,000 deg/s"};
+constexpr SettingBound kPhaseBound{0.0, 1e6, "rad", "a phase"};
+constexpr SettingBound kScaleBound{0.0, kMaxVibrationScale, "", "at most 40 dB above the profile"};
+
+// An oscillation's amplitudes and phases (sinusoid, rotor harmonic).
+void check_oscillation(const std::string& key, const std::string& label, const Vec3& linear, const Vec3& angular,
+                       const Vec3& phase) {
+  require_magnitude(key + ".linear_m_s2", label + ": linear_m_s2", linear, kAccelBound);
+  require_magnitude(key + ".angular_rad_s", label + ": angular_rad_s", angular, kRateBound);
+  require_magnitude(key + ".phase_rad", label + ": phase_rad", phase, kPhaseBound);
+}
+
 void check_rotor(const Rotor& r, std::size_t index) {
-  const std::string where = "rotor " + std::to_string(index + 1) + ": ";
-  if (r.speed.empty()) throw std::invalid_argument(where + "the speed profile needs at least one (time_s, rpm) point");
-  double min_rpm = r.speed.front().rpm;
+  const std::string key = item("rotor", index);
+  const std::string where = "rotor " + std::to_string(index + 1);
+  if (r.speed.empty())
+    throw SettingError(key + ".speed", where + ": the speed profile needs at least one (time_s, rpm) point");
+  check_profile_times(r.speed, &RpmPoint::time_s, key + ".speed", where + ": speed");
+  double min_rpm = r.speed.front().rpm, max_rpm = min_rpm;
   for (std::size_t i = 0; i < r.speed.size(); ++i) {
-    const RpmPoint& p = r.speed[i];
-    if (!std::isfinite(p.time_s) || !std::isfinite(p.rpm) || !(p.rpm > 0.0) ||
-        (i > 0 && !(p.time_s > r.speed[i - 1].time_s)))
-      throw std::invalid_argument(where + "speed point " + std::to_string(i + 1) +
-                                  " must have a time after the previous one and an rpm > 0");
-    min_rpm = std::min(min_rpm, p.rpm);
+    require_within(item(key + ".speed", i), where + ": speed point " + std::to_string(i + 1) + ": rpm",
+                   r.speed[i].rpm, {kMinRpm, kMaxRpm, "rpm", "turbomachinery turns at 1e5 rpm"});
+    min_rpm = std::min(min_rpm, r.speed[i].rpm);
+    max_rpm = std::max(max_rpm, r.speed[i].rpm);
   }
-  for (std::size_t i = 0; i < r.harmonics.size(); ++i) {
-    const RotorHarmonic& h = r.harmonics[i];
-    if (!(h.order > 0.0) || !std::isfinite(h.order) || !h.linear_m_s2.allFinite() || !h.angular_rad_s.allFinite() ||
-        !h.phase_rad.allFinite())
-      throw std::invalid_argument(where + "harmonic " + std::to_string(i + 1) +
-                                  ": order must be > 0 and every amplitude and phase finite");
-  }
-  if (!(r.jitter_rpm >= 0.0) || !std::isfinite(r.jitter_rpm) || !(r.jitter_bandwidth_hz > 0.0) ||
-      !std::isfinite(r.jitter_bandwidth_hz))
-    throw std::invalid_argument(where + "jitter_rpm must be >= 0 and jitter_bandwidth_hz > 0");
+  require_within(key + ".jitter_bandwidth_hz", where + ": jitter_bandwidth_hz", r.jitter_bandwidth_hz,
+                 {kMinJitterBandwidthHz, kMaxJitterBandwidthHz, "Hz", "a governor loop wanders at a few Hz"});
+  if (!(r.jitter_rpm >= 0.0))
+    throw SettingError(key + ".jitter_rpm", where + ": jitter_rpm must be >= 0");
   // The jitter's peak (every component in phase) stays below half the lowest
   // speed, so the shaft never stops and 1/Omega stays bounded.
   const double peak = r.jitter_rpm * std::sqrt(2.0 * Vibration::kJitterComponents);
   if (!(peak < 0.5 * min_rpm))
-    throw std::invalid_argument(where + "jitter_rpm " + std::to_string(r.jitter_rpm) + " may reach " +
-                                std::to_string(peak) + " rpm; it must stay below half the lowest speed (" +
-                                std::to_string(min_rpm) + " rpm)");
+    throw SettingError(key + ".jitter_rpm", where + ": jitter_rpm " + setting_number(r.jitter_rpm) + " may reach " +
+                                                setting_number(peak) +
+                                                " rpm; it must stay below half the lowest speed (" +
+                                                setting_number(min_rpm) + " rpm)");
+  for (std::size_t i = 0; i < r.harmonics.size(); ++i) {
+    const RotorHarmonic& h = r.harmonics[i];
+    const std::string hk = key + "." + item("harmonic", i);
+    const std::string hw = where + ": harmonic " + std::to_string(i + 1);
+    require_within(hk + ".order", hw + ": order", h.order,
+                   {kMinHarmonicOrder, kMaxHarmonicOrder, "", "a shaft's harmonics and blade passes"});
+    // At the top speed plus the jitter's peak.
+    const double top_hz = h.order * (max_rpm + peak) / 60.0;
+    if (!(top_hz <= kMaxVibrationHz))
+      throw SettingError(hk + ".order", hw + ": order " + setting_number(h.order) + " reaches " +
+                                            setting_number(top_hz) + " Hz at " + setting_number(max_rpm + peak) +
+                                            " rpm; at most " + setting_number(kMaxVibrationHz) + " Hz");
+    check_oscillation(hk, hw, h.linear_m_s2, h.angular_rad_s, h.phase_rad);
+  }
+}
+
+// One random profile: its table (density: the point's level), bins, scales.
+template <class Point>
+void check_random(const std::string& key, const std::string& label, const std::vector<Point>& psd,
+                  double Point::*density, const SettingBound& level, const Vec3& axis_scale, double resolution_hz,
+                  const std::vector<ScalePoint>& amplitude_scale) {
+  if (psd.size() < 2) throw SettingError(key + ".psd", label + ": the PSD table needs at least two points");
+  if (psd.size() > kMaxPsdPoints)
+    throw SettingError(key + ".psd", label + ": " + std::to_string(psd.size()) + " PSD points; at most " +
+                                         std::to_string(kMaxPsdPoints) +
+                                         " (test standards give 3..10 breakpoints; a measured PSD can be resampled)");
+  for (std::size_t i = 0; i < psd.size(); ++i) {
+    const std::string pk = item(key + ".psd", i);
+    const std::string pw = label + ": PSD point " + std::to_string(i + 1);
+    if (i > 0 && !(psd[i].frequency_hz > psd[i - 1].frequency_hz))
+      throw SettingError(pk, pw + " must have a frequency above the previous one");
+    require_within(pk, pw + ": frequency", psd[i].frequency_hz, kFrequencyBound);
+    require_within(pk, pw + ": density", psd[i].*density, level);
+  }
+  require_within(key + ".resolution_hz", label + ": resolution_hz", resolution_hz,
+                 {kMinResolutionHz, kMaxResolutionHz, "Hz", "one component per bin of this width"});
+  const double bins = random_bins(psd.front().frequency_hz, psd.back().frequency_hz, resolution_hz);
+  if (!(bins <= static_cast<double>(Vibration::kMaxComponents / 3)))
+    throw SettingError(key + ".resolution_hz",
+                       label + ": " + setting_number(bins) + " bins per axis of " + setting_number(resolution_hz) +
+                           " Hz over " + setting_number(psd.front().frequency_hz) + ".." +
+                           setting_number(psd.back().frequency_hz) + " Hz; at most " +
+                           std::to_string(Vibration::kMaxComponents / 3) +
+                           " per axis (raise resolution_hz): each costs work on every internal sample");
+  require_within(key + ".axis_scale", label + ": axis_scale", axis_scale, kScaleBound);
+  check_profile_times(amplitude_scale, &ScalePoint::time_s, key + ".amplitude_scale", label + ": amplitude_scale");
+  for (std::size_t i = 0; i < amplitude_scale.size(); ++i)
+    require_within(item(key + ".amplitude_scale", i),
+                   label + ": amplitude_scale point " + std::to_string(i + 1) + ": scale", amplitude_scale[i].scale,
+                   kScaleBound);
 }
 
 }  // namespace
 
 double psd_at(const std::vector<PsdPoint>& psd, double f) {
   if (psd.empty() || f < psd.front().frequency_hz || f > psd.back().frequency_hz) return 0.0;
-  for (std::size_t i = 1; i < psd.size(); ++i) {
-    const PsdPoint& a = psd[i - 1];
-    const PsdPoint& b = psd[i];
-    if (f <= b.frequency_hz) {
-      // Straight line in log S against log f (dB/octave slopes of the standards).
-      const double x = std::log(f / a.frequency_hz) / std::log(b.frequency_hz / a.frequency_hz);
-      return a.g2_per_hz * std::pow(b.g2_per_hz / a.g2_per_hz, x);
-    }
+  // The first point at or above f (a binary search: a table may have
+  // kMaxPsdPoints points and every component reads it once).
+  const auto b = std::lower_bound(psd.begin(), psd.end(), f,
+                                  [](const PsdPoint& p, double x) { return p.frequency_hz < x; });
+  if (b == psd.begin()) return b->g2_per_hz;
+  const PsdPoint& lo = *(b - 1);
+  // Straight line in log S against log f (dB/octave slopes of the standards).
+  const double x = std::log(f / lo.frequency_hz) / std::log(b->frequency_hz / lo.frequency_hz);
+  return lo.g2_per_hz * std::pow(b->g2_per_hz / lo.g2_per_hz, x);
+}
+
+double random_bins(double first_hz, double last_hz, double resolution_hz) {
+  return std::ceil((last_hz - first_hz) / resolution_hz);
+}
+
+void validate(const VibrationSpec& spec) {
+  for (std::size_t i = 0; i < spec.sinusoids.size(); ++i) {
+    const Sinusoid& s = spec.sinusoids[i];
+    const std::string key = item("sinusoid", i);
+    const std::string where = "vibration sinusoid " + std::to_string(i + 1);
+    require_within(key + ".frequency_hz", where + ": frequency_hz", s.frequency_hz, kFrequencyBound);
+    check_oscillation(key, where, s.linear_m_s2, s.angular_rad_s, s.phase_rad);
   }
-  return psd.back().g2_per_hz;
+  for (std::size_t i = 0; i < spec.rotors.size(); ++i) check_rotor(spec.rotors[i], i);
+  for (std::size_t i = 0; i < spec.shocks.size(); ++i) {
+    const Shock& k = spec.shocks[i];
+    const std::string key = item("shock", i);
+    const std::string where = "shock " + std::to_string(i + 1);
+    require_within(key + ".time_s", where + ": time_s", k.time_s, {0.0, kMaxVibrationTimeS, "s", "since the start"});
+    require_within(key + ".duration_s", where + ": duration_s", k.duration_s,
+                   {kMinShockDurationS, kMaxShockDurationS, "s",
+                    "MIL-STD-810H 516.8 pulses last 0.5..100 ms, pyroshock rises in tens of us"});
+    require_within(key + ".return_s", where + ": return_s", k.return_s,
+                   {kMinShockReturnS, kMaxShockReturnS, "s", "the mount's return after the pulse"});
+    require_magnitude(key + ".peak_m_s2", where + ": peak_m_s2", k.peak_m_s2, kAccelBound);
+    require_magnitude(key + ".angular_peak_rad_s2", where + ": angular_peak_rad_s2", k.angular_peak_rad_s2,
+                      {0.0, kMaxShockAngularRad_s2, "rad/s^2", "a 1 ms half-sine then turns the mount at 640 rad/s"});
+  }
+  std::size_t components = 0;  // per axis
+  if (spec.random_linear) {
+    const RandomVibration& r = *spec.random_linear;
+    check_random("random", "random vibration", r.psd, &PsdPoint::g2_per_hz,
+                 {kMinPsd, kMaxPsdG2PerHz, "g^2/Hz", "MIL-STD-810H 514.8 profiles stay below about 1 g^2/Hz"},
+                 r.axis_scale, r.resolution_hz, r.amplitude_scale);
+    components = static_cast<std::size_t>(
+        random_bins(r.psd.front().frequency_hz, r.psd.back().frequency_hz, r.resolution_hz));
+  }
+  if (spec.random_angular) {
+    const RandomAngularVibration& r = *spec.random_angular;
+    check_random("random_angular", "random angular vibration", r.psd, &AngularPsdPoint::rad2_s4_per_hz,
+                 {kMinPsd, kMaxPsdRad2S4PerHz, "(rad/s^2)^2/Hz", "2e5 times a multirotor frame's"}, r.axis_scale,
+                 r.resolution_hz, r.amplitude_scale);
+    const double bins = random_bins(r.psd.front().frequency_hz, r.psd.back().frequency_hz, r.resolution_hz);
+    if (static_cast<double>(components) + bins > static_cast<double>(Vibration::kMaxComponents / 3))
+      throw SettingError("random_angular.resolution_hz",
+                         "random angular vibration: " + setting_number(bins) + " bins per axis; at most " +
+                             std::to_string(Vibration::kMaxComponents / 3 - components) +
+                             " beside the linear profile's (raise resolution_hz)");
+  }
+  require_magnitude("lever_arm_m", "vibration: lever_arm_m", spec.lever_arm_m,
+                    {0.0, kMaxLeverArmM, "m", "the scene's [imu.mounting] bound"});
+  if (!spec.sensor_to_body.allFinite())
+    throw SettingError("sensor_to_body", "vibration: sensor_to_body must be finite");
 }
 
 Vibration::Vibration(const VibrationSpec& spec, const std::string& device) : spec_(spec) {
-  for (std::size_t i = 0; i < spec.sinusoids.size(); ++i) {
-    const Sinusoid& s = spec.sinusoids[i];
-    if (!(s.frequency_hz > 0.0) || !std::isfinite(s.frequency_hz) || !s.linear_m_s2.allFinite() ||
-        !s.angular_rad_s.allFinite() || !s.phase_rad.allFinite())
-      throw std::invalid_argument("vibration sinusoid " + std::to_string(i + 1) +
-                                  ": frequency_hz must be > 0 and every amplitude and phase finite");
-  }
+  validate(spec);
   const std::uint64_t dev = sensor::device_hash(device);
   for (std::size_t i = 0; i < spec.rotors.size(); ++i) {
     const Rotor& r = spec.rotors[i];
-    check_rotor(r, i);
     RotorState st;
     // Phi at each profile point: Omega_0 t before the first, trapezoids
     // (exact: the speed is linear) between points.
@@ -128,11 +258,6 @@ Vibration::Vibration(const VibrationSpec& spec, const std::string& device) : spe
   }
   for (std::size_t i = 0; i < spec.shocks.size(); ++i) {
     const Shock& k = spec.shocks[i];
-    if (!std::isfinite(k.time_s) || !(k.time_s >= 0.0) || !(k.duration_s > 0.0) || !std::isfinite(k.duration_s) ||
-        !(k.return_s > 0.0) || !std::isfinite(k.return_s) || !k.peak_m_s2.allFinite() ||
-        !k.angular_peak_rad_s2.allFinite())
-      throw std::invalid_argument("shock " + std::to_string(i + 1) +
-                                  ": time_s must be >= 0, duration and return > 0 and the peaks finite");
     const double T = k.duration_s, R = k.return_s;
     // The unit pulse's velocity and displacement at its end.
     const double v_end = k.shape == ShockShape::half_sine ? 2.0 * T / std::numbers::pi : 0.5 * T;
@@ -146,46 +271,26 @@ Vibration::Vibration(const VibrationSpec& spec, const std::string& device) : spe
   }
   if (spec.random_linear) {
     const RandomVibration& r = *spec.random_linear;
-    add_random("random vibration", r.psd, kG_m_s2, r.axis_scale, r.resolution_hz, r.amplitude_scale, r.seed,
-               dev, kVibrationStream, false);
+    add_random(r.psd, kG_m_s2, r.axis_scale, r.resolution_hz, r.seed, dev, kVibrationStream, false);
   }
   if (spec.random_angular) {
     const RandomAngularVibration& r = *spec.random_angular;
     std::vector<PsdPoint> psd;  // the same log-log table, its values in (rad/s^2)^2/Hz
     for (const AngularPsdPoint& p : r.psd) psd.push_back({p.frequency_hz, p.rad2_s4_per_hz});
-    add_random("random angular vibration", psd, 1.0, r.axis_scale, r.resolution_hz, r.amplitude_scale, r.seed, dev,
-               kAngularVibrationStream, true);
+    add_random(psd, 1.0, r.axis_scale, r.resolution_hz, r.seed, dev, kAngularVibrationStream, true);
   }
+  // Sized once: evaluating allocates nothing.
+  phasor_.resize(comps_.size());
+  off_grid_.resize(comps_.size());
 }
 
-void Vibration::add_random(const std::string& label, const std::vector<PsdPoint>& psd, double unit_si,
-                           const Vec3& axis_scale,
-                           double resolution_hz, const std::vector<ScalePoint>& amplitude_scale, std::uint64_t seed,
-                           std::uint64_t dev, unsigned stream_index, bool angular) {
-  if (psd.size() < 2) throw std::invalid_argument(label + ": the PSD table needs at least two points");
-  for (std::size_t i = 0; i < psd.size(); ++i) {
-    if (!(psd[i].frequency_hz > 0.0) || !(psd[i].g2_per_hz > 0.0) || !std::isfinite(psd[i].g2_per_hz) ||
-        !std::isfinite(psd[i].frequency_hz) || (i > 0 && !(psd[i].frequency_hz > psd[i - 1].frequency_hz)))
-      throw std::invalid_argument(label + ": PSD point " + std::to_string(i + 1) +
-                                  " must have a frequency above the previous one and a positive, finite density");
-  }
-  if (!(resolution_hz > 0.0) || !std::isfinite(resolution_hz))
-    throw std::invalid_argument(label + ": resolution_hz must be > 0");
-  for (std::size_t i = 0; i < amplitude_scale.size(); ++i) {
-    const ScalePoint& p = amplitude_scale[i];
-    if (!std::isfinite(p.time_s) || !std::isfinite(p.scale) || !(p.scale >= 0.0) ||
-        (i > 0 && !(p.time_s > amplitude_scale[i - 1].time_s)))
-      throw std::invalid_argument(label + ": amplitude_scale point " + std::to_string(i + 1) +
-                                  " must have a time after the previous one and a scale >= 0");
-  }
-  if (!axis_scale.allFinite() || (axis_scale.array() < 0.0).any())
-    throw std::invalid_argument(label + ": axis_scale must be finite and >= 0");
+void Vibration::add_random(const std::vector<PsdPoint>& psd, double unit_si, const Vec3& axis_scale,
+                           double resolution_hz, std::uint64_t seed, std::uint64_t dev, unsigned stream_index,
+                           bool angular) {
   const double f0 = psd.front().frequency_hz, f1 = psd.back().frequency_hz;
-  const std::size_t bins = static_cast<std::size_t>(std::ceil((f1 - f0) / resolution_hz));
-  if (comps_.size() + bins * 3 > kMaxComponents)
-    throw std::invalid_argument(label + ": " + std::to_string(bins) + " bins per axis of " +
-                                std::to_string(resolution_hz) + " Hz; at most " +
-                                std::to_string((kMaxComponents - comps_.size()) / 3) + " (raise resolution_hz)");
+  // validate() has bounded the count (as a double: no wrap) by kMaxComponents.
+  const auto bins = static_cast<std::size_t>(random_bins(f0, f1, resolution_hz));
+  comps_.reserve(comps_.size() + 3 * bins);
   for (int axis = 0; axis < 3; ++axis) {
     if (axis_scale[axis] == 0.0) continue;
     sensor::Stream stream;
@@ -193,6 +298,7 @@ void Vibration::add_random(const std::string& label, const std::vector<PsdPoint>
     for (std::size_t b = 0; b < bins; ++b) {
       const double lo = f0 + static_cast<double>(b) * resolution_hz;
       const double width = std::min(resolution_hz, f1 - lo);
+      if (!(width > 0.0)) break;  // a last bin the rounding of (f1 - f0) / resolution made empty
       const double f = lo + stream.uniform() * width;
       const double phase = kTwoPi * stream.uniform();
       // The bin's power S(f) df as a sinusoid's amplitude^2 / 2.
@@ -321,13 +427,13 @@ VibrationState Vibration::at(double t) const {
     }
   }
   if (comps_.empty()) return v;
-  random_phasors(t);
+  const std::vector<std::complex<double>>& phasor = random_phasors(t);
   // Linear (d) and angular (theta) sums, each with its profile's scale.
   Vec3 x[2] = {Vec3::Zero(), Vec3::Zero()}, x_dot[2] = {Vec3::Zero(), Vec3::Zero()},
        x_ddot[2] = {Vec3::Zero(), Vec3::Zero()};
   for (std::size_t i = 0; i < comps_.size(); ++i) {
     const Component& c = comps_[i];
-    const double cs = phasor_[i].real(), sn = phasor_[i].imag();
+    const double cs = phasor[i].real(), sn = phasor[i].imag();
     const int j = c.angular ? 1 : 0;
     x[j][c.axis] -= c.amplitude_over_w2 * cs;
     x_dot[j][c.axis] += c.amplitude_over_w * sn;
@@ -352,26 +458,39 @@ void Vibration::set_grid_step(double step_s) {
   cached_ = false;
 }
 
-void Vibration::random_phasors(double t) const {
-  phasor_.resize(comps_.size());
-  if (cached_ && t == t_cached_s_) return;
+const std::vector<std::complex<double>>& Vibration::random_phasors(double t) const {
+  const std::size_t n = comps_.size();
+  // The cached grid instant itself (to the rounding of the caller's t: the
+  // end of one interval is the start of the next, t_k = k h against
+  // t_{k+1} - h).
+  // (Below a quarter step, so neither test can take one instant for the other.)
+  double tolerance = 1e-12 * std::max(1.0, std::abs(t));
+  if (step_s_ > 0.0) tolerance = std::min(tolerance, 0.25 * step_s_);
+  if (cached_ && std::abs(t - t_cached_s_) <= tolerance) return phasor_;
   // One grid step after the cached instant, to the rounding of the caller's
   // t = t0 + s h (agreeing to ~1e-15 relative; 1e-12 is allowed).
-  const bool next_step = cached_ && step_s_ > 0.0 && std::abs(t - (t_cached_s_ + step_s_)) <= 1e-12 * std::max(1.0, t) &&
+  const bool next_step = cached_ && step_s_ > 0.0 && std::abs(t - (t_cached_s_ + step_s_)) <= tolerance &&
                          steps_since_exact_ < kResyncSteps;
   if (next_step) {
-    for (std::size_t i = 0; i < comps_.size(); ++i) phasor_[i] *= rotation_[i];
+    for (std::size_t i = 0; i < n; ++i) phasor_[i] *= rotation_[i];
     t_cached_s_ = t;
     ++steps_since_exact_;
-    return;
+    work_.rotations += n;
+    return phasor_;
   }
-  for (std::size_t i = 0; i < comps_.size(); ++i) phasor_[i] = std::polar(1.0, comps_[i].w_rad_s * t + comps_[i].phase_rad);
-  // Only grid instants become the cache (the raw increments' Gauss-Legendre
-  // nodes between them are computed and forgotten).
+  work_.direct += n;
+  // Only grid instants become the cache; an instant between them (the raw
+  // increments' Gauss-Legendre nodes) is computed into its own buffer and
+  // forgotten, so the grid goes on by rotations after it.
   const bool on_grid = step_s_ > 0.0 && std::abs(t / step_s_ - std::round(t / step_s_)) < 1e-6;
-  cached_ = on_grid;
-  t_cached_s_ = t;
-  steps_since_exact_ = 0;
+  std::vector<std::complex<double>>& out = on_grid || step_s_ <= 0.0 ? phasor_ : off_grid_;
+  for (std::size_t i = 0; i < n; ++i) out[i] = std::polar(1.0, comps_[i].w_rad_s * t + comps_[i].phase_rad);
+  if (&out == &phasor_) {
+    cached_ = on_grid;
+    t_cached_s_ = t;
+    steps_since_exact_ = 0;
+  }
+  return out;
 }
 
 Kinematics Vibration::apply(const Kinematics& base, const Vec3& alpha_s, double t) const {

@@ -3,6 +3,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdlib>
 #include <fstream>
 #include <map>
 #include <numbers>
@@ -23,6 +24,25 @@ struct Where {
 
 std::string dotted(const std::string& path, std::string_view key) {
   return path.empty() ? std::string(key) : path + "." + std::string(key);
+}
+
+// The scene's key of a core field where the scene writes it in other units
+// (core/signal_chain/vibration.hpp holds SI; the tables take degrees, g, ms
+// and rpm): the names to try, in order.
+std::vector<std::string> scene_keys_of(const std::string& field) {
+  static const std::vector<std::pair<std::string, std::vector<std::string>>> renamed = {
+      {"angular_rad_s", {"angular_deg_s"}},
+      {"phase_rad", {"phase_deg"}},
+      {"peak_m_s2", {"peak_g"}},
+      {"angular_peak_rad_s2", {"angular_peak_deg_s2"}},
+      {"duration_s", {"duration_ms"}},
+      {"return_s", {"return_ms"}},
+      {"speed", {"speed_rpm"}},
+      {"psd", {"psd_g2_per_hz", "psd_rad2_s4_per_hz"}},
+  };
+  for (const auto& [core, scene] : renamed)
+    if (core == field) return scene;
+  return {field};
 }
 
 std::vector<double> numbers_of(const Where& w, const toml::node& n, const std::string& key) {
@@ -273,7 +293,9 @@ signal_chain::VibrationSpec parse_vibration_table(const Where& w, const toml::ta
     v.random_angular = r;
   }
   try {
-    (void)signal_chain::Vibration(v, "check");
+    signal_chain::validate(v);
+  } catch (const SettingError& e) {
+    throw_at_setting(t, w.file, path, e);
   } catch (const std::invalid_argument& e) {
     w.fail(t.source(), path, e.what());
   }
@@ -346,6 +368,46 @@ signal_chain::ChainSpec parse_chain_table(const Where& w, const toml::table& t, 
 }
 
 }  // namespace
+
+void throw_at_setting(const toml::table& table, const std::string& file, const std::string& key_path,
+                      const SettingError& e, const std::string& suffix) {
+  // Walk the key ("rotor[0].harmonic[1].order", "random.psd[3]") through the
+  // table; the deepest entry found stands for the rest.
+  const toml::node* node = &table;
+  std::string path = key_path;
+  std::string rest = e.key();
+  while (!rest.empty()) {
+    const std::size_t dot = rest.find('.');
+    std::string part = rest.substr(0, dot);
+    rest = dot == std::string::npos ? "" : rest.substr(dot + 1);
+    std::optional<std::size_t> index;
+    if (const std::size_t open = part.find('['); open != std::string::npos) {
+      index = static_cast<std::size_t>(std::strtoull(part.c_str() + open + 1, nullptr, 10));
+      part.resize(open);
+    }
+    const toml::table* t = node->as_table();
+    const toml::node* next = nullptr;
+    std::string name;
+    for (const std::string& candidate : scene_keys_of(part))
+      if (t != nullptr && (next = t->get(candidate)) != nullptr) {
+        name = candidate;
+        break;
+      }
+    if (next == nullptr) break;
+    node = next;
+    path = dotted(path, name);
+    if (index) {
+      const toml::array* a = node->as_array();
+      if (a != nullptr && *index < a->size()) {
+        node = &(*a)[*index];
+        path.append(1, '[').append(std::to_string(*index)).append(1, ']');
+      } else if (a != nullptr || *index != 0) {
+        break;  // a one-number profile (speed_rpm = 6000) is its own point 0
+      }
+    }
+  }
+  throw SceneError(file, node->source().begin.line, node->source().begin.column, path, e.what() + suffix);
+}
 
 ErrorModelConfig parse_error_model_table(const toml::table& table, const std::string& file, const std::string& path) {
   const Where w{file};

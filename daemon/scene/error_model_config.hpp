@@ -25,6 +25,7 @@
 #include <toml++/toml.h>
 
 #include "core/sensor/sensor_model.hpp"
+#include "core/setting_error.hpp"
 #include "core/trajectory.hpp"
 #include "daemon/scene/scene_config.hpp"
 
@@ -33,6 +34,15 @@ namespace imuemu::scene {
 // `table`: the error-model table; `key_path`: its dotted path in messages
 // ("imu[0].error_model", or "" for a file of its own).
 ErrorModelConfig parse_error_model_table(const toml::table& table, const std::string& file, const std::string& key_path);
+
+// A setting the core refused (core/setting_error.hpp) as a SceneError at the
+// entry of `table` (a [signal_chain] or [signal_chain.vibration] table at
+// `key_path`) its key names, scene units mapped (angular_rad_s is written
+// angular_deg_s, ...): the core's message (plus `suffix`) at that entry's
+// file:line:column and dotted key, so the parser, check-config and the core
+// say the same thing.
+[[noreturn]] void throw_at_setting(const toml::table& table, const std::string& file, const std::string& key_path,
+                                   const SettingError& error, const std::string& suffix = "");
 
 // A whole TOML file as an error-model table. Throws SceneError.
 ErrorModelConfig parse_error_model_file(const std::string& path);

@@ -72,6 +72,11 @@ std::string normalised(const std::string& path) {
 
 }  // namespace
 
+double chain_cpu_seconds(const signal_chain::ChainWork& w) {
+  return w.internal_samples * kCpuSecondsPerInternalSample + w.increment_nodes * kCpuSecondsPerIncrementNode +
+         w.vibration_rotations * kCpuSecondsPerVibrationRotation + w.vibration_direct * kCpuSecondsPerVibrationDirect;
+}
+
 void check_start_paths(const SceneConfig& scene, const RunnerOptions& options, const std::string& control_socket) {
   namespace fs = std::filesystem;
   std::map<std::string, std::string> owner;  // normalised path -> what uses it
@@ -176,18 +181,26 @@ SceneCheck check_scene(const SceneConfig& scene) {
                                  " Hz poses: below 100 Hz it needs the poses' own rates (pose datagram v2, MAVLink) "
                                  "to be accurate (docs/streaming.md \"Low-latency live input\")");
     }
-    double seconds_per_sample = kCpuSecondsPerSample;
-    if (!imu.error_model.chain.is_ideal()) {
-      // The parser resolved this chain at this rate already: it does not throw here.
-      const signal_chain::ResolvedChain chain = signal_chain::resolve(imu.error_model.chain, imu.rate_hz);
-      c.oversampling = chain.oversampling;
-      if (!imu.error_model.chain.vibration.empty())
-        c.vibration_components = signal_chain::Vibration(imu.error_model.chain.vibration, imu.name).random_components();
-      seconds_per_sample += chain.oversampling * (kCpuSecondsPerInternalSample +
-                                                  static_cast<double>(c.vibration_components) *
-                                                      kCpuSecondsPerVibrationComponentSample);
-    }
-    c.cpu_fraction = static_cast<double>(imu.rate_hz) * seconds_per_sample;
+    // The chain's work per output sample as the producer runs it: the
+    // increments in the encoder's convention are computed for every sample.
+    c.compensated_increments = is_can_protocol(imu.protocol)
+                                   ? drivers::make_can_encoder(imu.protocol, imu.can_options)->compensated_increments()
+                                   : drivers::make_stream_encoder(imu.protocol, imu.stream_options)->compensated_increments();
+    // The parser resolved this chain at this rate already: it does not throw here.
+    const signal_chain::ResolvedChain chain = signal_chain::resolve(imu.error_model.chain, imu.rate_hz);
+    c.oversampling = chain.oversampling;
+    if (!imu.error_model.chain.vibration.empty())
+      c.vibration_components = signal_chain::Vibration(imu.error_model.chain.vibration, imu.name).random_components();
+    c.work = signal_chain::predict_work(
+        chain, imu.error_model.sensor().has_value(), c.vibration_components,
+        c.compensated_increments ? signal_chain::IncrementConvention::compensated : signal_chain::IncrementConvention::raw,
+        scene.physics.physics);
+    c.cpu_fraction = static_cast<double>(imu.rate_hz) * (kCpuSecondsPerSample + chain_cpu_seconds(c.work));
+    if (c.cpu_fraction > 1.0)
+      check.warnings.push_back(imu.name + ": estimated CPU " + fixed(100.0 * c.cpu_fraction, 1) +
+                               " % of one core: its producer cannot keep up and the device will fall behind "
+                               "(late samples dropped); lower the rate, the oversampling or the random vibration's "
+                               "components (resolution_hz)");
     const auto rate = static_cast<double>(imu.rate_hz);
     c.faults = fault_lines(imu.faults, imu.random_faults);
     // A scene fault the protocol cannot show is what a start would refuse.
@@ -289,6 +302,12 @@ std::string to_text(const SceneCheck& c) {
     out << "    cpu ~" << fixed(100.0 * d.cpu_fraction, 2) << " % of one core";
     if (d.oversampling > 1 || d.vibration_components > 0)
       out << " (signal chain at " << d.oversampling << "x, " << d.vibration_components << " random vibration components)";
+    out << "; per sample: " << fixed(d.work.internal_samples, 0) << " internal samples, "
+        << fixed(d.work.increment_nodes, 0) << " nodes of " << (d.compensated_increments ? "compensated" : "raw")
+        << " increments";
+    if (d.vibration_components > 0)
+      out << ", " << fixed(d.work.vibration_rotations, 0) << " vibration components rotated and "
+          << fixed(d.work.vibration_direct, 0) << " evaluated";
     out << "\n";
     for (std::size_t i = 0; i < d.error_model.size(); ++i)
       out << (i == 0 ? "    sensor model: " : "      ") << d.error_model[i] << "\n";
@@ -301,9 +320,10 @@ std::string to_text(const SceneCheck& c) {
   }
   out << "  total: cpu ~" << fixed(100.0 * c.total_cpu_fraction, 2) << " % of one core (estimate: "
       << kCpuSecondsPerSample * 1e6 << " us per sample per device, measured by bench/bench_stream, plus "
-      << kCpuSecondsPerInternalSample * 1e6 << " us per internal sample of a signal chain and "
-      << kCpuSecondsPerVibrationComponentSample * 1e9 << " ns per random vibration component per internal sample, "
-      << "bench/bench_signal_chain); "
+      << kCpuSecondsPerInternalSample * 1e6 << " us per internal sample of a signal chain, "
+      << kCpuSecondsPerIncrementNode * 1e6 << " us per increment node, " << kCpuSecondsPerVibrationRotation * 1e9
+      << " ns per random vibration component rotated and " << kCpuSecondsPerVibrationDirect * 1e9
+      << " ns evaluated, bench/bench_signal_chain); "
       << "largest emission delay " << seconds_text(c.max_emission_delay_ns) << "\n";
   for (const std::string& w : c.warnings) out << "  warning: " << w << "\n";
   out << (c.refused ? "REFUSED: a link cannot carry its traffic, or a fault cannot be shown (warnings above)\n" : "OK\n");
@@ -342,7 +362,12 @@ std::string to_json(const SceneCheck& c) {
            {"accel_error_1hz_estimated", d.accel_error_1hz_estimated},
            {"cpu_fraction", d.cpu_fraction},
            {"oversampling", d.oversampling},
-           {"vibration_components", d.vibration_components}};
+           {"vibration_components", d.vibration_components},
+           {"increments", d.compensated_increments ? "compensated" : "raw"},
+           {"work_per_sample", json{{"internal_samples", d.work.internal_samples},
+                                    {"increment_nodes", d.work.increment_nodes},
+                                    {"vibration_rotations", d.work.vibration_rotations},
+                                    {"vibration_direct", d.work.vibration_direct}}}};
     e["bytes_per_second"] = d.bytes_per_second ? json(*d.bytes_per_second) : json(nullptr);
     e["can_frames_per_second"] = d.can_frames_per_second ? json(*d.can_frames_per_second) : json(nullptr);
     e["link"] = d.link ? budget_json(*d.link) : json(nullptr);
@@ -355,10 +380,12 @@ std::string to_json(const SceneCheck& c) {
     j["shared_links"].push_back(json{{"link", s.link}, {"devices", s.devices}, {"budget", budget_json(s.budget)}});
   j["total_cpu_fraction"] = c.total_cpu_fraction;
   j["cpu_basis"] = "rate_hz x (" + std::to_string(kCpuSecondsPerSample) +
-                   " s per sample per device (bench/bench_stream) + oversampling x (" +
-                   std::to_string(kCpuSecondsPerInternalSample) + " s + components x " +
-                   std::to_string(kCpuSecondsPerVibrationComponentSample) +
-                   " s) for a signal chain (bench/bench_signal_chain))";
+                   " s per sample per device (bench/bench_stream) + work_per_sample x (" +
+                   std::to_string(kCpuSecondsPerInternalSample) + " s per internal sample, " +
+                   std::to_string(kCpuSecondsPerIncrementNode) + " s per increment node, " +
+                   std::to_string(kCpuSecondsPerVibrationRotation) + " s per vibration rotation, " +
+                   std::to_string(kCpuSecondsPerVibrationDirect) +
+                   " s per vibration evaluation) for a signal chain (bench/bench_signal_chain))";
   j["max_emission_delay_ns"] = c.max_emission_delay_ns;
   j["refused"] = c.refused;
   j["warnings"] = c.warnings;

@@ -9,6 +9,7 @@
 #include <string>
 #include <vector>
 
+#include "core/signal_chain/signal_chain.hpp"
 #include "daemon/scene/scene_config.hpp"
 #include "drivers/link_budget.hpp"
 
@@ -19,13 +20,29 @@ namespace imuemu::scene {
 // sample at the default window. An estimate, not a guarantee: a wider window
 // or finite-difference derivatives cost more.
 inline constexpr double kCpuSecondsPerSample = 1e-6;
-// The signal chain's share (bench/bench_signal_chain.cpp, docs/signal-chain.md
-// "Cost"): per internal sample of a non-ideal chain (the icm42688p chain at
-// 8x: 2546 ns per output sample, / 8), and per random-vibration component per
-// internal sample (2883 components at 8x: 142 us per output sample). Without
-// them a vibrating 8 kHz chain was estimated at the ideal chain's 1 us.
+// The signal chain's share, per unit of its work (core/signal_chain/
+// signal_chain.hpp ChainWork, predict_work; bench/bench_signal_chain.cpp,
+// docs/signal-chain.md "Cost"): per internal sample of a non-ideal chain
+// (the icm42688p chain at 8x: 2546 ns per output sample, / 8), per node of
+// the increments' quadrature (raw increments: 1331 ns per output sample for
+// 4 nodes), and per random-vibration component advanced by a rotation
+// (2883 components at 8x, compensated increments: 142 us per output sample)
+// or evaluated by a sine and a cosine (between grid instants: the raw
+// increments' 4 nodes; SettingBounds.N9CpuEstimateOfHeavyChainsFollowsTheirMeasuredCost
+// measured 36 ns for it beside 7.1 ns per rotation on the shared 2-core
+// build machine at a load of 9, so 31 ns beside the bench's 6.2 ns, and a
+// raw-increment chain of 6000 components 3.4-3.6 times the compensated
+// one's cost). Issue 26, N9: the estimate counted the components
+// per internal sample only, as if every one were a rotation, and put a
+// 100,000-row PSD on a native (raw increments) device at 12 % of a core; it
+// fell behind. SettingBounds.CpuEstimateOfHeavyChainsFollowsTheirMeasuredCost
+// (tests/test_setting_bounds.cpp) checks the units against a measured run.
 inline constexpr double kCpuSecondsPerInternalSample = 0.32e-6;
-inline constexpr double kCpuSecondsPerVibrationComponentSample = 6.2e-9;
+inline constexpr double kCpuSecondsPerIncrementNode = 0.33e-6;
+inline constexpr double kCpuSecondsPerVibrationRotation = 6.2e-9;
+inline constexpr double kCpuSecondsPerVibrationDirect = 31e-9;
+// CPU seconds of that work on the development machine.
+double chain_cpu_seconds(const signal_chain::ChainWork& work);
 
 struct ImuCheck {
   std::string name;
@@ -50,6 +67,8 @@ struct ImuCheck {
   double cpu_fraction = 0.0;             // of one core: rate x (kCpuSecondsPerSample + the chain's share)
   int oversampling = 1;                  // the signal chain's internal rate / rate_hz
   std::size_t vibration_components = 0;  // random vibration components (linear and angular)
+  bool compensated_increments = false;   // the encoder's convention (raw: 4 quadrature nodes per sample)
+  signal_chain::ChainWork work;          // the chain's work per output sample (predict_work)
   std::vector<std::string> error_model;  // each term with its discrete sigma at rate_hz (daemon/scene/error_model_config.hpp)
   std::vector<std::string> faults;       // [[imu.fault]] and [imu.random_faults], one line each (daemon/scene/fault_config.hpp)
 };

@@ -654,13 +654,19 @@ ImuConfig parse_imu(const Table& t) {
     imu.error_model.chain.vibration.sensor_to_body = imu.mounting.sensor_to_body;
     // The chain against this device's rate (a preset may not run at it, a
     // filter frequency may lie beyond half the internal rate).
+    const std::string at_rate = " (at rate_hz " + std::to_string(imu.rate_hz) + ")";
+    const toml::node* sc = em.get("signal_chain");
     try {
       (void)signal_chain::resolve(imu.error_model.chain, imu.rate_hz);
+    } catch (const SettingError& ex) {  // one key at fault (a stage's frequency, compensate_delay): there
+      if (sc != nullptr && sc->is_table())
+        throw_at_setting(*sc->as_table(), t.ctx().file, e->path() + ".signal_chain", ex, at_rate);
+      throw SceneError(t.ctx().file, em.source().begin.line, em.source().begin.column, e->path() + ".signal_chain",
+                       std::string(ex.what()) + at_rate);
     } catch (const std::invalid_argument& ex) {
-      const toml::node* sc = em.get("signal_chain");
       const toml::source_region at = sc != nullptr ? sc->source() : em.source();
       throw SceneError(t.ctx().file, at.begin.line, at.begin.column, e->path() + ".signal_chain",
-                       std::string(ex.what()) + " (at rate_hz " + std::to_string(imu.rate_hz) + ")");
+                       std::string(ex.what()) + at_rate);
     }
   }
   // Faults (daemon/scene/fault_config.cpp), seeded from the error model's seed.
