@@ -53,7 +53,7 @@ struct Options {
   // = 0.268 per knot, so the result differs from the whole-trajectory spline
   // by ~0.268^L times the window-end condition's error (L = 4: ~5e-3 of
   // it), and is identical to it when the trajectory has at most L + 1 knots.
-  // Measured on the one-hour flight (1 Hz knots, tests/test_stream.cpp): gyro
+  // Measured on the one-hour flight (1 Hz knots, tests/core/test_stream.cpp): gyro
   // RMS error against truth 1.31e-5 (L = 2), 4.2e-6 (3), 1.24e-6 (4),
   // 1.41e-6 (whole trajectory); each knot of L adds one knot interval of
   // look-ahead.

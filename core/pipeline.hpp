@@ -90,7 +90,7 @@ struct PipelineOptions {
   // With kernel derivatives: integrate the kernel against each knot segment's
   // position cubic in closed form (O(knots in window) per sample) instead of
   // summing over the 2*Delta+1 dense samples. Same result to rounding; the
-  // dense sum is kept for comparison (tests/test_pipeline.cpp).
+  // dense sum is kept for comparison (tests/core/test_pipeline.cpp).
   bool closed_form_positions = true;
   // With kernel derivatives and KernelWidth::window: the attitude's Eq. 3.68
   // sum (O(Delta) per sample) is evaluated with its exact first and second
@@ -100,7 +100,7 @@ struct PipelineOptions {
   // derivative, so attitude and gyro stay exactly consistent. The smoothed
   // signal is C-infinity and band-limited by the kernel: with nodes Delta/32
   // samples apart the interpolant differs from the per-sample sum by < 1e-13
-  // rad and < 1e-11 rad/s (tests/test_stream.cpp). 0: Delta/32 (so every
+  // rad and < 1e-11 rad/s (tests/core/test_stream.cpp). 0: Delta/32 (so every
   // sample below Delta = 64); 1: every sample.
   int attitude_node_step = 0;
   // With kernel derivatives and KernelWidth::window: if Delta is below this,
@@ -111,7 +111,7 @@ struct PipelineOptions {
   // sample rate in its derivatives, which an integrating receiver aliases:
   // at 50 Hz with Delta = 50 the emitted accelerometer is inconsistent with
   // the emitted trajectory by 3.8e-6 m/s^2, with m = 2 by 1.4e-8
-  // (tests/test_stream.cpp). 0 turns it off.
+  // (tests/core/test_stream.cpp). 0 turns it off.
   int min_kernel_samples = 100;
   std::int64_t rate_hz = 400;  // output rate, integer Hz
   // Default: the C2 Hermite base curve (the thesis' geodesic polygon needs a

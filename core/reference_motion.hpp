@@ -110,7 +110,7 @@ class FastYaw final : public Motion {
 // ECEF: a level circle (radius, speed) in the tangent plane of `where`, whose
 // attitude R_b^e = R_l^e R_z(psi) passes rotation angle pi at crossing_ns (the
 // heading psi_pi where tr(R_l^e R_z(psi)) = -1 exists for any R_l^e, see
-// tests/test_hard_cases.cpp case 1): log R_b^e flips branch there. Position,
+// tests/io/test_hard_cases.cpp case 1): log R_b^e flips branch there. Position,
 // velocity and acceleration are the circle's rotated into ECEF (a fixed
 // tangent frame, as AircraftFlight's ecef version), the body rate relative to
 // e is (0, 0, v/r).

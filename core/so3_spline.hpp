@@ -6,7 +6,7 @@
 // careful user would write without kernel smoothing, and the yardstick of
 // issue 14 acceptance 1: on fast rotation between sparse knots the product's
 // default must be at least as accurate as this curve (bench/accuracy_report,
-// tests/test_so3_spline.cpp).
+// tests/core/test_so3_spline.cpp).
 //
 // Segment k (knots k -> k+1, duration h_k, t in [0, h_k] seconds):
 //   R(t) = R_k exp([rho_k(t)]),  rho_k cubic,  rho_k(0) = 0,

@@ -3,7 +3,7 @@
 # a static body (`imuemu sample-trajectory --kind static`), its IMU output
 # through `imuemu generate --sensor PRESET --seed 1`, analysed by
 # `imuemu allan --png`. Same rates, durations and seed as
-# tests/test_allan_presets.cpp; docs/allan.md shows the results.
+# tests/cli/test_allan_presets.cpp; docs/allan.md shows the results.
 #   scripts/plot_presets_allan.sh [BUILD_DIR] [OUT_DIR]
 # Needs about 3 GB of free space in $TMPDIR (the STIM300's 13.8 M-row CSV,
 # deleted afterwards).

@@ -194,7 +194,7 @@ double pair_count(double count1, double count2, double l) {
 // (every lag) up to kCoreLagSamples lags, otherwise every step-th lag (at
 // most that many), each standing for its cell (the summand is piecewise
 // polynomial with kinks every m1 and m2 lags over 2 (m1 + m2) lags, so 256
-// samples put at least 64 in each piece; tests/test_allan.cpp checks the
+// samples put at least 64 in each piece; tests/core/test_allan.cpp checks the
 // sampled sum against the exact one through the scaling of each term).
 constexpr std::int64_t kCoreLagSamples = 256;
 double lag_sum(const std::array<double, kTermCount>& c, double tau0_s, double m1, double m2, double count1,

@@ -55,7 +55,7 @@ double overlapping_allan_variance(std::span<const double> theta, std::int64_t m,
 // variance is that of the fully overlapping one to O((stride/m)^2) (its
 // terms' correlation is a smooth function of the start offset, sampled 64
 // times per m instead of m times), so the EDF formulas apply unchanged
-// (tests/test_allan.cpp checks the coverage), while a 24-hour 200 Hz axis
+// (tests/core/test_allan.cpp checks the coverage), while a 24-hour 200 Hz axis
 // costs about 23 N instead of 64 N difference evaluations. ratio 0: always 1.
 std::int64_t stride_for(std::int64_t m, std::int64_t ratio);
 
@@ -206,7 +206,7 @@ Analysis analyse(std::span<const double> rate, double tau0_s, const AnalysisOpti
 //   rate random walk (integrated random walk, rate step variance K^2 tau0): G = K^2 tau0 (|l|^3 - |l|) / 12
 // in (rate x samples)^2. Each gives the Allan variance of its basis (the
 // flicker G exactly at every m, the random walk's as (2m^2 + 1)/(6m) tau0 K^2;
-// tests/test_allan.cpp). The sum over lags is exact while the support is at
+// tests/core/test_allan.cpp). The sum over lags is exact while the support is at
 // most 256 lags wide (white PM .. random walk: E[d1 d2] = 0 outside
 // -2 m2 <= l <= 2 m1); wider ranges are sampled at 256 points (the summand is
 // piecewise polynomial; white PM's spikes at the lags a m1 - b m2 are added

@@ -15,7 +15,7 @@
 // (|d - nominal| is largest at the shortest or longest interval).
 // Memory: kExactIntervals * 8 bytes until the switch, then the histogram
 // (kBuckets * 8 bytes) only: ~160 KB at most, however long the run
-// (tests/test_listen.cpp ArrivalJitter.*).
+// (tests/cli/test_listen.cpp ArrivalJitter.*).
 #pragma once
 
 #include <cstddef>

@@ -3,7 +3,7 @@
 // it comes out, and each sample written straight to the output files
 // (io/sample_writers.hpp). Nothing proportional to the output is held: memory
 // is the input knots plus the engine's O(window) buffers and the writers'
-// 1 MiB buffers, whatever the duration (tests/test_cli.cpp
+// 1 MiB buffers, whatever the duration (tests/cli/test_cli.cpp
 // Cli.GenerateFourHoursAtOneKilohertzInBoundedMemory).
 #pragma once
 

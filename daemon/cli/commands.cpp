@@ -74,7 +74,7 @@ std::string number(double v) {
 // Default window in median knot intervals: the C2 Hermite base curve needs
 // only +-1; the two-point methods' chord polygon has impulsive acceleration at
 // the knots, and a bump one interval wide leaves an 18% ripple at the knot
-// rate, two intervals 0.7% (tests/test_pipeline.cpp, circle).
+// rate, two intervals 0.7% (tests/core/test_pipeline.cpp, circle).
 // The window is capped where every window is (limits::kMaxWindowSamples):
 // two knots an hour apart at 4 kHz asked for 14.4 million samples.
 int auto_delta(const std::vector<Pose>& knots, std::int64_t rate_hz, double intervals) {

@@ -1,4 +1,4 @@
-// Generated from config/default.toml; keep identical (tests/test_scene_config.cpp
+// Generated from config/default.toml; keep identical (tests/scene/test_scene_config.cpp
 // compares them). To regenerate after editing config/default.toml, paste its
 // text between the raw-string delimiters.
 #include "daemon/scene/default_scene.hpp"

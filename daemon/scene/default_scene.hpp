@@ -1,5 +1,5 @@
 // The scene imuemud runs when started without a scene file: config/default.toml,
-// embedded in the binary (tests/test_scene_config.cpp checks the two are
+// embedded in the binary (tests/scene/test_scene_config.cpp checks the two are
 // byte for byte the same).
 #pragma once
 

@@ -36,7 +36,7 @@ inline constexpr double kCpuSecondsPerSample = 1e-6;
 // per internal sample only, as if every one were a rotation, and put a
 // 100,000-row PSD on a native (raw increments) device at 12 % of a core; it
 // fell behind. SettingBounds.CpuEstimateOfHeavyChainsFollowsTheirMeasuredCost
-// (tests/test_setting_bounds.cpp) checks the units against a measured run.
+// (tests/scene/test_setting_bounds.cpp) checks the units against a measured run.
 inline constexpr double kCpuSecondsPerInternalSample = 0.32e-6;
 inline constexpr double kCpuSecondsPerIncrementNode = 0.33e-6;
 inline constexpr double kCpuSecondsPerVibrationRotation = 6.2e-9;
@@ -59,7 +59,7 @@ struct ImuCheck {
   // Causal: relative acceleration error bound of the Hermite cubic for a
   // motion at 1 Hz, (2 pi f h)^2 / 12 with the poses' rates (cubic Hermite
   // bound |p'' - H''| <= h^2/12 |p''''|), and 2 (2 pi f h)^2 with slopes
-  // estimated from the poses (tests/test_causal_hermite.cpp).
+  // estimated from the poses (tests/core/test_causal_hermite.cpp).
   double accel_error_1hz_with_rates = 0.0, accel_error_1hz_estimated = 0.0;
   std::optional<double> bytes_per_second;     // byte-stream protocols: max_bytes_per_sample x rate
   std::optional<double> can_frames_per_second;

@@ -6,7 +6,7 @@
 // before anything reaches the engine) and, with IMUEMU_TEST_HOOKS=1 only,
 // the test hooks "stall-emitter" (the emission thread stops progressing: the
 // watchdog test, tests/hil/systemd_run.sh) and "fault-producer" (the
-// producer thread throws: tests/test_imuemud.cpp proves it ends in exit 5).
+// producer thread throws: tests/service/test_imuemud.cpp proves it ends in exit 5).
 // Every handler runs on the service io thread and asks the scene's life
 // cycle (daemon/service/scene_lifecycle.hpp) for what it needs.
 #pragma once

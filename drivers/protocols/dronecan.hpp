@@ -22,7 +22,7 @@
 //    dsdl/parser.py CompoundType.get_data_type_signature); RawIMU's published
 //    value 0x8280632C40E574B5 (DroneCAN dsdlc output, e.g. MissionPlanner
 //    ExtLibs/DroneCAN uavcan.equipment.ahrs.RawIMU.cs) is recomputed from the
-//    DSDL text in tests/test_protocols_can.cpp.
+//    DSDL text in tests/engine/test_protocols_can.cpp.
 #pragma once
 
 #include <cstdint>

@@ -8,7 +8,7 @@ deltas on a pty whose raw bytes this script captures:
 
  1. scene faults: one [[imu.fault]] of every byte-stream type (26: all but
     the two CAN-only ones, tested with the DroneCAN decoder in
-    tests/test_fault_injection.cpp) on its own 20-sample window (after_s
+    tests/engine/test_fault_injection.cpp) on its own 20-sample window (after_s
     since the device's first sample). The decoded samples are walked in wire
     order against the expected order (absent, once, twice for duplicate,
     three times for babble). The capture is decoded

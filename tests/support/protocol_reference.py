@@ -1,5 +1,5 @@
 #!/usr/bin/env python3
-"""Independent reference for the golden bytes in tests/test_protocols_stream.cpp.
+"""Independent reference for the golden bytes in tests/drivers/test_protocols_stream.cpp.
 
 Written from the specifications alone (no project code, no protocol library):
 bit-by-bit CRCs from their Rocksoft parameters, the MAVLink CRC_EXTRA algorithm
@@ -10,7 +10,7 @@ hard-codes:
     python3 tests/support/protocol_reference.py
 
 and, as a reference receiver of a captured stream (counters as JSON; used by
-tests/test_link_faults.cpp to check link faults):
+tests/drivers/test_link_faults.cpp to check link faults):
 
     python3 tests/support/protocol_reference.py decode native|mavlink2|mip FILE
 """

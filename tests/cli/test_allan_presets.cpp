@@ -5,7 +5,7 @@
 // path (cli::allan_options + cli::analyse_allan_input, what `imuemu allan`
 // runs between reading the CSV and printing). The truth is the preset's
 // configured figures (core/sensor/datasheet.cpp), not anything the analysis
-// computes. The CSV round trip itself is tested in tests/test_allan_command.cpp
+// computes. The CSV round trip itself is tested in tests/cli/test_allan_command.cpp
 // (and a multi-hour CSV would be gigabytes). docs/allan.md "The presets"
 // explains the durations and what a static Allan analysis cannot see.
 #include <gtest/gtest.h>
@@ -47,7 +47,7 @@ struct StaticRun {
 // from the device's spec at the rate, measuring sample k = grid_index(t0,
 // t_k) = k; it is called here the same way, one sample at a time, so that a
 // record of 14 M samples keeps 6 doubles per sample, not a whole ImuSample
-// (generate's bits equal this stage's: tests/test_sensor_integration.cpp).
+// (generate's bits equal this stage's: tests/scene/test_sensor_integration.cpp).
 StaticRun static_run(const std::string& preset, std::int64_t rate_hz, double hours, std::int64_t seed) {
   const auto count = static_cast<std::size_t>(std::llround(hours * 3600.0 * static_cast<double>(rate_hz)));
   const imuemu::reference::Static body(imuemu::reference::AircraftFlight::default_origin(),
@@ -256,7 +256,7 @@ Tally run_preset(const PresetCase& c) {
 // durations below, 5-6 % at a quarter of them (STIM300 and HG9900 gyros,
 // 90 % interval +-9-10 %: one B in 13 came out beyond 10 % over 8 seeds). Rates
 // are chosen for cost: the density convention makes the Allan white noise
-// independent of the rate (tests/test_sensor_model.cpp), so a long record at
+// independent of the rate (tests/core/test_sensor_model.cpp), so a long record at
 // a low rate holds the same information about the slow terms, as long as the
 // flicker's fastest processes stay a few samples long (docs/sensor-models.md).
 
@@ -290,8 +290,8 @@ TEST(AllanPresets, Hg9900SevenHundredHoursAt1Hz) { run_preset(kHg9900); }
 // or change the cases. Prints, per preset and in all,
 // how often the truth is inside the interval and the RMS of
 // (fitted - truth) / reported sigma (1 when the sigma is honest):
-//   build/release/tests/test_allan_presets --gtest_also_run_disabled_tests
-//     --gtest_filter='*Coverage*' | grep coverage
+//   build/release/tests/cli_tests --gtest_also_run_disabled_tests
+//     --gtest_filter='AllanPresets.*Coverage*' | grep coverage
 TEST(AllanPresets, DISABLED_CoverageOverSeeds) {
   const std::vector<PresetCase> cases = {kIcm42688p, kAdis16470, kStim300, kHg9900};
   constexpr int kSeeds = 8;

@@ -462,7 +462,7 @@ TEST(ParkRavani, PositionIsTheNaturalCubicSpline) {
   wk = wiggly_knots();  // positions (t, t^2, 0): curved
   // The whole-trajectory natural spline: a spline window reaching every knot
   // (the default window solves the C2 condition over +-4 knots only, see
-  // interp::Options::spline_window_knots; tests/test_stream.cpp measures it).
+  // interp::Options::spline_window_knots; tests/core/test_stream.cpp measures it).
   auto whole = with_method(interp::Method::park_ravani);
   whole.spline_window_knots = static_cast<int>(wk.size()) - 1;
   const TimeNs d = 1'000'000;

@@ -792,7 +792,7 @@ TEST(AtomicFile, TransactionReplacesNoOutputWhenOneFails) {
 
 // A rename that fails at commit (the second target became a directory after
 // its writer started; one that already is a directory is refused at once,
-// tests/test_output_paths.cpp): the first target, already renamed, gets its
+// tests/io/test_output_paths.cpp): the first target, already renamed, gets its
 // old content back.
 TEST(AtomicFile, TransactionRenameFailureRestoresTheTargetsRenamed) {
   TempDir dir;

@@ -134,7 +134,7 @@ TEST(Derivatives, FivePointErrorIsFourthOrder) {
 }
 
 TEST(KernelDerivatives, ExactForQuadraticMotionEvenWithFewSamplesPerWindow) {
-  // Regression (found by tests/test_hard_cases.cpp): differentiating the
+  // Regression (found by tests/io/test_hard_cases.cpp): differentiating the
   // continuous-time sum gave -66% acceleration at Delta = 10. The derivative
   // weights are rescaled so a full window is exact for quadratics.
   const double h = 0.01;
