@@ -6,7 +6,9 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <optional>
+#include <vector>
 #include <span>
 
 #include "drivers/protocol.hpp"
@@ -46,10 +48,20 @@ inline constexpr std::uint16_t kGpsTimeValid = kTimeInitialized | kTowValid | kW
 // sum1 in the high byte (sent first).
 std::uint16_t fletcher_checksum(std::span<const std::uint8_t> bytes);
 
+class Device;
+struct FieldRate;
+
 class Encoder final : public StreamEncoder {
  public:
-  explicit Encoder(const StreamEncoderOptions& options) : options_(options) {}
+  // With options.mip_device.answers_commands, the encoder carries the
+  // device's command side (drivers/protocols/mip_device.hpp): what it streams
+  // then follows the mode and message format its driver set.
+  explicit Encoder(const StreamEncoderOptions& options);
+  ~Encoder() override;
   std::string name() const override { return "mip"; }
+  CommandResponder* command_responder() override;
+  // The 0x80 fields this encoder sends at power-up, in order.
+  std::vector<std::uint8_t> sensor_fields() const;
   void encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out) override;
   std::size_t max_bytes_per_sample() const override;
   // Delta theta / delta velocity (0x80,0x07 / 0x80,0x08) as the device sends
@@ -65,7 +77,12 @@ class Encoder final : public StreamEncoder {
   StreamFrameLayout frame_layout(std::span<const std::uint8_t> frame) const override;
 
  private:
+  // A format the driver set: the fields due at this sample's counter (a
+  // field with decimation d goes out on counters that are multiples of d).
+  void encode_format(const ImuFrameInput& sample, std::span<const FieldRate> fields,
+                     std::vector<std::uint8_t>& out);
   StreamEncoderOptions options_;
+  std::unique_ptr<Device> device_;
 };
 
 // The GPS timestamp field (0x80,0x12) of a sample at trajectory time t_ns,
