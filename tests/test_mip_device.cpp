@@ -46,6 +46,7 @@
 #include <vector>
 
 #include "daemon/device/device.hpp"
+#include "daemon/scene/scene_config.hpp"
 #include "drivers/link_fault.hpp"
 #include "drivers/protocols/mip.hpp"
 #include "drivers/protocols/mip_device.hpp"
@@ -509,6 +510,40 @@ TEST(MipDevice, TheDefaultStreamIsTheOldEncodersOutputByteForByte) {
     legacy.encode(s, a);
     device.encode(s, b);
     ASSERT_EQ(a, b) << k;
+  }
+}
+
+// ------------------------------------------------------------ scene keys
+
+std::string scene_with_device(const std::string& protocol, const std::string& device_table) {
+  return "[scene]\nname = \"t\"\nphysics = \"flat\"\n[trajectory]\nsource = \"sample:static\"\nduration_s = 10\n"
+         "[[imu]]\nname = \"a\"\nrate_hz = 500\nprotocol = \"" + protocol + "\"\n[imu.transport]\ntype = \"null\"\n" +
+         device_table;
+}
+
+TEST(MipDevice, SceneKeysUnderImuDeviceSetIdentityAndPowerUpMode) {
+  const scene::SceneConfig c = scene::parse_scene_text(
+      scene_with_device("mip", "[imu.device]\npower_up_mode = \"idle\"\nmodel_name = \"3DM-GX5-25\"\n"
+                               "model_number = \"6251-4220\"\nserial_number = \"6251.99\"\n"
+                               "firmware_version = \"1.2.03\"\nhardware_revision = \"B\"\n"),
+      "t.toml", "/tmp");
+  const drivers::MipDeviceConfig& d = c.imus.at(0).stream_options.mip_device;
+  EXPECT_TRUE(d.power_up_idle);
+  EXPECT_EQ(d.model_name, "3DM-GX5-25");
+  EXPECT_EQ(d.model_number, "6251-4220");
+  EXPECT_EQ(d.serial_number, "6251.99");
+  EXPECT_EQ(d.firmware_version, 1203);
+  EXPECT_EQ(d.hardware_revision, "B");
+  // Defaults: a streaming 3DM-CV7-AHRS.
+  const scene::SceneConfig dflt = scene::parse_scene_text(scene_with_device("mip", ""), "t.toml", "/tmp");
+  EXPECT_FALSE(dflt.imus.at(0).stream_options.mip_device.power_up_idle);
+  EXPECT_EQ(dflt.imus.at(0).stream_options.mip_device.model_name, "3DM-CV7-AHRS");
+  // Refused: a string longer than its 16-character field, a bad mode, another protocol.
+  for (const std::string& bad : {scene_with_device("mip", "[imu.device]\nmodel_name = \"0123456789abcdefg\"\n"),
+                                 scene_with_device("mip", "[imu.device]\npower_up_mode = \"asleep\"\n"),
+                                 scene_with_device("mip", "[imu.device]\nfirmware_version = \"1.10.0\"\n"),
+                                 scene_with_device("native", "[imu.device]\npower_up_mode = \"idle\"\n")}) {
+    EXPECT_THROW((void)scene::parse_scene_text(bad, "t.toml", "/tmp"), std::exception) << bad;
   }
 }
 
