@@ -232,6 +232,21 @@ TEST(MipDevice, ResyncsOnGarbageBadChecksumsAndCommandsSplitMidFrame) {
   EXPECT_EQ(c.not_command_bytes, garbage.size() + bad_ping.size());
 }
 
+TEST(MipDevice, RepliesAndDataPacketsEchoedBackAreNotCommands) {
+  // A reader whose tty echoes sends our own packets back: a reply (field
+  // 0xF1) or a data packet (set 0x80) is never answered.
+  drivers::mip::Encoder e(options_1000hz());
+  Sink sink;
+  const Bytes echoed_ack = spec_packet(0x01, {ack(0x01)});
+  const Bytes echoed_data = spec_packet(0x80, {{0x0E, 0x04, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0, 0}});
+  e.command_responder()->on_input(echoed_ack, sink);
+  e.command_responder()->on_input(echoed_data, sink);
+  EXPECT_TRUE(sink.replies.empty());
+  const drivers::CommandCounters c = e.command_responder()->command_counters();
+  EXPECT_EQ(c.received, 0u);
+  EXPECT_EQ(c.not_command_bytes, echoed_ack.size() + echoed_data.size());
+}
+
 // ------------------------------------------------------------- commands
 
 TEST(MipDevice, DeviceInformationCarriesTheSceneIdentity) {

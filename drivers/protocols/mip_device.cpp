@@ -193,14 +193,19 @@ void Device::on_input(std::span<const std::uint8_t> bytes, ReplySink& replies) {
       parser_.count_not_command(payload.size() + kHeaderBytes + kChecksumBytes);
       return;
     }
-    // The fields must tile the payload exactly.
+    // The fields must tile the payload exactly. A field descriptor of 0x80
+    // or more is a reply field (ACK/NACK 0xF1, reply data), never a command
+    // [P]: a packet carrying one is a reply (ours, echoed back by a reader
+    // whose tty echoes), and answering it would answer our own replies.
     std::size_t at = 0;
+    bool reply_field = false;
     while (at < payload.size()) {
       const std::size_t len = payload[at];
       if (len < 2 || at + len > payload.size()) break;
+      reply_field = reply_field || payload[at + 1] >= 0x80;
       at += len;
     }
-    if (at != payload.size() || payload.empty()) {
+    if (at != payload.size() || payload.empty() || reply_field) {
       parser_.count_not_command(payload.size() + kHeaderBytes + kChecksumBytes);
       return;
     }
