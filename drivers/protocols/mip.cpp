@@ -162,6 +162,15 @@ Encoder::Encoder(const StreamEncoderOptions& options) : options_(options) {
 
 Encoder::~Encoder() = default;
 
+Encoder& Encoder::operator=(const Encoder& other) {
+  if (this != &other) {
+    Encoder fresh(other.options_);
+    options_ = fresh.options_;
+    device_ = std::move(fresh.device_);
+  }
+  return *this;
+}
+
 CommandResponder* Encoder::command_responder() { return device_.get(); }
 
 std::vector<std::uint8_t> Encoder::sensor_fields() const {

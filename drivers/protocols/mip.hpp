@@ -57,6 +57,10 @@ class Encoder final : public StreamEncoder {
   // device's command side (drivers/protocols/mip_device.hpp): what it streams
   // then follows the mode and message format its driver set.
   explicit Encoder(const StreamEncoderOptions& options);
+  // A copy is the same device model powered up again: the options, and a
+  // command side in its power-up state (not the original's settings).
+  Encoder(const Encoder& other) : Encoder(other.options_) {}
+  Encoder& operator=(const Encoder& other);
   ~Encoder() override;
   std::string name() const override { return "mip"; }
   CommandResponder* command_responder() override;
