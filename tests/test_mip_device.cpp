@@ -26,6 +26,7 @@
 //    fatal there), Reset Filter 0x0D,0x01, Datastream Control all streams on,
 //    Resume.
 #include <fcntl.h>
+#include <mutex>
 #include <poll.h>
 #include <termios.h>
 #include <unistd.h>
@@ -52,6 +53,7 @@
 #include "drivers/protocols/mip_device.hpp"
 #include "drivers/protocols/stream_protocols.hpp"
 #include "drivers/pty_transport.hpp"
+#include "drivers/queued_writer.hpp"
 
 // Allocations counted per thread: the emission thread must allocate nothing
 // while the io thread (which may) answers commands at the same time, so the
@@ -560,6 +562,104 @@ TEST(MipDevice, SceneKeysUnderImuDeviceSetIdentityAndPowerUpMode) {
                                  scene_with_device("native", "[imu.device]\npower_up_mode = \"idle\"\n")}) {
     EXPECT_THROW((void)scene::parse_scene_text(bad, "t.toml", "/tmp"), std::exception) << bad;
   }
+}
+
+// The writer thread's side, with a device that takes at most 7 bytes per
+// write (a UART's kernel buffer nearly full): replies still never land
+// inside a frame, and the baud change comes after the ACK's last byte.
+class SlowUart final : public drivers::WriterDevice {
+ public:
+  struct Shared {
+    std::mutex mutex;
+    Bytes wire;
+    std::vector<std::pair<std::size_t, std::uint32_t>> baud_changes;  // wire offset, rate
+  };
+  SlowUart(std::shared_ptr<Shared> shared, int input_fd) : shared_(std::move(shared)), input_fd_(input_fd) {}
+  bool datagrams() const override { return false; }
+  int poll_fd() const override { return input_fd_; }
+  drivers::DeviceWrite write(std::span<const std::byte> bytes) override {
+    const std::size_t take = std::min<std::size_t>(bytes.size(), 7);
+    std::lock_guard lock(shared_->mutex);
+    for (std::size_t i = 0; i < take; ++i) shared_->wire.push_back(static_cast<std::uint8_t>(bytes[i]));
+    return {drivers::DeviceWrite::Outcome::written, take, {}};
+  }
+  std::optional<std::string> service(short revents, std::uint64_t* discarded) override {
+    if (revents & POLLIN) {
+      std::byte buf[256];
+      const ssize_t n = ::read(input_fd_, buf, sizeof buf);
+      if (n > 0) deliver_input(std::span<const std::byte>(buf, static_cast<std::size_t>(n)), discarded);
+    }
+    return std::nullopt;
+  }
+  bool set_baud(std::uint32_t baud, std::string&) override {
+    std::lock_guard lock(shared_->mutex);
+    shared_->baud_changes.emplace_back(shared_->wire.size(), baud);
+    return true;
+  }
+  void on_link_lost() override {}
+  bool try_restore(std::string&) override { return true; }
+  bool initially_up() const override { return true; }
+
+ private:
+  std::shared_ptr<Shared> shared_;
+  int input_fd_;
+};
+
+TEST(MipDevice, TheWriterPutsRepliesBetweenFramesAndChangesBaudAfterTheAckEvenOnPartialWrites) {
+  int pipe_fds[2];
+  ASSERT_EQ(::pipe2(pipe_fds, O_NONBLOCK | O_CLOEXEC), 0);
+  auto shared = std::make_shared<SlowUart::Shared>();
+  drivers::QueuedWriterOptions wo;
+  wo.name = "slow uart";
+  wo.baud = 115200;
+  wo.log = [](std::string_view) {};
+  drivers::QueuedWriter writer(std::make_unique<SlowUart>(shared, pipe_fds[0]), wo);
+  drivers::mip::Encoder e(options_1000hz());
+  writer.set_input_handler(e.command_responder());
+
+  const Bytes ping = spec_packet(0x01, {{0x02, 0x01}});
+  const Bytes to_460800 = spec_packet(0x01, {{0x08, 0x09, 0x01, 0x01, 0x00, 0x07, 0x08, 0x00}});
+  constexpr int kRounds = 40;
+  for (int r = 0; r < kRounds; ++r) {
+    for (int f = 0; f < 5; ++f) {
+      drivers::ImuFrameInput s;
+      s.sample_counter = static_cast<std::uint64_t>(r * 5 + f);
+      Bytes frame;
+      e.encode(s, frame);
+      ASSERT_TRUE(writer.offer(std::as_bytes(std::span<const std::uint8_t>(frame))));
+    }
+    const Bytes& c = r == kRounds / 2 ? to_460800 : ping;
+    ASSERT_EQ(::write(pipe_fds[1], c.data(), c.size()), static_cast<ssize_t>(c.size()));
+    std::this_thread::sleep_for(std::chrono::milliseconds(1));
+  }
+  const auto deadline = std::chrono::steady_clock::now() + std::chrono::seconds(20);
+  while (writer.counters().replies_sent < static_cast<std::uint64_t>(kRounds) &&
+         std::chrono::steady_clock::now() < deadline)
+    std::this_thread::sleep_for(std::chrono::milliseconds(2));
+  ASSERT_TRUE(writer.flush(std::chrono::seconds(5)));
+  writer.stop(std::chrono::milliseconds(100));
+  ::close(pipe_fds[0]);
+  ::close(pipe_fds[1]);
+
+  std::lock_guard lock(shared->mutex);
+  std::size_t garbage = 0, tail = 0;
+  const std::vector<SeenPacket> packets = split_packets(shared->wire, &garbage, &tail);
+  EXPECT_EQ(garbage + tail, 0u) << "a reply inside a frame would leave bytes outside whole packets";
+  std::size_t replies = 0, frames = 0;
+  for (const SeenPacket& p : packets) (p.set < 0x80 ? replies : frames) += 1;
+  EXPECT_EQ(replies, static_cast<std::size_t>(kRounds));
+  EXPECT_EQ(frames, static_cast<std::size_t>(kRounds * 5));
+  // One baud change, right where the Comm Port Speed ACK ends.
+  ASSERT_EQ(shared->baud_changes.size(), 1u);
+  EXPECT_EQ(shared->baud_changes[0].second, 460800u);
+  const Bytes ack_packet = spec_packet(0x01, {ack(0x09)});
+  const std::size_t at = shared->baud_changes[0].first;
+  ASSERT_GE(at, ack_packet.size());
+  EXPECT_EQ(Bytes(shared->wire.begin() + static_cast<std::ptrdiff_t>(at - ack_packet.size()),
+                  shared->wire.begin() + static_cast<std::ptrdiff_t>(at)),
+            ack_packet);
+  EXPECT_EQ(writer.baud(), 460800u);
+  EXPECT_EQ(writer.counters().input_bytes, (kRounds - 1) * ping.size() + to_460800.size());
 }
 
 // ----------------------------------------------- on a pty, while streaming
