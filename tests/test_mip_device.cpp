@@ -375,6 +375,31 @@ TEST(MipDevice, SavedSettingsComeBackOnLoadAndDefaultsOnDeviceSettingsDefault) {
   EXPECT_EQ(ask(d, spec_packet(0x0C, {{0x03, 0x30, 0x01}})), spec_packet(0x0C, {ack(0x30, 0x03)}));
 }
 
+TEST(MipDevice, ARestartFaultBringsBackTheStartupSettingsAndPowerUpMode) {
+  drivers::mip::Encoder e(options_1000hz());
+  drivers::CommandResponder& d = *e.command_responder();
+  // Saved startup format: accel every 10th sample; then the driver sets gyro
+  // every 5th (not saved) and idles the device.
+  EXPECT_EQ(ask(d, spec_packet(0x0C, {{0x08, 0x0F, 0x01, 0x80, 0x01, 0x04, 0x00, 0x0A}})), spec_packet(0x0C, {ack(0x0F)}));
+  EXPECT_EQ(ask(d, spec_packet(0x0C, {{0x04, 0x0F, 0x03, 0x80}})), spec_packet(0x0C, {ack(0x0F)}));  // save
+  EXPECT_EQ(ask(d, spec_packet(0x0C, {{0x08, 0x0F, 0x01, 0x80, 0x01, 0x05, 0x00, 0x05}})), spec_packet(0x0C, {ack(0x0F)}));
+  EXPECT_EQ(ask(d, spec_packet(0x01, {{0x02, 0x02}})), spec_packet(0x01, {ack(0x02)}));
+  EXPECT_TRUE(stream(e, 0, 20).empty());
+  // Power cycle (a restart fault, on the emission thread): the device comes
+  // up streaming (power_up_mode) its saved format at once, before the io
+  // thread has seen anything.
+  Bytes nothing;
+  e.restart(0, nothing);
+  EXPECT_TRUE(nothing.empty());
+  auto sent = stream(e, 20, 20);
+  EXPECT_EQ(sent, (std::map<std::uint64_t, std::vector<std::uint8_t>>{{20, {0x04}}, {30, {0x04}}}));
+  // The next command finds the settings reset: mode streaming, the saved format.
+  EXPECT_EQ(ask(d, spec_packet(0x0C, {{0x04, 0x0F, 0x02, 0x80}})),
+            spec_packet(0x0C, {ack(0x0F), {0x07, 0x8F, 0x80, 0x01, 0x04, 0x00, 0x0A}}));
+  EXPECT_EQ(d.command_counters().mode, "streaming");
+  EXPECT_EQ(stream(e, 40, 20).size(), 2u);
+}
+
 TEST(MipDevice, DatastreamControlTurnsTheSensorStreamOffAndOn) {
   drivers::mip::Encoder e(options_1000hz());
   drivers::CommandResponder& d = *e.command_responder();

@@ -162,11 +162,20 @@ Encoder::Encoder(const StreamEncoderOptions& options) : options_(options) {
 
 Encoder::~Encoder() = default;
 
+void Encoder::restart(TimeNs now_ns, std::vector<std::uint8_t>& out) {
+  (void)now_ns;
+  (void)out;  // no power-up packet
+  if (!device_) return;
+  ++restarts_;
+  device_->note_restart();
+}
+
 Encoder& Encoder::operator=(const Encoder& other) {
   if (this != &other) {
     Encoder fresh(other.options_);
     options_ = fresh.options_;
     device_ = std::move(fresh.device_);
+    restarts_ = 0;
   }
   return *this;
 }
@@ -242,7 +251,9 @@ void Encoder::encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out
     // What the driver left the device doing (wait-free read of the io
     // thread's last change): idle sends nothing; a format of its own sends
     // its fields at their decimations; otherwise the power-up stream below.
-    const EmitConfig& c = device_->emit_config();
+    const EmitConfig& published = device_->emit_config();
+    // After a restart fault the io thread has not taken in yet: the startup settings.
+    const StreamConfig& c = published.restarts_handled < restarts_ ? published.startup : published;
     if (!c.send) return;
     if (!c.scene_format) {
       encode_format(sample, std::span<const FieldRate>(c.fields.data(), c.count), out);

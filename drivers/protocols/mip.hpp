@@ -75,10 +75,12 @@ class Encoder final : public StreamEncoder {
 
   // Link faults (docs/faults.md): payload length byte and Fletcher
   // checksum [P 6.3, 6.4]. The IMU data set carries no packet counter and
-  // the emulated device sends no power-up packet (it resumes streaming the
-  // same data set), so the sequence and restart hooks keep their defaults:
-  // a restart shows on the wire only as the silence before it.
+  // the emulated device sends no power-up packet, so the sequence hooks keep
+  // their defaults; a restart shows on the wire as the silence before it
+  // and, for a device whose driver changed its settings, as the startup
+  // settings (saved, power-up mode) after it (docs/mip-device.md).
   StreamFrameLayout frame_layout(std::span<const std::uint8_t> frame) const override;
+  void restart(TimeNs now_ns, std::vector<std::uint8_t>& out) override;
 
  private:
   // A format the driver set: the fields due at this sample's counter (a
@@ -87,6 +89,7 @@ class Encoder final : public StreamEncoder {
                      std::vector<std::uint8_t>& out);
   StreamEncoderOptions options_;
   std::unique_ptr<Device> device_;
+  std::uint64_t restarts_ = 0;  // restart faults seen (emission thread)
 };
 
 // The GPS timestamp field (0x80,0x12) of a sample at trajectory time t_ns,

@@ -160,11 +160,18 @@ std::string Device::format_text() const {
 }
 
 void Device::publish() {
+  auto stream_of = [&](const Settings& s, bool streaming) {
+    StreamConfig c;
+    c.send = streaming && s.sensor_stream && !s.sensor_format.empty();
+    c.scene_format = s.sensor_format == defaults_.sensor_format;
+    c.count = static_cast<std::uint8_t>(std::min(s.sensor_format.size(), kMaxFormatFields));
+    for (std::size_t i = 0; i < c.count; ++i) c.fields[i] = s.sensor_format[i];
+    return c;
+  };
   EmitConfig c;
-  c.send = streaming_ && current_.sensor_stream && !current_.sensor_format.empty();
-  c.scene_format = current_.sensor_format == defaults_.sensor_format;
-  c.count = static_cast<std::uint8_t>(std::min(current_.sensor_format.size(), kMaxFormatFields));
-  for (std::size_t i = 0; i < c.count; ++i) c.fields[i] = current_.sensor_format[i];
+  static_cast<StreamConfig&>(c) = stream_of(current_, streaming_);
+  c.startup = stream_of(saved_, !config_.power_up_idle);
+  c.restarts_handled = restarts_handled_;
   published_.publish(c);
   const std::lock_guard<std::mutex> lock(status_mutex_);
   mode_text_ = streaming_ ? "streaming" : "idle";
@@ -172,6 +179,7 @@ void Device::publish() {
 }
 
 CommandCounters Device::command_counters() const {
+  // (A restart not yet taken in by the io thread shows at its next input.)
   CommandCounters c;
   c.received = received_.load(std::memory_order_relaxed);
   c.answered = answered_.load(std::memory_order_relaxed);
@@ -185,7 +193,23 @@ CommandCounters Device::command_counters() const {
   return c;
 }
 
+void Device::take_restarts() {
+  const std::uint64_t r = restarts_.load(std::memory_order_acquire);
+  if (r == restarts_handled_) return;
+  restarts_handled_ = r;
+  // A power cycle: the saved startup settings and the power-up mode. The
+  // line rate stays (the transport keeps its own; a real device would come
+  // up at its saved rate, which is this one unless the driver saved another).
+  const std::uint32_t baud = current_.baud;
+  current_ = saved_;
+  current_.baud = baud;
+  streaming_ = !config_.power_up_idle;
+  publish();
+  log("restarted (fault): startup settings, " + std::string(streaming_ ? "streaming " : "idle, ") + format_text());
+}
+
 void Device::on_input(std::span<const std::uint8_t> bytes, ReplySink& replies) {
+  take_restarts();
   parser_.feed(bytes, std::chrono::steady_clock::now(), [&](std::uint8_t set, std::span<const std::uint8_t> payload) {
     // Descriptor sets 0x80 and above carry data, not commands [P]: a driver
     // never sends them; not commands.

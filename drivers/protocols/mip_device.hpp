@@ -75,12 +75,21 @@ struct FieldRate {
 };
 inline constexpr std::size_t kMaxFormatFields = 8;
 
-// What the emission thread streams (set 0x80), as the io thread published it.
-struct EmitConfig {
+// One 0x80 stream as the encoder sends it.
+struct StreamConfig {
   bool send = true;             // streaming (not idle) and the 0x80 stream enabled
   bool scene_format = true;     // the power-up format: the encoder's own field list at decimation 1
   std::uint8_t count = 0;       // otherwise these fields, in this order
   std::array<FieldRate, kMaxFormatFields> fields{};
+};
+
+// What the emission thread streams (set 0x80), as the io thread published it.
+struct EmitConfig : StreamConfig {
+  // What the device streams after a power cycle (its saved startup settings
+  // and power-up mode): the emission thread uses it alone after a restart
+  // fault until the io thread has taken the restart in (restarts_handled).
+  StreamConfig startup;
+  std::uint64_t restarts_handled = 0;
 };
 
 // Wait-free single-producer / single-consumer hand-over of the newest value
@@ -153,6 +162,9 @@ class Device final : public CommandResponder {
   void set_log(std::function<void(std::string_view)> log) override;
   // --- emission thread ---
   const EmitConfig& emit_config() noexcept { return published_.read(); }
+  // A restart fault (the device powered up again): counted without a wait;
+  // the io thread resets the settings to the startup ones at its next turn.
+  void note_restart() noexcept { restarts_.fetch_add(1, std::memory_order_release); }
 
   // The descriptors Get Device Descriptors reports (set << 8 | field).
   const std::vector<std::uint16_t>& descriptors() const noexcept { return descriptors_; }
@@ -182,6 +194,9 @@ class Device final : public CommandResponder {
   AckCode baud_setting(std::uint8_t function, std::uint32_t baud, ReplySink& replies);
   void apply_baud(std::uint32_t baud, ReplySink& replies);
   void publish();
+  // A restart the emission thread noted: settings back to the saved startup
+  // ones, mode to the power-up mode (io thread, before any command).
+  void take_restarts();
   void log(const std::string& line);
   std::string format_text() const;
 
@@ -194,6 +209,8 @@ class Device final : public CommandResponder {
   bool streaming_ = true;
   TripleBuffer<EmitConfig> published_;
 
+  std::atomic<std::uint64_t> restarts_{0};
+  std::uint64_t restarts_handled_ = 0;
   std::atomic<std::uint64_t> received_{0}, answered_{0}, nacked_{0}, not_command_{0}, replies_dropped_{0};
   mutable std::mutex status_mutex_;  // mode/format/baud text and the log sink (never the emission thread)
   std::string mode_text_, format_text_;
