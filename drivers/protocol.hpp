@@ -12,9 +12,11 @@
 #include <functional>
 #include <span>
 #include <string>
+#include <string_view>
 #include <vector>
 
 #include "core/types.hpp"
+#include "drivers/transport.hpp"
 
 namespace imuemu::drivers {
 
@@ -78,9 +80,36 @@ struct StreamFrameLayout {
 };
 
 // Byte-stream protocols (UART, pty): frames appended to `out`.
+// What a device that answers its driver counted, and its settings now
+// (daemon/device maps it to the status JSON's "commands").
+struct CommandCounters {
+  std::uint64_t received = 0;           // whole commands (valid framing and checksum)
+  std::uint64_t answered = 0;           // acknowledged (ACK, with its reply data if any)
+  std::uint64_t nacked = 0;             // refused with the protocol's error code
+  std::uint64_t not_command_bytes = 0;  // input bytes that were not part of a valid command
+  std::uint64_t replies_dropped = 0;    // replies the reply queue could not take
+  std::string mode;                     // "streaming" / "idle"
+  std::string format;                   // what it streams: messages, fields, decimation
+  std::uint32_t baud = 0;               // the rate its driver last set (or the power-up one)
+};
+
+// The command side of a device (the bytes its driver writes), handed to the
+// transport (Transport::set_input_handler): on_input runs on the transport's
+// io thread. Whatever it changes reaches the encoder (the emission thread)
+// without a lock or a wait.
+class CommandResponder : public InputHandler {
+ public:
+  virtual CommandCounters command_counters() const = 0;
+  // Log lines about changes the driver made (mode, format, baud); empty: none.
+  virtual void set_log(std::function<void(std::string_view)> log) = 0;
+};
+
 class StreamEncoder {
  public:
   virtual ~StreamEncoder() = default;
+  // A device that answers its driver's commands: its responder (owned by
+  // the encoder, alive as long as it); nullptr for a device that only sends.
+  virtual CommandResponder* command_responder() { return nullptr; }
   virtual std::string name() const = 0;
   // Appends the frame(s) of one sample.
   virtual void encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out) = 0;

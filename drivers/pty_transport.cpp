@@ -48,13 +48,14 @@ class PtyDevice final : public WriterDevice {
 
   std::optional<std::string> service(short revents, std::uint64_t* discarded_bytes) override {
     if (revents & POLLIN) {
-      // The reader wrote to the slave (commands to the device): drop them so
-      // its writes never block on a full buffer.
+      // The reader wrote to the slave (commands to the device): read all of
+      // it (its writes never block on a full buffer) and hand it to the
+      // device's input handler, or discard it without one.
       std::array<std::byte, 4096> sink;
       for (;;) {
         const ssize_t n = ::read(master_, sink.data(), sink.size());
         if (n <= 0) break;  // EAGAIN: drained; EIO: no slave open (POLLHUP below)
-        *discarded_bytes += static_cast<std::uint64_t>(n);
+        deliver_input(std::span<const std::byte>(sink.data(), static_cast<std::size_t>(n)), discarded_bytes);
       }
     }
     // Linux reports POLLHUP on the master while no process has the slave open.
@@ -248,6 +249,9 @@ PtyTransport::PtyTransport(PtyTransportOptions options) : link_path_(options.lin
   writer.link_lost_verb = "reader gone";
   writer.link_restored_verb = "reader connected";
   writer.log = std::move(options.log);
+  // A pty has no line rate; it records the one its peer's device was last
+  // told (a baud-rate command), starting from the usual 115200.
+  writer.baud = 115200;
   writer_ = std::make_unique<QueuedWriter>(std::move(device), std::move(writer));
 }
 
@@ -257,6 +261,11 @@ PtyTransport::~PtyTransport() {
 }
 
 bool PtyTransport::write_frame(std::span<const std::byte> frame) { return writer_->offer(frame); }
+bool PtyTransport::set_input_handler(InputHandler* handler) {
+  writer_->set_input_handler(handler);
+  return true;
+}
+std::uint32_t PtyTransport::baud() const { return writer_->baud(); }
 
 std::string PtyTransport::describe() const {
   return link_path_.empty() ? "pty " + slave_path_ : "pty " + slave_path_ + " (" + link_path_ + ")";

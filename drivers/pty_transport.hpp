@@ -18,8 +18,10 @@
 //    fresh samples instead of seconds-old ones. The writer checks for a
 //    reader every reader_probe_interval (the first frames after a reader
 //    opens the slave can be lost within that interval).
-// Bytes the reader writes (configuration commands to the emulated device) are
-// read and discarded (input_bytes_discarded) so the reader never blocks.
+// Bytes the reader writes (commands to the emulated device) are read on the
+// writer thread and handed to the device's input handler
+// (set_input_handler), whose replies go out between frames; without one they
+// are discarded (input_bytes_discarded), so the reader never blocks.
 #pragma once
 
 #include <chrono>
@@ -62,6 +64,8 @@ class PtyTransport final : public Transport {
   bool link_up() const override;  // a process has the slave open
   bool flush(std::chrono::milliseconds timeout) override;
   void stop(std::chrono::milliseconds drain_timeout) override;
+  bool set_input_handler(InputHandler* handler) override;
+  std::uint32_t baud() const override;
 
   const std::string& slave_path() const noexcept { return slave_path_; }
   const std::string& link_path() const noexcept { return link_path_; }

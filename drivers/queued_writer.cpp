@@ -102,6 +102,8 @@ QueuedWriter::QueuedWriter(std::unique_ptr<WriterDevice> device, QueuedWriterOpt
   wake_fd_ = eventfd(0, EFD_NONBLOCK | EFD_CLOEXEC);
   if (wake_fd_ < 0) throw TransportError(options_.name + ": eventfd: " + errno_message(errno));
   link_up_.store(device_->initially_up(), std::memory_order_release);
+  baud_.store(options_.baud, std::memory_order_relaxed);
+  device_->set_input_tap(this);
   thread_ = std::thread([this] { run(); });
 }
 
@@ -121,6 +123,7 @@ void QueuedWriter::stop(std::chrono::milliseconds drain_timeout) {
   stop_.store(true, std::memory_order_release);
   signal_wake();
   thread_.join();
+  drop_replies();  // replies still waiting: counted replies_dropped
   // The writer is gone: what it did not finish (queued, or in its batch) is
   // discarded here, and counted, instead of vanishing from the counters.
   const std::uint64_t accepted = accepted_.load(std::memory_order_acquire);
@@ -195,6 +198,9 @@ TransportCounters QueuedWriter::counters() const {
   c.link_restored = link_restored_.load(std::memory_order_relaxed);
   c.retries = retries_.load(std::memory_order_relaxed);
   c.input_bytes_discarded = input_discarded_.load(std::memory_order_relaxed);
+  c.input_bytes = input_bytes_.load(std::memory_order_relaxed);
+  c.replies_sent = replies_sent_.load(std::memory_order_relaxed);
+  c.replies_dropped = replies_dropped_.load(std::memory_order_relaxed);
   c.dropped_at_stop = dropped_at_stop_.load(std::memory_order_relaxed);
   const std::uint64_t accepted = accepted_.load(std::memory_order_relaxed);
   c.queued = accepted > finished ? accepted - finished : 0;
@@ -280,10 +286,98 @@ void QueuedWriter::drop_batch_and_queue() {
   } while (take_batch());
 }
 
+void QueuedWriter::set_input_handler(InputHandler* handler) {
+  const std::lock_guard<std::mutex> lock(handler_mutex_);
+  handler_ = handler;
+}
+
+void QueuedWriter::input(std::span<const std::byte> bytes) {
+  input_bytes_.fetch_add(bytes.size(), std::memory_order_relaxed);
+  const std::lock_guard<std::mutex> lock(handler_mutex_);
+  if (handler_ == nullptr) {
+    input_discarded_.fetch_add(bytes.size(), std::memory_order_relaxed);
+    return;
+  }
+  handler_->on_input(std::span<const std::uint8_t>(reinterpret_cast<const std::uint8_t*>(bytes.data()), bytes.size()),
+                     *this);
+}
+
+bool QueuedWriter::reply(std::span<const std::uint8_t> bytes) {
+  if (bytes.empty()) return true;
+  if (replies_.size() - replies_pos_ + bytes.size() > options_.reply_queue_bytes) {
+    replies_dropped_.fetch_add(1, std::memory_order_relaxed);
+    return false;
+  }
+  const auto* b = reinterpret_cast<const std::byte*>(bytes.data());
+  replies_.insert(replies_.end(), b, b + bytes.size());
+  reply_ends_.push_back(replies_.size());
+  return true;
+}
+
+void QueuedWriter::change_baud_after_replies(std::uint32_t baud) { baud_after_replies_ = baud; }
+
+bool QueuedWriter::at_frame_boundary() const noexcept {
+  if (next_frame_ >= frame_ends_.size()) return true;
+  return batch_pos_ == (next_frame_ == 0 ? 0 : frame_ends_[next_frame_ - 1]);
+}
+
+void QueuedWriter::drop_replies() {
+  replies_dropped_.fetch_add(reply_ends_.size() - next_reply_, std::memory_order_relaxed);
+  replies_.clear();
+  reply_ends_.clear();
+  replies_pos_ = 0;
+  next_reply_ = 0;
+  baud_after_replies_.reset();  // the command's ACK never left: the device keeps its rate
+}
+
+void QueuedWriter::write_replies() {
+  const DeviceWrite result =
+      device_->write(std::span<const std::byte>(replies_).subspan(replies_pos_, replies_.size() - replies_pos_));
+  switch (result.outcome) {
+    case DeviceWrite::Outcome::written:
+      replies_pos_ += result.bytes;
+      while (next_reply_ < reply_ends_.size() && reply_ends_[next_reply_] <= replies_pos_) {
+        replies_sent_.fetch_add(1, std::memory_order_relaxed);
+        ++next_reply_;
+      }
+      if (replies_pos_ == replies_.size()) {
+        replies_.clear();
+        reply_ends_.clear();
+        replies_pos_ = 0;
+        next_reply_ = 0;
+        if (baud_after_replies_) {
+          const std::uint32_t baud = *baud_after_replies_;
+          baud_after_replies_.reset();
+          std::string why;
+          if (device_->set_baud(baud, why)) {
+            baud_.store(baud, std::memory_order_relaxed);
+            log("line rate now " + std::to_string(baud) + " baud (the device was told so by its driver)");
+          } else {
+            log("line rate " + std::to_string(baud) + " baud refused by the port: " + why);
+          }
+        }
+      }
+      break;
+    case DeviceWrite::Outcome::would_block:
+      handle_events(wait(POLLIN | POLLOUT, std::chrono::nanoseconds(-1)));
+      break;
+    case DeviceWrite::Outcome::retry_later:
+      back_off_before_retry();
+      break;
+    case DeviceWrite::Outcome::frame_rejected:
+      drop_replies();
+      break;
+    case DeviceWrite::Outcome::link_lost:
+      go_down(result.reason);
+      break;
+  }
+}
+
 void QueuedWriter::go_down(const std::string& reason) {
   link_down_events_.fetch_add(1, std::memory_order_relaxed);
   link_up_.store(false, std::memory_order_release);  // refuse new frames at once; the log line follows
   drop_batch_and_queue();
+  drop_replies();
   device_->on_link_lost();
   restore_backoff_.reset();
   last_restore_failure_.clear();
@@ -377,6 +471,12 @@ void QueuedWriter::write_loop() {
       wait_while_down();
       continue;
     }
+    // Replies to the driver's commands go out between two frames, never
+    // inside one (a MIP parser would lose both packets).
+    if (!replies_.empty() && at_frame_boundary()) {
+      write_replies();
+      continue;
+    }
     if (next_frame_ == frame_ends_.size() && !take_batch()) {
       // Idle. Announce the sleep, then look once more: offer() pushes, then
       // checks sleeping_; with a full fence on both sides one of us sees the
@@ -394,7 +494,9 @@ void QueuedWriter::write_loop() {
     }
     // A byte stream gets everything pending in one write; a datagram device
     // one frame per write.
-    const std::size_t end = device_->datagrams() ? frame_ends_[next_frame_] : batch_.size();
+    // With replies waiting, only up to the end of the current frame.
+    const std::size_t end =
+        device_->datagrams() || !replies_.empty() ? frame_ends_[next_frame_] : batch_.size();
     const DeviceWrite result = device_->write(std::span<const std::byte>(batch_).subspan(batch_pos_, end - batch_pos_));
     switch (result.outcome) {
       case DeviceWrite::Outcome::written:

@@ -33,6 +33,7 @@
 #include <cstdint>
 #include <functional>
 #include <memory>
+#include <mutex>
 #include <optional>
 #include <span>
 #include <string>
@@ -60,11 +61,28 @@ struct DeviceWrite {
   std::string reason;  // for rejected / lost: what the kernel said
 };
 
+// Where a device's input goes (QueuedWriter: to the transport's
+// InputHandler). The writer thread only.
+class InputTap {
+ public:
+  virtual ~InputTap() = default;
+  virtual void input(std::span<const std::byte> bytes) = 0;
+};
+
 // The device side of a queued transport. All calls come from the writer
 // thread, except the constructor/destructor.
 class WriterDevice {
  public:
   virtual ~WriterDevice() = default;
+  // Set once by the QueuedWriter that owns the device, before its thread starts.
+  void set_input_tap(InputTap* tap) noexcept { tap_ = tap; }
+  // Changes the line rate (a UART, after the replies before it left the
+  // line); a pty only records it. False with `why` when the port refused.
+  virtual bool set_baud(std::uint32_t baud, std::string& why) {
+    (void)baud;
+    (void)why;
+    return true;
+  }
   // True: each write() is one whole frame (CAN); false: a byte stream that
   // may accept part of what it is given.
   virtual bool datagrams() const = 0;
@@ -83,6 +101,17 @@ class WriterDevice {
   virtual bool try_restore(std::string& why) = 0;
   // Link state at start.
   virtual bool initially_up() const = 0;
+
+ protected:
+  // What service() read from the peer: to the tap (the transport's input
+  // handler), or counted in *discarded_bytes without one.
+  void deliver_input(std::span<const std::byte> bytes, std::uint64_t* discarded_bytes) {
+    if (tap_ != nullptr) tap_->input(bytes);
+    else *discarded_bytes += bytes.size();
+  }
+
+ private:
+  InputTap* tap_ = nullptr;
 };
 
 struct QueuedWriterOptions {
@@ -106,6 +135,10 @@ struct QueuedWriterOptions {
   // stop() without an argument (and the destructor) first lets the writer
   // hand what is queued to the device for at most this long.
   std::chrono::milliseconds stop_drain{200};
+  // The line rate at start (a UART's; a pty's nominal one), for baud().
+  std::uint32_t baud = 0;
+  // Replies (InputHandler's) waiting to be written between frames, at most.
+  std::size_t reply_queue_bytes = 8 * 1024;
 };
 
 // Exponential back-off: current() starts at `initial`, grow() doubles it up
@@ -121,7 +154,7 @@ class Backoff {
   std::chrono::nanoseconds initial_, max_, current_;
 };
 
-class QueuedWriter {
+class QueuedWriter final : private InputTap, private ReplySink {
  public:
   // Starts the writer thread. Throws TransportError on bad options.
   QueuedWriter(std::unique_ptr<WriterDevice> device, QueuedWriterOptions options);
@@ -146,8 +179,21 @@ class QueuedWriter {
   // called. Idempotent (a second call does nothing).
   void stop(std::chrono::milliseconds drain_timeout);
   void stop() { stop(options_.stop_drain); }
+  // Transport::set_input_handler: what the device reads goes to `handler`
+  // (on the writer thread); returns once the writer is not inside the old one.
+  void set_input_handler(InputHandler* handler);
+  std::uint32_t baud() const noexcept { return baud_.load(std::memory_order_relaxed); }
 
  private:
+  // InputTap: the device read `bytes` from the peer (writer thread).
+  void input(std::span<const std::byte> bytes) override;
+  // ReplySink (writer thread, inside the handler).
+  bool reply(std::span<const std::uint8_t> bytes) override;
+  void change_baud_after_replies(std::uint32_t baud) override;
+  // Replies are written only where a frame ends (or none is under way).
+  bool at_frame_boundary() const noexcept;
+  void write_replies();
+  void drop_replies();
   void run() noexcept;
   void write_loop();
   void writer_failed(const char* what) noexcept;
@@ -200,6 +246,19 @@ class QueuedWriter {
   std::atomic<std::uint64_t> dropped_queue_full_{0}, dropped_link_down_{0}, write_errors_{0};
   std::atomic<std::uint64_t> link_down_events_{0}, link_restored_{0}, retries_{0}, input_discarded_{0};
   std::atomic<std::uint64_t> dropped_at_stop_{0};
+
+  // Input and replies. The handler is swapped under the mutex (control
+  // thread) and called under it (writer thread); the emission thread never
+  // touches either.
+  std::mutex handler_mutex_;
+  InputHandler* handler_ = nullptr;
+  std::vector<std::byte> replies_;         // writer thread: whole replies back to back
+  std::vector<std::size_t> reply_ends_;    // end offset of each reply in replies_
+  std::size_t replies_pos_ = 0;            // bytes of replies_ handed to the device
+  std::size_t next_reply_ = 0;             // first reply not completely handed over
+  std::optional<std::uint32_t> baud_after_replies_;
+  std::atomic<std::uint64_t> input_bytes_{0}, replies_sent_{0}, replies_dropped_{0};
+  std::atomic<std::uint32_t> baud_{0};
 };
 
 // Issue 17 (latency): the SCHED_FIFO priority of every queued writer's

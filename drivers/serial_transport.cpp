@@ -4,6 +4,7 @@
 #include <poll.h>
 #include <sys/stat.h>
 #include <sys/sysmacros.h>
+#include <termios.h>
 
 #include <algorithm>
 #include <array>
@@ -96,7 +97,7 @@ class SerialDevice final : public WriterDevice {
         const int result = static_cast<int>(sp_nonblocking_read(port_.get(), sink.data(), sink.size()));
         if (result == 0) break;
         if (result < 0) return "read failed: " + serial_error_text(static_cast<sp_return>(result));
-        *discarded_bytes += static_cast<std::uint64_t>(result);
+        deliver_input(std::span<const std::byte>(sink.data(), static_cast<std::size_t>(result)), discarded_bytes);
       }
     }
     if (revents & (POLLHUP | POLLERR | POLLNVAL)) return std::string("the device hung up (unplugged?)");
@@ -106,6 +107,21 @@ class SerialDevice final : public WriterDevice {
   void on_link_lost() override {
     port_.reset();
     fd_ = -1;
+  }
+
+  bool set_baud(std::uint32_t baud, std::string& why) override {
+    // The reply (the ACK) leaves the line at the old rate first, as the
+    // device sends it (tcdrain: until the UART's shift register is empty).
+    if (fd_ >= 0) ::tcdrain(fd_);
+    if (port_) {
+      const sp_return r = sp_set_baudrate(port_.get(), static_cast<int>(baud));
+      if (r != SP_OK) {
+        why = serial_error_text(r);
+        return false;
+      }
+    }
+    settings_.baud = static_cast<int>(baud);  // a reopen after a device loss keeps it
+    return true;
   }
 
   bool try_restore(std::string& why) override {
@@ -257,6 +273,7 @@ SerialTransport::SerialTransport(SerialTransportOptions options) {
   writer.link_lost_verb = "device lost";
   writer.link_restored_verb = "device reopened";
   writer.log = std::move(options.log);
+  writer.baud = static_cast<std::uint32_t>(options.settings.baud);
   writer_ = std::make_unique<QueuedWriter>(
       std::make_unique<SerialDevice>(std::move(port), options.port, options.settings), std::move(writer));
 }
@@ -264,6 +281,11 @@ SerialTransport::SerialTransport(SerialTransportOptions options) {
 SerialTransport::~SerialTransport() = default;
 
 bool SerialTransport::write_frame(std::span<const std::byte> frame) { return writer_->offer(frame); }
+bool SerialTransport::set_input_handler(InputHandler* handler) {
+  writer_->set_input_handler(handler);
+  return true;
+}
+std::uint32_t SerialTransport::baud() const { return writer_->baud(); }
 std::string SerialTransport::describe() const { return description_; }
 TransportCounters SerialTransport::counters() const { return writer_->counters(); }
 bool SerialTransport::link_up() const { return writer_->link_up(); }

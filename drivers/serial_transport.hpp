@@ -75,6 +75,11 @@ class SerialTransport final : public Transport {
   bool link_up() const override;
   bool flush(std::chrono::milliseconds timeout) override;
   void stop(std::chrono::milliseconds drain_timeout) override;
+  // What the device on the other end writes goes to `handler`; a baud change
+  // it asks for (ReplySink::change_baud_after_replies) reconfigures the port
+  // once the reply has left the line.
+  bool set_input_handler(InputHandler* handler) override;
+  std::uint32_t baud() const override;
 
  private:
   std::string description_;

@@ -41,6 +41,34 @@ struct TransportCounters {
   std::uint64_t link_restored = 0;       // down -> up transitions
   std::uint64_t retries = 0;             // back-off retries of a frame the kernel had no room for (CAN ENOBUFS)
   std::uint64_t input_bytes_discarded = 0;  // bytes the peer sent us (commands to the emulated device), read and dropped
+                                            // because no device protocol takes input on this transport
+  std::uint64_t input_bytes = 0;            // bytes the peer sent us, all of them (handed to the input handler or discarded)
+  std::uint64_t replies_sent = 0;           // replies (InputHandler's) handed to the kernel whole
+  std::uint64_t replies_dropped = 0;        // replies refused (reply queue full) or discarded (link lost)
+};
+
+// Where an InputHandler's replies go: the transport queues them and writes
+// them between two frames, never inside one. Called on the transport's io
+// thread only (inside InputHandler::on_input).
+class ReplySink {
+ public:
+  virtual ~ReplySink() = default;
+  // Queues one whole reply; false (counted replies_dropped) when the bounded
+  // reply queue has no room for it.
+  virtual bool reply(std::span<const std::uint8_t> bytes) = 0;
+  // Once every reply queued so far is handed to the kernel (and, on a UART,
+  // has left the line: tcdrain), the line changes to `baud` (a device that
+  // changes its rate after acknowledging the command). A pty records it.
+  virtual void change_baud_after_replies(std::uint32_t baud) = 0;
+};
+
+// What a device protocol does with the bytes its driver writes (commands).
+// on_input runs on the transport's io thread (its writer thread), never on
+// the emission thread; it may allocate and lock.
+class InputHandler {
+ public:
+  virtual ~InputHandler() = default;
+  virtual void on_input(std::span<const std::uint8_t> bytes, ReplySink& replies) = 0;
 };
 
 // What `now` counted since `base` (a transport reused by a new emission
@@ -60,6 +88,9 @@ inline TransportCounters counters_since(const TransportCounters& now, const Tran
   d.link_restored -= base.link_restored;
   d.retries -= base.retries;
   d.input_bytes_discarded -= base.input_bytes_discarded;
+  d.input_bytes -= base.input_bytes;
+  d.replies_sent -= base.replies_sent;
+  d.replies_dropped -= base.replies_dropped;
   return d;
 }
 
@@ -85,6 +116,18 @@ class Transport {
   // queued is discarded and counted (TransportCounters::dropped_at_stop);
   // counters() stays readable. No write_frame afterwards.
   virtual void stop(std::chrono::milliseconds drain_timeout) { flush(drain_timeout); }
+  // Hands what the peer writes to `handler` from now on (nullptr: read and
+  // discard again). The handler must stay valid until it is replaced; this
+  // call returns only when the io thread is no longer inside the previous
+  // one. False: this transport has no input (null, CAN frames elsewhere).
+  // Not the emission thread.
+  virtual bool set_input_handler(InputHandler* handler) {
+    (void)handler;
+    return false;
+  }
+  // The line rate the transport runs at now (a UART after a baud change; a
+  // pty the rate its peer was last told); 0: not a serial line.
+  virtual std::uint32_t baud() const { return 0; }
 };
 
 // Discards frames, counting them as sent: for timing benchmarks and dry runs.

@@ -229,6 +229,9 @@ int emit(const EmitArgs& a) {
       if (!member(drivers::stream_protocol_names(), a.protocol))
         throw std::invalid_argument("--protocol " + a.protocol + ": expected native, mavlink2, mip, dronecan or j1939");
       stream_encoder = drivers::make_stream_encoder(a.protocol, protocol_options.stream);
+      // A device that answers its driver (MIP): what the driver changed, on stderr.
+      if (drivers::CommandResponder* r = stream_encoder->command_responder())
+        r->set_log([](std::string_view line) { std::cerr << "imuemu emit: " << line << "\n"; });
       if (a.device.rfind("can:", 0) == 0)
         throw std::invalid_argument("--device " + a.device + ": protocol " + a.protocol + " is a byte stream (pty: or serial:)");
     }

@@ -160,6 +160,18 @@ void print_status_summary(const nlohmann::json& status, std::ostream& out) {
         << " packets (link down " << count_of(transport, "dropped_link_down")
         << ": e.g. no reader on the pty; queue full " << count_of(transport, "dropped_queue_full")
         << "; refused by the kernel or invalid " << count_of(transport, "write_errors") << ")\n";
+    if (count_of(transport, "input_bytes") > 0)
+      out << "    input: " << count_of(transport, "input_bytes") << " bytes from the client ("
+          << count_of(transport, "input_bytes_discarded") << " discarded: no device protocol reads them), "
+          << count_of(transport, "replies_sent") << " replies sent, " << count_of(transport, "replies_dropped")
+          << " dropped\n";
+    // A device that answers its driver (issue 27): what its driver sent and
+    // the settings it left.
+    if (const auto c = d.find("commands"); c != d.end() && c->is_object())
+      out << "    commands: " << count_of(*c, "received") << " received, " << count_of(*c, "answered")
+          << " answered, " << count_of(*c, "nacked") << " NACKed, " << count_of(*c, "not_command_bytes")
+          << " bytes that were not commands, " << count_of(*c, "replies_dropped") << " replies dropped; mode "
+          << text_of(*c, "mode") << ", baud " << count_of(*c, "baud") << ", format " << text_of(*c, "format") << "\n";
   }
   if (const auto source = engine->find("pose_source"); source != engine->end() && source->is_object()) {
     out << "  pose source " << text_of(*source, "name") << ": " << count_of(*source, "accepted") << " accepted of "

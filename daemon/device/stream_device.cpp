@@ -27,6 +27,31 @@ class StreamDevice final : public EncoderDevice<drivers::StreamEncoder, std::vec
     if (!encoder_ || !transport_)
       throw std::invalid_argument("a byte-stream device needs a stream encoder and a transport");
     encoded_.reserve(std::max(kReserveBytes, drivers::link_fault_reserve(*encoder_, fault::kMaxBabbleFactor)));
+    // A device that answers its driver reads its port from now on (the
+    // transport's io thread); a transport without input keeps it send-only.
+    responder_ = encoder_->command_responder();
+    if (responder_ && !transport_->set_input_handler(responder_)) responder_ = nullptr;
+  }
+  ~StreamDevice() override {
+    if (transport_ && responder_) transport_->set_input_handler(nullptr);
+  }
+
+  std::optional<CommandStatus> command_status() const override {
+    if (!responder_) return std::nullopt;
+    const drivers::CommandCounters c = responder_->command_counters();
+    CommandStatus s;
+    s.received = c.received;
+    s.answered = c.answered;
+    s.nacked = c.nacked;
+    s.not_command_bytes = c.not_command_bytes;
+    // Replies the device could not queue, and queued ones the transport
+    // dropped (its reply queue full, the link lost before they left).
+    const drivers::TransportCounters t = counters();
+    s.replies_dropped = c.replies_dropped + t.replies_dropped;
+    s.mode = c.mode;
+    s.format = c.format;
+    s.baud = c.baud;
+    return s;
   }
 
   SampleNeeds needs() const override { return encoder_needs(); }
@@ -34,6 +59,8 @@ class StreamDevice final : public EncoderDevice<drivers::StreamEncoder, std::vec
 
   void stop(std::chrono::milliseconds drain_timeout, bool keep_transport) override {
     if (transport_) {
+      // The device's state goes with it: its io thread stops answering.
+      if (responder_) transport_->set_input_handler(nullptr);
       if (keep_transport) (void)transport_->flush(drain_timeout);
       else transport_->stop(drain_timeout);
     }
@@ -41,6 +68,7 @@ class StreamDevice final : public EncoderDevice<drivers::StreamEncoder, std::vec
   }
   std::unique_ptr<drivers::Transport> take_transport() override {
     if (!transport_) return nullptr;
+    if (responder_) transport_->set_input_handler(nullptr);
     taken_.emplace(describe(), counters());
     return std::move(transport_);
   }
@@ -62,6 +90,7 @@ class StreamDevice final : public EncoderDevice<drivers::StreamEncoder, std::vec
 
   std::unique_ptr<drivers::Transport> transport_;
   drivers::TransportCounters baseline_;
+  drivers::CommandResponder* responder_ = nullptr;  // the encoder's, when the transport reads its port
   // The transport as it was when take_transport() moved it out.
   std::optional<std::pair<std::string, drivers::TransportCounters>> taken_;
 };

@@ -144,7 +144,13 @@ nlohmann::json to_json(const EngineStats& s) {
                        {"write_errors", d.transport.write_errors},
                        {"queued", d.transport.queued},
                        {"dropped_at_stop", d.transport.dropped_at_stop},
-                       {"link_down_events", d.transport.link_down_events}}},
+                       {"link_down_events", d.transport.link_down_events},
+                       // What the client wrote (issue 27): all of it, what no
+                       // device protocol took, and the device's replies.
+                       {"input_bytes", d.transport.input_bytes},
+                       {"input_bytes_discarded", d.transport.input_bytes_discarded},
+                       {"replies_sent", d.transport.replies_sent},
+                       {"replies_dropped", d.transport.replies_dropped}}},
                      {"live",
                       {{"ticks", d.live.ticks},
                        {"exact", d.live.exact},

@@ -6,6 +6,7 @@
 #include <arpa/inet.h>
 
 #include <algorithm>
+#include <cstdio>
 #include <charconv>
 #include <cmath>
 #include <filesystem>
@@ -616,11 +617,43 @@ void parse_sync(const Table& t, const ImuConfig& imu, SyncConfig& out) {
   out.trailing_edge_priority = static_cast<int>(t.integer("trailing_edge_priority", 0, 0, 99));
 }
 
+// [imu.device] (issue 27, docs/mip-device.md): how the emulated MIP device
+// behaves toward its driver and who it says it is.
+void parse_mip_device(const Table& t, drivers::MipDeviceConfig& d) {
+  t.allow_only({"answers_commands", "power_up_mode", "model_name", "model_number", "serial_number", "lot_number",
+                "device_options", "firmware_version", "hardware_revision"});
+  d.answers_commands = t.boolean("answers_commands", d.answers_commands);
+  d.power_up_idle = t.choice("power_up_mode", "streaming", {"streaming", "idle"}) == "idle";
+  // Get Device Information (0x01,0x03) carries each string in 16 characters.
+  for (const auto& [key, field] : {std::pair<const char*, std::string*>{"model_name", &d.model_name},
+                                   {"model_number", &d.model_number},
+                                   {"serial_number", &d.serial_number},
+                                   {"lot_number", &d.lot_number},
+                                   {"device_options", &d.device_options}}) {
+    *field = t.string(key, *field);
+    if (field->size() > 16) t.fail_at(key, "'" + *field + "' is longer than the 16 characters of its MIP field");
+    for (const char c : *field)
+      if (c < 0x20 || c > 0x7E) t.fail_at(key, "printable ASCII only (a 16-character MIP string field)");
+  }
+  // "major.minor.patch", sent as 1000 major + 100 minor + patch (u16), as
+  // the MIP SDK decodes it: 1.1.08 -> 1108.
+  if (const std::optional<std::string> v = t.opt_string("firmware_version")) {
+    unsigned major = 0, minor = 0, patch = 0;
+    char extra = 0;
+    if (std::sscanf(v->c_str(), "%u.%u.%u%c", &major, &minor, &patch, &extra) != 3 || major > 64 || minor > 9 ||
+        patch > 99)
+      t.fail_at("firmware_version", "'" + *v + "': expected major.minor.patch with minor 0..9 and patch 0..99 "
+                                              "(e.g. \"1.1.08\"), major 0..64");
+    d.firmware_version = static_cast<std::uint16_t>(1000 * major + 100 * minor + patch);
+  }
+  d.hardware_revision = t.string("hardware_revision", d.hardware_revision);
+}
+
 ImuConfig parse_imu(const Table& t) {
   ImuConfig imu;
   imu.line = t.where().begin.line;
   std::vector<std::string> allowed = {"name",      "rate_hz",     "protocol", "mounting",     "transport",
-                                      "sync",      "error_model", "fault",    "random_faults"};
+                                      "sync",      "error_model", "fault",    "random_faults", "device"};
   for (const std::string& p : kProtocols) allowed.push_back(option_table_of(p));
   t.allow_only(allowed);
   imu.name = t.required_string("name", "the device's name in logs, status and the control socket");
@@ -632,6 +665,13 @@ ImuConfig parse_imu(const Table& t) {
   imu.protocol = t.choice("protocol", "", kProtocols);
   if (const auto m = t.subtable("mounting")) parse_mounting(*m, imu.mounting);
   parse_protocol_options(t, imu);
+  if (const auto dt = t.subtable("device")) {
+    // Only the MIP device answers its driver so far (issue 27).
+    if (imu.protocol != "mip")
+      t.fail_at("device", "applies to protocol mip (the device that answers its driver); this device's protocol is " +
+                              imu.protocol);
+    parse_mip_device(*dt, imu.stream_options.mip_device);
+  }
   try {
     if (is_can_protocol(imu.protocol))
       (void)drivers::make_can_encoder(imu.protocol, imu.can_options);

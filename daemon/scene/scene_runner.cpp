@@ -181,6 +181,13 @@ BuiltEngine build_engine(const SceneConfig& scene, const RunnerOptions& options,
         drivers::StreamEncoderOptions so = imu.stream_options;
         so.nominal_sample_rate_hz = static_cast<double>(imu.rate_hz);
         stream_encoder = drivers::make_stream_encoder(imu.protocol, so);
+        if (drivers::CommandResponder* r = stream_encoder->command_responder()) {
+          if (options.log) {
+            r->set_log([log = options.log, name = imu.name](std::string_view line) {
+              log(name + ": " + std::string(line));
+            });
+          }
+        }
       }
       const TransportConfig& t = imu.transport;
       switch (t.type) {

@@ -33,6 +33,7 @@
 #include <limits>
 
 #include "drivers/protocols/gps_time.hpp"
+#include "drivers/protocols/mip_device.hpp"
 #include "drivers/protocols/wire_bytes.hpp"
 
 namespace imuemu::drivers::mip {
@@ -61,6 +62,16 @@ std::uint16_t put_vector_field(std::vector<std::uint8_t>& out, std::uint8_t desc
   }
   out.insert(out.end(), f.begin(), f.end());
   return overrange;
+}
+
+void put_gps_field(std::vector<std::uint8_t>& out, const GpsTimestamp& ts) {
+  std::array<std::uint8_t, kGpsFieldBytes> g{};
+  g[0] = static_cast<std::uint8_t>(kGpsFieldBytes);
+  g[1] = kGpsTimestamp;
+  wire::put_be<double>(g.data() + 2, ts.tow_s);
+  wire::put_be<std::uint16_t>(g.data() + 10, ts.week);
+  wire::put_be<std::uint16_t>(g.data() + 12, ts.valid_flags);
+  out.insert(out.end(), g.begin(), g.end());
 }
 
 Vec3 get_vector(const std::uint8_t* at) {
@@ -138,7 +149,117 @@ std::uint16_t fletcher_checksum(std::span<const std::uint8_t> bytes) {
   return static_cast<std::uint16_t>(sum1 << 8 | sum2);
 }
 
+Encoder::Encoder(const StreamEncoderOptions& options) : options_(options) {
+  if (options_.mip_device.answers_commands) {
+    // The base rate the device reports (Get Base Rate): the scene's rate,
+    // which every decimation divides; 1000 Hz (the CV7's IMU rate) while the
+    // rate is not known (an encoder made only to check options).
+    const double r = options_.nominal_sample_rate_hz;
+    const auto base_rate_hz = static_cast<std::uint16_t>(r >= 1.0 ? std::min(std::lround(r), 65535L) : 1000L);
+    device_ = std::make_unique<Device>(options_.mip_device, sensor_fields(), base_rate_hz);
+  }
+}
+
+Encoder::~Encoder() = default;
+
+void Encoder::restart(TimeNs now_ns, std::vector<std::uint8_t>& out) {
+  (void)now_ns;
+  (void)out;  // no power-up packet
+  if (!device_) return;
+  ++restarts_;
+  device_->note_restart();
+}
+
+Encoder& Encoder::operator=(const Encoder& other) {
+  if (this != &other) {
+    Encoder fresh(other.options_);
+    options_ = fresh.options_;
+    device_ = std::move(fresh.device_);
+    restarts_ = 0;
+  }
+  return *this;
+}
+
+CommandResponder* Encoder::command_responder() { return device_.get(); }
+
+std::vector<std::uint8_t> Encoder::sensor_fields() const {
+  std::vector<std::uint8_t> f;
+  f.reserve(6);
+  f.push_back(kScaledAccel);
+  f.push_back(kScaledGyro);
+  if (options_.include_deltas) {
+    f.push_back(kDeltaTheta);
+    f.push_back(kDeltaVelocity);
+  }
+  f.push_back(kGpsTimestamp);
+  if (options_.mip_overrange_status) f.push_back(kOverrangeStatus);
+  return f;
+}
+
+void Encoder::encode_format(const ImuFrameInput& sample, std::span<const FieldRate> fields,
+                            std::vector<std::uint8_t>& out) {
+  bool due = false;
+  for (const FieldRate& f : fields) due = due || sample.sample_counter % f.decimation == 0;
+  if (!due) return;  // no field on this sample: no packet
+  const std::size_t start = out.size();
+  out.insert(out.end(), {kSync1, kSync2, kSensorDataSet, 0});
+  // The overrange bits of every axis, whichever fields carry them.
+  const Vec3 accel_g = frd_to_mip_sensor(sample.accel_m_s2) / kStandardGravity_m_s2;
+  const Vec3 dv_gs = frd_to_mip_sensor(sample.delta_velocity_m_s) / kStandardGravity_m_s2;
+  std::uint16_t overrange = (sample.status & kStatusSaturated) != 0 ? kOverrangeAccelGyroAll : 0;
+  for (int i = 0; i < 3; ++i) {
+    for (const double v : {accel_g[i], dv_gs[i]}) {
+      const wire::WireValue w = wire::to_wire_float<float>(v);
+      if (w.clamped || w.was_nan) overrange |= static_cast<std::uint16_t>(kOverrangeAccelX << i);
+    }
+    for (const double v : {sample.gyro_rad_s[i], sample.delta_theta_rad[i]}) {
+      const wire::WireValue w = wire::to_wire_float<float>(v);
+      if (w.clamped || w.was_nan) overrange |= static_cast<std::uint16_t>(kOverrangeGyroX << i);
+    }
+  }
+  for (const FieldRate& f : fields) {
+    if (sample.sample_counter % f.decimation != 0) continue;
+    switch (f.descriptor) {
+      case kScaledAccel: put_vector_field(out, kScaledAccel, accel_g, kOverrangeAccelX); break;
+      case kScaledGyro:
+        put_vector_field(out, kScaledGyro, frd_to_mip_sensor(sample.gyro_rad_s), kOverrangeGyroX);
+        break;
+      case kDeltaTheta:
+        put_vector_field(out, kDeltaTheta, frd_to_mip_sensor(sample.delta_theta_rad), kOverrangeGyroX);
+        break;
+      case kDeltaVelocity: put_vector_field(out, kDeltaVelocity, dv_gs, kOverrangeAccelX); break;
+      case kGpsTimestamp: put_gps_field(out, gps_timestamp_of(sample.t_ns, options_)); break;
+      case kOverrangeStatus: {
+        std::array<std::uint8_t, kOverrangeFieldBytes> o{static_cast<std::uint8_t>(kOverrangeFieldBytes),
+                                                         kOverrangeStatus};
+        wire::put_be<std::uint16_t>(o.data() + 2, overrange);
+        out.insert(out.end(), o.begin(), o.end());
+        break;
+      }
+      default: break;  // the device accepts only the fields above (mip_device.cpp)
+    }
+  }
+  out[start + 3] = static_cast<std::uint8_t>(out.size() - start - kHeaderBytes);
+  const std::uint16_t checksum =
+      fletcher_checksum(std::span<const std::uint8_t>(out.data() + start, out.size() - start));
+  out.push_back(static_cast<std::uint8_t>(checksum >> 8));
+  out.push_back(static_cast<std::uint8_t>(checksum));
+}
+
 void Encoder::encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out) {
+  if (device_) {
+    // What the driver left the device doing (wait-free read of the io
+    // thread's last change): idle sends nothing; a format of its own sends
+    // its fields at their decimations; otherwise the power-up stream below.
+    const EmitConfig& published = device_->emit_config();
+    // After a restart fault the io thread has not taken in yet: the startup settings.
+    const StreamConfig& c = published.restarts_handled < restarts_ ? published.startup : published;
+    if (!c.send) return;
+    if (!c.scene_format) {
+      encode_format(sample, std::span<const FieldRate>(c.fields.data(), c.count), out);
+      return;
+    }
+  }
   // Built in place at the end of `out`; length and checksum patched last.
   const std::size_t start = out.size();
   out.insert(out.end(), {kSync1, kSync2, kSensorDataSet, 0});
@@ -155,14 +276,7 @@ void Encoder::encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out
   }
 
   // GPS timestamp (0x80,0x12): by the time base (gps_timestamp_of).
-  const GpsTimestamp ts = gps_timestamp_of(sample.t_ns, options_);
-  std::array<std::uint8_t, kGpsFieldBytes> g{};
-  g[0] = static_cast<std::uint8_t>(kGpsFieldBytes);
-  g[1] = kGpsTimestamp;
-  wire::put_be<double>(g.data() + 2, ts.tow_s);
-  wire::put_be<std::uint16_t>(g.data() + 10, ts.week);
-  wire::put_be<std::uint16_t>(g.data() + 12, ts.valid_flags);
-  out.insert(out.end(), g.begin(), g.end());
+  put_gps_field(out, gps_timestamp_of(sample.t_ns, options_));
 
   // The sensor model's saturated bit does not say which axis: every accel
   // and gyro axis is flagged; axes clamped here add their own bit anyway.

@@ -6,7 +6,9 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <memory>
 #include <optional>
+#include <vector>
 #include <span>
 
 #include "drivers/protocol.hpp"
@@ -46,10 +48,24 @@ inline constexpr std::uint16_t kGpsTimeValid = kTimeInitialized | kTowValid | kW
 // sum1 in the high byte (sent first).
 std::uint16_t fletcher_checksum(std::span<const std::uint8_t> bytes);
 
+class Device;
+struct FieldRate;
+
 class Encoder final : public StreamEncoder {
  public:
-  explicit Encoder(const StreamEncoderOptions& options) : options_(options) {}
+  // With options.mip_device.answers_commands, the encoder carries the
+  // device's command side (drivers/protocols/mip_device.hpp): what it streams
+  // then follows the mode and message format its driver set.
+  explicit Encoder(const StreamEncoderOptions& options);
+  // A copy is the same device model powered up again: the options, and a
+  // command side in its power-up state (not the original's settings).
+  Encoder(const Encoder& other) : Encoder(other.options_) {}
+  Encoder& operator=(const Encoder& other);
+  ~Encoder() override;
   std::string name() const override { return "mip"; }
+  CommandResponder* command_responder() override;
+  // The 0x80 fields this encoder sends at power-up, in order.
+  std::vector<std::uint8_t> sensor_fields() const;
   void encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out) override;
   std::size_t max_bytes_per_sample() const override;
   // Delta theta / delta velocity (0x80,0x07 / 0x80,0x08) as the device sends
@@ -59,13 +75,21 @@ class Encoder final : public StreamEncoder {
 
   // Link faults (docs/faults.md): payload length byte and Fletcher
   // checksum [P 6.3, 6.4]. The IMU data set carries no packet counter and
-  // the emulated device sends no power-up packet (it resumes streaming the
-  // same data set), so the sequence and restart hooks keep their defaults:
-  // a restart shows on the wire only as the silence before it.
+  // the emulated device sends no power-up packet, so the sequence hooks keep
+  // their defaults; a restart shows on the wire as the silence before it
+  // and, for a device whose driver changed its settings, as the startup
+  // settings (saved, power-up mode) after it (docs/mip-device.md).
   StreamFrameLayout frame_layout(std::span<const std::uint8_t> frame) const override;
+  void restart(TimeNs now_ns, std::vector<std::uint8_t>& out) override;
 
  private:
+  // A format the driver set: the fields due at this sample's counter (a
+  // field with decimation d goes out on counters that are multiples of d).
+  void encode_format(const ImuFrameInput& sample, std::span<const FieldRate> fields,
+                     std::vector<std::uint8_t>& out);
   StreamEncoderOptions options_;
+  std::unique_ptr<Device> device_;
+  std::uint64_t restarts_ = 0;  // restart faults seen (emission thread)
 };
 
 // The GPS timestamp field (0x80,0x12) of a sample at trajectory time t_ns,

@@ -2,6 +2,7 @@
 
 #include <cmath>
 #include <stdexcept>
+#include <utility>
 
 #include "drivers/protocols/mavlink2.hpp"
 #include "drivers/protocols/mip.hpp"
@@ -21,6 +22,19 @@ void check_options(const std::string& protocol, const StreamEncoderOptions& o) {
   if (!std::isfinite(o.nominal_sample_rate_hz) || o.nominal_sample_rate_hz < 0.0) {
     throw std::invalid_argument("stream protocol '" + protocol +
                                 "': nominal_sample_rate_hz must be finite and >= 0 (0 = unknown)");
+  }
+  if (protocol == "mip") {
+    const MipDeviceConfig& d = o.mip_device;
+    for (const auto& [key, value] : {std::pair<const char*, const std::string*>{"model_name", &d.model_name},
+                                     {"model_number", &d.model_number},
+                                     {"serial_number", &d.serial_number},
+                                     {"lot_number", &d.lot_number},
+                                     {"device_options", &d.device_options}}) {
+      // Get Device Information (0x01,0x03) carries each as 16 characters.
+      if (value->size() > 16)
+        throw std::invalid_argument(std::string("stream protocol 'mip': device ") + key + " '" + *value +
+                                    "' is longer than the 16 characters of its Get Device Information field");
+    }
   }
   if (protocol == "mavlink2") {
     // MAVLink guide, packet format: 0 is the broadcast address, never a

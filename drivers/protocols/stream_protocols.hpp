@@ -19,6 +19,23 @@ namespace imuemu::drivers {
 // The time base of trajectory time, for protocols that send absolute time.
 enum class MipTimeBase : std::uint8_t { unknown, gps, utc };
 
+// The MIP device that answers its driver (drivers/protocols/mip_device.hpp,
+// docs/mip-device.md): scene keys [imu.device]. Defaults: a 3DM-CV7-AHRS as
+// its Get Device Information (0x01,0x03) reports it; the identity strings are
+// at most 16 characters (the reply's fixed fields).
+struct MipDeviceConfig {
+  bool answers_commands = true;       // false: input read and discarded, as before issue 27
+  bool power_up_idle = false;         // power_up_mode = "idle": silent until Resume (0x01,0x06)
+  std::uint16_t firmware_version = 1108;  // "1.1.08": 1000*major + 100*minor + patch (DCP 0x01,0x03)
+  std::string model_name = "3DM-CV7-AHRS";
+  std::string model_number = "6284-4220";
+  std::string serial_number = "6284.100027";
+  std::string lot_number = "";
+  std::string device_options = "8g,300dps";
+  // Reported in status and docs only: Get Device Information has no field for it.
+  std::string hardware_revision = "1.0";
+};
+
 struct StreamEncoderOptions {
   // native and mip: send delta-theta / delta-velocity as well as the rates.
   bool include_deltas = true;
@@ -55,6 +72,7 @@ struct StreamEncoderOptions {
   std::optional<int> mip_gps_minus_utc_s;
   // Overrange status field (0x80,0x18): where the saturated bit goes.
   bool mip_overrange_status = true;
+  MipDeviceConfig mip_device;
 
   // The sample rate the encoder will run at, only to spread periodic traffic
   // (heartbeats) over samples in max_bytes_per_sample(); 0 = unknown (then
