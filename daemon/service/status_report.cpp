@@ -52,6 +52,8 @@ nlohmann::json status_json(const DaemonStatus& d) {
       {"imus", d.imus},
       {"waiting_for_device", d.waiting_for_device},
       {"fault_log", d.fault_log_path.empty() ? nlohmann::json(nullptr) : nlohmann::json(d.fault_log_path)},
+      {"fault_log_output", d.fault_log_output ? to_json(*d.fault_log_output) : nlohmann::json(nullptr)},
+      {"log_lines_lost", d.log_lines_lost},
   };
   if (d.building) {
     status["building"] = {{"what", d.building->start ? "start" : "reload"},

@@ -17,6 +17,7 @@
 
 #include "core/types.hpp"
 #include "daemon/engine/emission.hpp"
+#include "daemon/service/fault_log_writer.hpp"
 
 namespace imuemu::service {
 
@@ -34,6 +35,8 @@ struct DaemonStatus {
   TimeNs uptime_ns = 0;
   bool waiting_for_device = false;
   std::string fault_log_path;  // empty: no fault log
+  std::optional<FaultLogCounters> fault_log_output;  // the fault log's writer (issue 26 N2/N3/N13)
+  std::uint64_t log_lines_lost = 0;  // log lines stderr refused (EPIPE: its reader went away)
   struct Build {
     bool start = true;  // false: a reload's re-read
     TimeNs elapsed_ns = 0;
@@ -49,7 +52,7 @@ struct DaemonStatus {
 };
 
 // {"scene", "scene_file", "pid", "uptime_s", "imus", "waiting_for_device",
-//  "fault_log", "building", "samples_emitted", "emitter_progressing",
+//  "fault_log", "fault_log_output", "log_lines_lost", "building", "samples_emitted", "emitter_progressing",
 //  "engine", "watchdog"}; what is absent is null (samples_emitted 0).
 nlohmann::json status_json(const DaemonStatus& status);
 
