@@ -344,6 +344,9 @@ TEST_F(Imuemud, SigtermStopsCleanlyAndTheStatisticsAreComplete) {
   // Nobody read the pty: every frame was counted as dropped while no reader, none lost silently.
   EXPECT_EQ(d["transport"]["frames"], d["emitted"]);
   EXPECT_EQ(d["transport"]["dropped_link_down"], d["emitted"]);
+  // Issue 26: at the device level too they are dropped while no reader, not write errors.
+  EXPECT_EQ(d["dropped_link_down"], d["emitted"]) << d.dump();
+  EXPECT_EQ(d["write_errors"], 0) << d.dump();
 }
 
 TEST_F(Imuemud, TheEndOfTheTrajectoryStopsTheDaemonWithSuccess) {
@@ -1076,7 +1079,9 @@ TEST_F(Imuemud, AFullDiskIsCountedAndASighupMovesOrRotatesTheFaultLog) {
 TEST_F(Imuemud, OutputPathsThatCollideAreRefusedBeforeAnythingIsCreated) {
   const fs::path run = dir_ / "run";
   fs::create_directories(run);
-  const std::string base = "--pty-link-dir " + run.string() + " --control-socket " + (run / "c.sock").string();
+  // --seconds: a start that is not refused ends by itself.
+  const std::string base =
+      "--seconds 0.3 --pty-link-dir " + run.string() + " --control-socket " + (run / "c.sock").string();
   // A pty of "another daemon": a symbolic link to a /dev/pts/N.
   const int master = ::posix_openpt(O_RDWR | O_NOCTTY);
   ASSERT_GE(master, 0);
@@ -1121,6 +1126,39 @@ TEST_F(Imuemud, AnUnwritableOutputIsRefusedWithTheReason) {
                             ": cannot open it for writing: No such file or directory"),
             std::string::npos)
       << log.output;
+}
+
+// Issue 26: one time base in fault messages. The log said a fault was
+// injected "at 0 s since start" (the request's own start), `fault list` said
+// "at 24.448 s since start" (the engine's): both are now the engine's start,
+// since the device's first sample.
+TEST_F(Imuemud, AnInjectedFaultIsLoggedAndListedAtTheSameTimeSinceStart) {
+  Child c = spawn_imuemud({"--scene", write("s.toml", flog::fault_scene_text("", 0)).string(), "--control-socket",
+                           (dir_ / "c.sock").string()},
+                          dir_ / "log");
+  ReapOnExit reap{c.pid};
+  ASSERT_TRUE(status_when(dir_ / "c.sock", [](const nlohmann::json& s) { return emitted_of(s) > 400; })) << c.output();
+  const nlohmann::json injected = imuemu::cli::query_control_socket(
+      (dir_ / "c.sock").string(), "fault-inject",
+      {{"imu", "imu0"}, {"type", "bias_step"}, {"after_s", 0.5}, {"params", {{"bias_deg_s", 1.0}}}}, 2000ms);
+  ASSERT_TRUE(injected.contains("start_since_start_ns")) << injected.dump();
+  EXPECT_GT(injected["start_since_start_ns"].get<std::int64_t>(), 1'000'000'000) << injected.dump();
+  const nlohmann::json list = imuemu::cli::query_control_socket((dir_ / "c.sock").string(), "fault-list", 2000ms);
+  ASSERT_EQ(list["faults"].size(), 1u) << list.dump();
+  const std::string listed = list["faults"][0]["description"].get<std::string>();
+  const auto at_part = [](const std::string& text) {
+    const std::size_t at = text.find(" at ");
+    const std::size_t end = text.find(" since start", at);
+    return at == std::string::npos || end == std::string::npos ? std::string() : text.substr(at, end - at);
+  };
+  ASSERT_FALSE(at_part(listed).empty()) << listed;
+  ASSERT_EQ(::kill(c.pid, SIGTERM), 0);
+  EXPECT_EQ(wait_exit_within(c, 5s), std::optional<int>(0)) << c.output();
+  const std::string out = c.output();
+  const std::size_t line = out.find("fault injected on imu0");
+  ASSERT_NE(line, std::string::npos) << out;
+  const std::string logged = out.substr(line, out.find('\n', line) - line);
+  EXPECT_EQ(at_part(logged), at_part(listed)) << logged << "\n" << listed;
 }
 
 }  // namespace

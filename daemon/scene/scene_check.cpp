@@ -331,8 +331,12 @@ std::string to_text(const SceneCheck& c) {
                            " (one pose interval)"
                      : "    window Delta " + std::to_string(d.delta_samples) + " samples; look-ahead " +
                            seconds_text(d.lookahead_ns))
-        << ", emitted " << (d.causal ? ms_text(d.emission_delay_ns) : seconds_text(d.emission_delay_ns)) << " after the pose"
-        << (d.causal ? " (latency budget)" : " (look-ahead + margin or latency budget)") << "\n";
+        << (d.emission_delay_ns == 0 && !d.causal
+                ? std::string(", emitted on the trajectory's own schedule (a file or sample source is read ahead: no "
+                              "emission delay)")
+                : ", emitted " + (d.causal ? ms_text(d.emission_delay_ns) : seconds_text(d.emission_delay_ns)) +
+                      " after the pose" + (d.causal ? " (latency budget)" : " (look-ahead + margin or latency budget)"))
+        << "\n";
     if (d.causal)
       out << "    latency: producer lead " << ms_text(d.producer_lead_ns) << "; a pose arriving up to "
           << ms_text(d.arrival_slack_ns) << " after its mapped time is used exactly, a later one is bridged "

@@ -336,6 +336,7 @@ void SceneLifecycle::on_status_tick(std::chrono::nanoseconds status_period) {
   }
   const auto now = std::chrono::steady_clock::now();
   report_.log_new_refusals(s, now);
+  report_.log_falling_behind(s, now);
   const bool alive = built_.engine->healthy(emission::monotonic_now_ns(), kAliveWithinNs);
   report_.publish(scene_.name, s, alive, now, status_period);
 }

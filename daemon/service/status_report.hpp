@@ -12,6 +12,7 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
@@ -70,6 +71,14 @@ class StatusReport {
   // counted. A count lower than the last one is a new engine (restart, reload).
   void log_new_refusals(const emission::EngineStats& stats, Clock::time_point now);
 
+  // A device that falls behind (underruns: the producer had nothing when the
+  // tick was due; deadline misses: the emission thread woke more than a
+  // period late) says so while it does (issue 26: only the exit summary did):
+  // a warning naming the device and what it missed since the last one, at
+  // most one per 10 s; quiet while nothing new is missed. Counts lower than
+  // the last seen are a new engine.
+  void log_falling_behind(const emission::EngineStats& stats, Clock::time_point now);
+
   // Once per status_period: STATUS=summary_line, logged at info once a
   // minute, at debug otherwise.
   void publish(const std::string& scene_name, const emission::EngineStats& stats, bool alive, Clock::time_point now,
@@ -78,6 +87,12 @@ class StatusReport {
  private:
   Clock::time_point last_status_{}, last_summary_{}, last_refusal_log_{};
   std::uint64_t refusals_logged_ = 0;  // of the running engine's poses_refused
+  struct Behind {
+    std::uint64_t underruns = 0, deadline_misses = 0;
+  };
+  std::vector<Behind> behind_logged_;  // per device, as of the last warning
+  Clock::time_point last_behind_log_{};
+  bool behind_logged_once_ = false;
 };
 
 }  // namespace imuemu::service
