@@ -10,6 +10,7 @@ namespace imuemu::service {
 namespace {
 
 std::atomic<int> g_threshold{static_cast<int>(LogLevel::info)};
+std::atomic<std::uint64_t> g_lines_lost{0};
 
 // The prefixes are sd-daemon(3)'s macros, not literals of our own, so the
 // format is exactly what journald parses.
@@ -41,18 +42,20 @@ std::string format_log_line(LogLevel level, std::string_view text) {
 
 void set_log_threshold(LogLevel least_severe_logged) { g_threshold.store(static_cast<int>(least_severe_logged)); }
 LogLevel log_threshold() { return static_cast<LogLevel>(g_threshold.load()); }
+std::uint64_t log_lines_lost() { return g_lines_lost.load(std::memory_order_relaxed); }
 
 void log(LogLevel level, std::string_view text) {
   if (static_cast<int>(level) > g_threshold.load()) return;
   const std::string line = format_log_line(level, text);
   // One write(2) per line (stderr is unbuffered, but iostreams may split it);
   // a short write to a pipe is finished, EINTR retried; other errors are
-  // dropped: there is nowhere left to report them.
+  // dropped and counted: there is nowhere left to report them but the status.
   std::size_t written = 0;
   while (written < line.size()) {
     const ssize_t n = ::write(STDERR_FILENO, line.data() + written, line.size() - written);
     if (n < 0) {
       if (errno == EINTR) continue;
+      g_lines_lost.fetch_add(1, std::memory_order_relaxed);
       return;
     }
     written += static_cast<std::size_t>(n);

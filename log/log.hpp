@@ -35,8 +35,11 @@ std::string format_log_line(LogLevel level, std::string_view text);
 void set_log_threshold(LogLevel least_severe_logged);
 LogLevel log_threshold();
 
-// Writes one line to stderr (fd 2) unless below the threshold.
+// Writes one line to stderr (fd 2) unless below the threshold. A line stderr
+// refuses (EPIPE: its reader went away; imuemud ignores SIGPIPE) is counted.
 void log(LogLevel level, std::string_view text);
+// Lines (or their rest) stderr refused since the start (issue 26 N1).
+std::uint64_t log_lines_lost();
 inline void log_err(std::string_view text) { log(LogLevel::err, text); }
 inline void log_warning(std::string_view text) { log(LogLevel::warning, text); }
 inline void log_notice(std::string_view text) { log(LogLevel::notice, text); }

@@ -140,7 +140,7 @@ void print_summary(const emission::EngineStats& s) {
               << " samples emitted (" << d.exact << " exact, " << d.extrapolated << " extrapolated, " << d.blending
               << " blending), " << d.producer_late << " underruns, " << d.deadline_misses << " deadline misses (" << d.dropped_late
               << " not sent), "
-              << d.write_errors << " write errors, " << d.packets << " packets / " << d.bytes << " bytes sent, "
+              << d.dropped_link_down << " dropped (no reader), " << d.write_errors << " write errors, " << d.packets << " packets / " << d.bytes << " bytes sent, "
               << d.queue_overflows << " queue overflows; lateness p50 " << d.lateness.p50_ns / 1000 << " us, p99 "
               << d.lateness.p99_ns / 1000 << " us, p99.9 " << d.lateness.p999_ns / 1000 << " us, max "
               << d.lateness.max_ns / 1000 << " us\n";

@@ -74,11 +74,13 @@ int run_fault(const FaultArgs& args) {
     std::cerr << "imuemu " << e.what() << '\n';
     return kUsageError;
   }
-  const std::string path = args.socket_path.empty() ? service::default_control_socket_path(args.scene) : args.socket_path;
+  const std::string path = args.socket_path.empty() ? service::find_control_socket(args.scene) : args.socket_path;
   const auto timeout = std::chrono::milliseconds(static_cast<std::int64_t>(std::llround(args.timeout_s * 1000.0)));
   try {
     const nlohmann::json reply = query_control_socket(path, request.first, request.second, timeout);
-    std::cout << reply.dump(args.compact ? -1 : 2) << '\n';
+    // A refusal is said once, on stderr (issue 26: it was also printed as
+    // JSON on stdout); stdout carries only an accepted request's reply.
+    if (!(reply.is_object() && reply.contains("error"))) std::cout << reply.dump(args.compact ? -1 : 2) << '\n';
     if (reply.is_object() && reply.contains("error")) {
       const nlohmann::json& error = reply["error"];
       std::cerr << "imuemu fault " << args.action << ": the daemon at " << path
@@ -87,7 +89,9 @@ int run_fault(const FaultArgs& args) {
     }
     return kOk;
   } catch (const std::exception& e) {
-    std::cerr << "imuemu fault " << args.action << ": " << e.what() << '\n';
+    std::cerr << "imuemu fault " << args.action << ": " << e.what()
+              << (args.socket_path.empty() ? " (looked at " + service::control_socket_places_text(args.scene) + ")" : "")
+              << '\n';
     return kCannotProcess;
   }
 }
@@ -96,7 +100,7 @@ void add_fault_command(CLI::App& app, int& exit_code) {
   auto* fault = app.add_subcommand("fault", "Inject, list or clear faults in a running imuemud (control socket; docs/faults.md)");
   fault->require_subcommand(1);
   const auto common = [&exit_code](CLI::App* cmd, const std::shared_ptr<FaultArgs>& args) {
-    auto* socket_option = cmd->add_option("--socket", args->socket_path, "Control socket path (default /run/imuemu/SCENE.sock)");
+    auto* socket_option = cmd->add_option("--socket", args->socket_path, "Control socket path (default /run/imuemu/SCENE.sock, else /tmp/imuemu/SCENE.sock: the first that exists)");
     cmd->add_option("--scene", args->scene, "Scene name, for the default socket path")->capture_default_str()->excludes(socket_option);
     cmd->add_option("--timeout-s", args->timeout_s, "Give up when no reply comes within this")
         ->capture_default_str()->check(seconds_in(0.0, kMaxIntervalS, true));
@@ -129,7 +133,16 @@ void add_fault_command(CLI::App& app, int& exit_code) {
     auto* cmd = fault->add_subcommand("clear", "End a fault (by id) or all faults of a device");
     common(cmd, args);
     cmd->add_option("--imu", args->imu, "The [[imu]] name")->required();
-    auto* id = cmd->add_option("--id", args->id, "The fault's id (from inject or list)");
+    // Checked as text before the conversion: CLI11 would wrap "-5" into
+    // 18446744073709551611 (issue 26 N17).
+    auto* id = cmd->add_option("--id", args->id, "The fault's id (from inject or list)")
+                   ->check([](const std::string& text) -> std::string {
+                     const bool digits = !text.empty() && text.size() <= 19 &&
+                                         text.find_first_not_of("0123456789") == std::string::npos;
+                     if (!digits || text.find_first_not_of('0') == std::string::npos)
+                       return "expected a fault id (an integer >= 1, from inject or list), got '" + text + "'";
+                     return {};
+                   });
     cmd->add_flag("--all", args->all, "Every fault of the device")->excludes(id);
   }
 }

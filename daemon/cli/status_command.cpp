@@ -156,10 +156,12 @@ void print_status_summary(const nlohmann::json& status, std::ostream& out) {
           << " ticks silenced (device off), " << count_of(faults, "dropped_events")
           << " events lost (queue full)\n";
     out << "    transport: " << count_of(transport, "frames_sent") << " frames sent, "
-        << count_of(transport, "queued") << " queued; not taken: " << count_of(d, "write_errors")
-        << " packets (link down " << count_of(transport, "dropped_link_down")
-        << ": e.g. no reader on the pty; queue full " << count_of(transport, "dropped_queue_full")
-        << "; refused by the kernel or invalid " << count_of(transport, "write_errors") << ")\n";
+        << count_of(transport, "queued") << " queued; not taken: "
+        << count_of(d, "dropped_link_down") + count_of(d, "write_errors") << " packets ("
+        << count_of(d, "dropped_link_down") << " dropped while the link was down: e.g. no reader on the pty; "
+        << count_of(d, "write_errors") << " write errors: queue full "
+        << count_of(transport, "dropped_queue_full") << ", refused by the kernel or invalid "
+        << count_of(transport, "write_errors") << ")\n";
     if (count_of(transport, "input_bytes") > 0)
       out << "    input: " << count_of(transport, "input_bytes") << " bytes from the client ("
           << count_of(transport, "input_bytes_discarded") << " discarded: no device protocol reads them), "
@@ -282,7 +284,7 @@ int run_status(const StatusArgs& args) {
     std::cerr << "imuemu status: --timeout-s must be in (0, 3600]\n";
     return kUsageError;
   }
-  const std::string path = args.socket_path.empty() ? service::default_control_socket_path(args.scene) : args.socket_path;
+  const std::string path = args.socket_path.empty() ? service::find_control_socket(args.scene) : args.socket_path;
   const auto timeout = std::chrono::milliseconds(static_cast<std::int64_t>(std::llround(args.timeout_s * 1000.0)));
   try {
     const nlohmann::json reply = query_control_socket(path, args.command, timeout);
@@ -295,7 +297,9 @@ int run_status(const StatusArgs& args) {
     }
     return kOk;
   } catch (const std::exception& e) {
-    std::cerr << "imuemu status: " << e.what() << '\n';
+    std::cerr << "imuemu status: " << e.what()
+              << (args.socket_path.empty() ? " (looked at " + service::control_socket_places_text(args.scene) + ")" : "")
+              << '\n';
     return kCannotProcess;
   }
 }
@@ -303,7 +307,7 @@ int run_status(const StatusArgs& args) {
 void add_status_command(CLI::App& app, int& exit_code) {
   auto args = std::make_shared<StatusArgs>();
   auto* cmd = app.add_subcommand("status", "Ask a running imuemud for its status (JSON) over its control socket");
-  auto* socket_option = cmd->add_option("--socket", args->socket_path, "Control socket path (default /run/imuemu/SCENE.sock)");
+  auto* socket_option = cmd->add_option("--socket", args->socket_path, "Control socket path (default /run/imuemu/SCENE.sock, else /tmp/imuemu/SCENE.sock: the first that exists)");
   cmd->add_option("--scene", args->scene, "Scene name, for the default socket path")->capture_default_str()->excludes(socket_option);
   cmd->add_option("--command", args->command,
                   "Command to send: status, help (lists what the daemon offers)")->capture_default_str();

@@ -57,9 +57,12 @@ struct SampleNeeds {
 
 // What one emit() did on the wire.
 struct EmitOutcome {
-  // Frames the output refused (any reason: queue full, link down, bad
-  // frame), plus one when the encoder refused the sample.
+  // Frames the output refused while its link was up (queue full, bad frame,
+  // the kernel), plus one when the encoder refused the sample.
   std::uint64_t refused = 0;
+  // Frames the output refused because its link was down (no process reading
+  // the pty, the device gone): not write errors (issue 26).
+  std::uint64_t refused_link_down = 0;
   // CLOCK_MONOTONIC when the output accepted the sample's frames (for the
   // live pose latency: arrival -> handed to the output); 0: nothing accepted.
   TimeNs accepted_ns = 0;

@@ -85,6 +85,7 @@ class StreamDevice final : public EncoderDevice<drivers::StreamEncoder, std::vec
  private:
   void hand_over(const std::vector<std::uint8_t>& bytes, EmitOutcome& out) override {
     if (transport_->write_frame(std::as_bytes(std::span<const std::uint8_t>(bytes)))) out.accepted_ns = monotonic_ns();
+    else if (!transport_->link_up()) ++out.refused_link_down;  // an atomic load: no reader, the device gone
     else ++out.refused;
   }
 

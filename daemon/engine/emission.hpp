@@ -159,7 +159,8 @@ struct DeviceStats {
   std::uint64_t producer_late = 0;  // underruns: nothing from the producer when the tick was due
   std::uint64_t deadline_misses = 0;  // woke more than one period late
   std::uint64_t dropped_late = 0;     // deadline misses not sent (EngineOptions::drop_late_ticks)
-  std::uint64_t write_errors = 0;     // frames the transport refused (any reason)
+  std::uint64_t write_errors = 0;     // frames the transport refused while its link was up (queue full, kernel, invalid)
+  std::uint64_t dropped_link_down = 0;  // frames the transport refused while its link was down (no reader on the pty)
   std::uint64_t saturated = 0;        // samples with an axis clipped to the sensor's range (kStatusSaturated)
   std::uint64_t packets = 0, bytes = 0, queue_overflows = 0;  // the transport's own counters
   drivers::TransportCounters transport;

@@ -52,6 +52,7 @@ void EmissionEngine::Impl::emit_tick(DeviceState& d, std::uint64_t k, bool drop)
   // frames to the output, the sync pulse: the device's (daemon/device/device.hpp).
   const device::EmitOutcome out = d.options.device->emit(frame, slot->link, slot->pulse_t_ns);
   if (out.refused > 0) d.write_errors.fetch_add(out.refused, std::memory_order_relaxed);
+  if (out.refused_link_down > 0) d.dropped_link_down.fetch_add(out.refused_link_down, std::memory_order_relaxed);
   if (out.accepted_ns != 0 && slot->pose_receive_ns > 0)
     d.pose_latency.record(saturating_sub_ns(out.accepted_ns, slot->pose_receive_ns));
   if (silenced) {  // not emitted: ticks = emitted + not_sent + underruns + dropped_late + silenced

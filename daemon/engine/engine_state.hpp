@@ -111,7 +111,8 @@ struct DeviceState {
   // Shared (relaxed atomics; snapshot by stats()).
   std::atomic<std::uint64_t> end_tick{std::numeric_limits<std::uint64_t>::max()};  // no tick at or after
   std::atomic<std::uint64_t> ticks{0}, emitted{0}, exact{0}, extrapolated{0}, blending{0}, not_sent{0},
-      producer_late{0}, deadline_misses{0}, dropped_late{0}, write_errors{0}, last_counter{0}, saturated{0};
+      producer_late{0}, deadline_misses{0}, dropped_late{0}, write_errors{0}, dropped_link_down{0}, last_counter{0},
+      saturated{0};
   std::atomic<TimeNs> engine_lag_ns{0};
   std::atomic<std::uint64_t> faults_active{0}, faults_started{0}, faults_ended{0}, faults_injected{0},
       faults_cleared{0}, fault_events_dropped{0}, silenced{0};

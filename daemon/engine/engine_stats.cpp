@@ -29,6 +29,7 @@ EngineStats EmissionEngine::stats() const {
     ds.deadline_misses = d.deadline_misses.load(std::memory_order_relaxed);
     ds.dropped_late = d.dropped_late.load(std::memory_order_relaxed);
     ds.write_errors = d.write_errors.load(std::memory_order_relaxed);
+    ds.dropped_link_down = d.dropped_link_down.load(std::memory_order_relaxed);
     ds.saturated = d.saturated.load(std::memory_order_relaxed);
     ds.packets = ds.transport.frames_sent;
     ds.bytes = ds.transport.bytes_sent;
@@ -132,6 +133,7 @@ nlohmann::json to_json(const EngineStats& s) {
                      {"deadline_misses", d.deadline_misses},
                      {"dropped_late", d.dropped_late},
                      {"write_errors", d.write_errors},
+                     {"dropped_link_down", d.dropped_link_down},
                      {"saturated", d.saturated},
                      {"packets", d.packets},
                      {"bytes", d.bytes},

@@ -8,6 +8,7 @@
 #include <cstdio>
 #include <iomanip>
 #include <numbers>
+#include <cstring>
 #include <map>
 #include <nlohmann/json.hpp>
 #include <sstream>
@@ -77,7 +78,8 @@ double chain_cpu_seconds(const signal_chain::ChainWork& w) {
          w.vibration_rotations * kCpuSecondsPerVibrationRotation + w.vibration_direct * kCpuSecondsPerVibrationDirect;
 }
 
-void check_start_paths(const SceneConfig& scene, const RunnerOptions& options, const std::string& control_socket) {
+void check_start_paths(const SceneConfig& scene, const RunnerOptions& options, const std::string& control_socket,
+                       const OutputPaths& outputs) {
   namespace fs = std::filesystem;
   std::map<std::string, std::string> owner;  // normalised path -> what uses it
   auto claim = [&](const std::string& path, const std::string& what) {
@@ -115,6 +117,39 @@ void check_start_paths(const SceneConfig& scene, const RunnerOptions& options, c
     if (fs::is_directory(fs::symlink_status(p, ec)))
       throw std::invalid_argument(scene.file + ": " + what + ": is an existing directory");
     claim(link, what);
+    // The pty's flock file: created at the start, removed at exit.
+    claim(link + ".lock", what + "'s lock file " + link + ".lock");
+  }
+  auto check_output = [&](const std::string& path, const std::string& what) {
+    if (path.empty()) return;
+    const std::string named = what + " " + path;
+    claim(path, named);
+    std::error_code ec;
+    const fs::path p = fs::path(path).lexically_normal();
+    const std::string text = p.string();
+    const auto in_dev_pts = [](const std::string& t) { return t.rfind("/dev/pts/", 0) == 0 || t == "/dev/ptmx"; };
+    if (in_dev_pts(text) || text.rfind("/dev/tty", 0) == 0)
+      throw std::invalid_argument(scene.file + ": " + named + ": is a terminal, not a file for an output");
+    if (fs::is_symlink(fs::symlink_status(p, ec))) {
+      const std::string target = fs::read_symlink(p, ec).string();
+      if (!ec && in_dev_pts(target))
+        throw std::invalid_argument(scene.file + ": " + named + ": is a symbolic link to the terminal " + target +
+                                    " (a pty link, perhaps of another imuemud), not a file for an output");
+    }
+    if (fs::is_directory(p, ec)) throw std::invalid_argument(scene.file + ": " + named + ": is a directory");
+  };
+  check_output(outputs.fault_log, "the fault log");
+  check_output(outputs.stats_json, "--stats-json");
+  if (!outputs.stats_json.empty()) {
+    const fs::path p = fs::path(outputs.stats_json);
+    const fs::path dir = p.parent_path().empty() ? fs::path(".") : p.parent_path();
+    std::error_code ec;
+    if (!fs::is_directory(dir, ec))
+      throw std::invalid_argument("--stats-json " + outputs.stats_json + ": " + dir.string() + " is not a directory");
+    const bool exists = fs::exists(fs::symlink_status(p, ec));
+    if (::access(exists ? p.c_str() : dir.c_str(), W_OK) != 0)
+      throw std::invalid_argument("--stats-json " + outputs.stats_json + ": cannot be written: " +
+                                  (exists ? p.string() : dir.string()) + ": " + std::strerror(errno));
   }
 }
 
@@ -136,7 +171,14 @@ void check_startable(const SceneConfig& scene, const RunnerOptions& options) {
       }
     }
   }
-  check_start_paths(scene, options, scene.daemon.control_socket);
+  check_start_paths(scene, options, scene.daemon.control_socket, OutputPaths{scene.daemon.fault_log, ""});
+}
+
+std::string refusal_text(const SceneCheck& check) {
+  std::string text = "refused: ";
+  for (std::size_t i = 0; i < check.refusals.size(); ++i) text += (i ? "; " : "") + check.refusals[i];
+  if (check.refusals.empty()) text += "see above";
+  return text;
 }
 
 SceneCheck check_scene(const SceneConfig& scene) {
@@ -215,6 +257,7 @@ SceneCheck check_scene(const SceneConfig& scene) {
         } catch (const std::invalid_argument& e) {
           check.refused = true;
           check.warnings.push_back(std::string("fault refused: ") + e.what());
+          check.refusals.push_back(std::string("a fault the protocol cannot show: ") + e.what());
         }
       }
     };
@@ -238,7 +281,10 @@ SceneCheck check_scene(const SceneConfig& scene) {
         c.link = drivers::uart_budget(*encoder, rate, imu.transport.serial.settings);
     }
     if (c.link) {
-      if (c.link->verdict == drivers::BudgetVerdict::refuse) check.refused = true;
+      if (c.link->verdict == drivers::BudgetVerdict::refuse) {
+        check.refused = true;
+        check.refusals.push_back(imu.name + ": its link is loaded beyond 100 %: " + c.link->message);
+      }
       if (c.link->verdict != drivers::BudgetVerdict::ok)
         check.warnings.push_back(imu.name + ": link " + drivers::to_string(c.link->verdict) + ": " + c.link->message);
     }
@@ -259,7 +305,10 @@ SceneCheck check_scene(const SceneConfig& scene) {
     }
     // The parser makes devices on one interface agree on its bit rates.
     shared.budget = drivers::can_budget(all, bit_rates(scene.imus[devices.front()].transport.can));
-    if (shared.budget.verdict == drivers::BudgetVerdict::refuse) check.refused = true;
+    if (shared.budget.verdict == drivers::BudgetVerdict::refuse) {
+      check.refused = true;
+      check.refusals.push_back(shared.link + " is loaded beyond 100 %: " + shared.budget.message);
+    }
     if (shared.budget.verdict != drivers::BudgetVerdict::ok)
       check.warnings.push_back(shared.link + " shared by " + std::to_string(devices.size()) + " devices: " +
                                drivers::to_string(shared.budget.verdict) + ": " + shared.budget.message);
@@ -282,8 +331,12 @@ std::string to_text(const SceneCheck& c) {
                            " (one pose interval)"
                      : "    window Delta " + std::to_string(d.delta_samples) + " samples; look-ahead " +
                            seconds_text(d.lookahead_ns))
-        << ", emitted " << (d.causal ? ms_text(d.emission_delay_ns) : seconds_text(d.emission_delay_ns)) << " after the pose"
-        << (d.causal ? " (latency budget)" : " (look-ahead + margin or latency budget)") << "\n";
+        << (d.emission_delay_ns == 0 && !d.causal
+                ? std::string(", emitted on the trajectory's own schedule (a file or sample source is read ahead: no "
+                              "emission delay)")
+                : ", emitted " + (d.causal ? ms_text(d.emission_delay_ns) : seconds_text(d.emission_delay_ns)) +
+                      " after the pose" + (d.causal ? " (latency budget)" : " (look-ahead + margin or latency budget)"))
+        << "\n";
     if (d.causal)
       out << "    latency: producer lead " << ms_text(d.producer_lead_ns) << "; a pose arriving up to "
           << ms_text(d.arrival_slack_ns) << " after its mapped time is used exactly, a later one is bridged "

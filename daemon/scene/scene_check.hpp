@@ -89,7 +89,8 @@ struct SceneCheck {
     drivers::LinkBudget budget;
   };
   std::vector<SharedLink> shared_links;
-  bool refused = false;      // a link over 100 %: the scene cannot keep its schedule
+  bool refused = false;      // a link over 100 % or a fault the protocol cannot show: a start would refuse it
+  std::vector<std::string> refusals;  // why, one line each (issue 26 N17: not always a link)
   std::vector<std::string> warnings;
 };
 
@@ -112,11 +113,24 @@ void check_startable(const SceneConfig& scene, const RunnerOptions& options);
 // PATH_MAX/NAME_MAX, and be distinct from the others and from the control
 // socket after normalisation ("./x", "//x", "a/../x"); the control socket's
 // directory must exist or be creatable. imuemud runs this before it starts.
-void check_start_paths(const SceneConfig& scene, const RunnerOptions& options, const std::string& control_socket);
+// The outputs (issue 26 N15), before anything is opened or created: the fault
+// log and --stats-json are distinct from each other, from the control socket,
+// from every pty link and its "<link>.lock"; neither names a directory or a
+// terminal (a path under /dev/pts, /dev/ptmx, /dev/tty*, or a symbolic link
+// to /dev/pts/N: another imuemud's pty link); --stats-json's directory exists
+// and is writable (it is written at exit, when nothing can be done about it).
+struct OutputPaths {
+  std::string fault_log;   // empty: none
+  std::string stats_json;  // empty: none
+};
+void check_start_paths(const SceneConfig& scene, const RunnerOptions& options, const std::string& control_socket,
+                       const OutputPaths& outputs = {});
 
 // Computes the figures; throws std::invalid_argument only for a scene that
 // parse_scene_* would not have produced.
 SceneCheck check_scene(const SceneConfig& scene);
+// "refused: REASON[; REASON...]" from check.refusals (the refusal's own words).
+std::string refusal_text(const SceneCheck& check);
 std::string to_text(const SceneCheck& check);
 std::string to_json(const SceneCheck& check);  // one JSON object, 2-space indented
 

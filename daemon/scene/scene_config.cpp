@@ -920,7 +920,15 @@ LatencyPlan latency_plan(const SceneConfig& scene, const ImuConfig& imu) {
   plan.smoothing_lookahead_ns = StreamPipeline::lookahead_ns(pipeline_options(smoothing_scene, imu), knot_interval_ns);
   plan.lookahead_ns = plan.smoothing_lookahead_ns;
   plan.emission_delay_ns = saturating_add_ns(plan.smoothing_lookahead_ns, margin_ns);
-  if (!scene.live.latency_budget_ms || !is_live(scene.trajectory.kind)) return plan;
+  // A file or sample source is known whole: the engine reads ahead of it and
+  // sends every tick on the trajectory's own schedule, with no delay
+  // (scene_runner.cpp sets emit_delay_ns for live input only). Issue 26:
+  // check-config said "emitted 8.638 s after the pose" where status said 0.
+  if (!is_live(scene.trajectory.kind)) {
+    plan.emission_delay_ns = 0;
+    return plan;
+  }
+  if (!scene.live.latency_budget_ms) return plan;
   const auto budget_ns = static_cast<TimeNs>(std::llround(*scene.live.latency_budget_ms * 1e6));
   plan.emission_delay_ns = budget_ns;
   // The window of Eq. 3.68 fits in the budget, with the producer's default

@@ -24,8 +24,14 @@ void add_control_commands(ControlServer& control, SceneLifecycle& lifecycle, boo
         const FaultInjectRequest r = parse_fault_inject(args);
         emission::EmissionEngine& engine = lifecycle.running_engine();
         const auto injected = engine.inject_fault(r.imu, r.spec, r.after_ns);
+        // Described at the start the engine gave it, since the device's
+        // first sample: the time base of `fault-list` and the fault log
+        // (issue 26: the request's own start, 0, was logged).
+        fault::FaultSpec started = r.spec;
+        started.clock = fault::Clock::since_start;
+        started.start_ns = injected.start_since_start_ns;
         log_notice("fault injected on " + r.imu + ": id " + std::to_string(injected.id) + ", " +
-                   fault::describe(r.spec) + ", from sample " + std::to_string(injected.first_sample));
+                   fault::describe(started) + ", from sample " + std::to_string(injected.first_sample));
         return nlohmann::json{{"imu", r.imu},
                               {"id", injected.id},
                               {"type", std::string(fault::kind_name(r.spec.kind))},

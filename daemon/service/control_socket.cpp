@@ -198,6 +198,14 @@ ControlRequest parse_control_request(const std::string& line) {
     args = nlohmann::json::parse(rest);
   } catch (const nlohmann::json::parse_error& e) {
     throw std::invalid_argument(request.name + ": the arguments are not JSON (" + e.what() + ")");
+  } catch (const nlohmann::json::exception& e) {
+    // A number beyond a double (1e400) is an out_of_range, not a parse
+    // error (issue 26 N17: it reached the client as a raw json exception).
+    std::string what = e.what();
+    if (const auto end = what.find("] "); what.rfind("[json.exception", 0) == 0 && end != std::string::npos)
+      what.erase(0, end + 2);
+    throw std::invalid_argument(request.name + ": a number in the arguments is beyond the range of a double (" + what +
+                                "); times are seconds, at most 9e9");
   }
   if (!args.is_object())
     throw std::invalid_argument(request.name + ": the arguments must be one JSON object, got " + std::string(args.type_name()));
@@ -207,6 +215,28 @@ ControlRequest parse_control_request(const std::string& line) {
 
 std::string default_control_socket_path(const std::string& scene_name) {
   return "/run/imuemu/" + scene_name + ".sock";
+}
+
+std::vector<std::string> default_control_socket_paths(const std::string& scene_name) {
+  // The second is the built-in scene's [daemon] control_socket
+  // (daemon/scene/default_scene.cpp, config/default.toml) for its name.
+  return {default_control_socket_path(scene_name), "/tmp/imuemu/" + scene_name + ".sock"};
+}
+
+std::string find_control_socket(const std::string& scene_name) {
+  const std::vector<std::string> paths = default_control_socket_paths(scene_name);
+  for (const std::string& p : paths) {
+    struct stat st {};
+    if (::stat(p.c_str(), &st) == 0 && S_ISSOCK(st.st_mode)) return p;
+  }
+  return paths.front();
+}
+
+std::string control_socket_places_text(const std::string& scene_name) {
+  const std::vector<std::string> paths = default_control_socket_paths(scene_name);
+  std::string text;
+  for (std::size_t i = 0; i < paths.size(); ++i) text += (i == 0 ? "" : " or ") + paths[i];
+  return text;
 }
 
 ControlServer::ControlServer(asio::io_context& io, ControlSocketOptions options)

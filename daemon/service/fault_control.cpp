@@ -3,6 +3,7 @@
 #include <cmath>
 #include <limits>
 #include <set>
+#include <sstream>
 #include <stdexcept>
 
 #include "core/limits.hpp"
@@ -35,15 +36,24 @@ std::string imu_of(const json& args, bool required) {
   return it->get<std::string>();
 }
 
+// The scene's [[imu.fault]] after_s/duration_s bound (fault_config.cpp):
+// 9e9 s is 9e18 ns, within int64 (9.22e18); the engine adds it to the
+// start with saturation (issue 26 N17: 9e9 was refused as "does not fit").
+constexpr double kMaxFaultSeconds = 9e9;
+
 TimeNs seconds_of(const json& args, const char* key) {
   const auto it = args.find(key);
   if (it == args.end()) return 0;
-  if (!it->is_number()) throw std::invalid_argument(std::string("\"") + key + "\": expected a number of seconds");
+  if (!it->is_number())
+    throw std::invalid_argument(std::string("\"") + key + "\": expected a number of seconds, got " + it->type_name());
   const double s = it->get<double>();
-  if (!std::isfinite(s) || s < 0.0) throw std::invalid_argument(std::string("\"") + key + "\": expected a finite number >= 0");
-  const std::optional<TimeNs> ns = limits::checked_ns_from_seconds(s);
-  if (!ns) throw std::invalid_argument(std::string("\"") + key + "\": does not fit int64 nanoseconds");
-  return *ns;
+  if (!std::isfinite(s) || s < 0.0 || s > kMaxFaultSeconds) {
+    std::ostringstream text;
+    text << "\"" << key << "\": expected a finite number >= 0 and <= 9e9 s (int64 nanoseconds, as a scene's "
+         << "[[imu.fault]]), got " << s;
+    throw std::invalid_argument(text.str());
+  }
+  return static_cast<TimeNs>(std::llround(s * 1e9));
 }
 
 // A JSON value as the TOML value a scene would hold.
@@ -65,7 +75,10 @@ FaultInjectRequest parse_fault_inject(const json& args) {
   FaultInjectRequest r;
   r.imu = imu_of(args, true);
   const auto type = args.find("type");
-  if (type == args.end() || !type->is_string()) throw std::invalid_argument("missing \"type\": the fault type");
+  if (type == args.end()) throw std::invalid_argument("missing \"type\": the fault type");
+  if (!type->is_string())
+    throw std::invalid_argument(std::string("\"type\": expected a string (a fault type's name, e.g. \"bias_step\"), got ") +
+                                type->type_name());
   const std::optional<fault::Kind> kind = fault::kind_from_name(type->get<std::string>());
   if (!kind) {
     std::string names;

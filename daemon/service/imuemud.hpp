@@ -8,6 +8,7 @@
 
 #include <cstddef>
 #include <string>
+#include <vector>
 
 namespace imuemu::service {
 
@@ -19,6 +20,21 @@ inline constexpr std::size_t kMaxCommandBytes = 4096;
 // rule as the scene file's [daemon] control_socket default):
 // /run/imuemu/<scene_name>.sock (RuntimeDirectory=imuemu of imuemud@.service).
 std::string default_control_socket_path(const std::string& scene_name);
+
+// The places a daemon of scene `scene_name` listens by default, in the order
+// a client without --socket tries them (issue 26: `imuemud` with no
+// arguments, the built-in scene, listens at /tmp/imuemu/default.sock, where
+// `imuemu status` did not look): /run/imuemu/<scene>.sock (a scene file's
+// default, imuemud@.service), then /tmp/imuemu/<scene>.sock (the built-in
+// scene's, imuemud run by hand without root).
+std::vector<std::string> default_control_socket_paths(const std::string& scene_name);
+
+// The first of default_control_socket_paths() that exists as a socket; none:
+// the first (a client's error then names every place it looked, see
+// control_socket_places_text()).
+std::string find_control_socket(const std::string& scene_name);
+// "/run/imuemu/x.sock or /tmp/imuemu/x.sock".
+std::string control_socket_places_text(const std::string& scene_name);
 
 // Exit codes for systemd: 0 clean stop (or the trajectory ended); anything
 // else is a failure that Restart=on-failure acts on (a scene that does not

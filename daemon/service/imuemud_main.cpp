@@ -21,8 +21,11 @@
 // Test hook: with IMUEMU_TEST_HOOKS=1 in the environment the control socket
 // also offers "stall-emitter" and "fault-producer" (control_commands.hpp).
 // Never set in the shipped unit.
+#include <csignal>
+#include <cerrno>
 #include <chrono>
 #include <cstdint>
+#include <cstring>
 #include <cstdlib>
 #include <filesystem>
 #include <fstream>
@@ -63,6 +66,9 @@ using svc::kExitUsage;
 // SIGTERM during a scene build: how long the worker may take to finish (it
 // may be opening devices, which is quick) before the process exits without it.
 constexpr auto kBuildJoinLimit = std::chrono::milliseconds(500);
+// At exit, the fault events still waiting get this long to be written (a
+// reader that stopped reading must not hold up SIGTERM; the rest are counted).
+constexpr auto kFaultLogDrainLimit = std::chrono::milliseconds(500);
 
 // A handler that throws ends io.run() with the exception; the service
 // goes on (io_context can be run again), the failure is counted and
@@ -86,10 +92,23 @@ void run_until_stopped(boost::asio::io_context& io) {
   }
 }
 
-void write_stats(const std::string& path, const svc::SceneLifecycle& lifecycle) {
-  if (path.empty()) return;
+// False (logged with the reason) when the file could not be written: the
+// exit is then a failure (issue 26 N17), the run's numbers are gone.
+bool write_stats(const std::string& path, const svc::SceneLifecycle& lifecycle) {
+  if (path.empty()) return true;
+  errno = 0;
   std::ofstream out(path);
-  out << (lifecycle.final_stats() ? imuemu::emission::to_json(*lifecycle.final_stats()).dump(2) : std::string("null")) << "\n";
+  if (out)
+    out << (lifecycle.final_stats() ? imuemu::emission::to_json(*lifecycle.final_stats()).dump(2) : std::string("null"))
+        << "\n";
+  if (out) out.flush();
+  if (!out) {
+    const int error = errno;
+    svc::log_err("--stats-json " + path + ": cannot write the statistics" +
+                 (error != 0 ? std::string(": ") + std::strerror(error) : std::string()));
+    return false;
+  }
+  return true;
 }
 
 // --check-config: parse, compute the figures, print them. Nothing is opened.
@@ -105,7 +124,7 @@ int check_config(const std::string& path, bool json, const sc::RunnerOptions& ru
   const sc::SceneCheck check = sc::check_scene(scene);
   std::cout << (json ? sc::to_json(check) : sc::to_text(check));
   if (check.refused) {
-    std::cerr << "imuemud: " << scene.file << ": refused: a link is loaded beyond 100 % (see above)\n";
+    std::cerr << "imuemud: " << scene.file << ": " << sc::refusal_text(check) << "\n";
     return kExitLinkRefused;
   }
   return kExitOk;
@@ -141,6 +160,9 @@ int main(int argc, char** argv) {
   } catch (const CLI::ParseError& e) {
     return app.exit(e) == 0 ? kExitOk : kExitUsage;
   }
+  // A reader of the fault log or of stderr that goes away must not kill the
+  // daemon (issue 26 N1): a write gets EPIPE instead, which is counted.
+  std::signal(SIGPIPE, SIG_IGN);
   if (!check_path.empty()) {
     sc::RunnerOptions check_runner;
     check_runner.pty_link_dir = pty_link_dir;
@@ -157,7 +179,7 @@ int main(int argc, char** argv) {
     const sc::SceneCheck check = sc::check_scene(scene);
     for (const std::string& w : check.warnings) svc::log_warning(w);
     if (check.refused) {
-      svc::log_err(scene.file + ": refused: a link is loaded beyond 100 %:\n" + sc::to_text(check));
+      svc::log_err(scene.file + ": " + sc::refusal_text(check) + ":\n" + sc::to_text(check));
       return kExitLinkRefused;
     }
   } catch (const std::exception& e) {
@@ -175,14 +197,17 @@ int main(int argc, char** argv) {
   runner.pty_link_dir = pty_link_dir;
   if (!late_ticks.empty()) runner.drop_late_ticks = late_ticks == "drop";
   runner.log = [](std::string_view line) { svc::log_notice(line); };
-  svc::SceneLifecycle lifecycle(io, scene_path, scene, runner, run_seconds, test_hooks,
-                                fault_log_path.empty() ? scene.daemon.fault_log : fault_log_path);
+  const std::string fault_log = fault_log_path.empty() ? scene.daemon.fault_log : fault_log_path;
+  svc::SceneLifecycle lifecycle(io, scene_path, scene, runner, run_seconds, test_hooks, fault_log,
+                                !fault_log_path.empty());
   try {
     const std::string socket_path = !socket_override.empty() ? socket_override
                                     : !scene.daemon.control_socket.empty()
                                         ? scene.daemon.control_socket
                                         : svc::default_control_socket_path(scene.name);
-    sc::check_start_paths(scene, runner, socket_path);  // aliases, directories, lengths (scene_check.hpp)
+    // Aliases, directories, lengths, the outputs' collisions (scene_check.hpp):
+    // nothing is opened or created before.
+    sc::check_start_paths(scene, runner, socket_path, sc::OutputPaths{fault_log, stats_json});
     {
       // /run/imuemu comes from the unit's RuntimeDirectory=; the built-in
       // scene's /tmp/imuemu and test directories are made here.
@@ -210,22 +235,23 @@ int main(int argc, char** argv) {
     lifecycle.start();
     lifecycle.start_service_timers();
     run_until_stopped(io);
+    lifecycle.close_fault_log(kFaultLogDrainLimit);
     if (!lifecycle.join_builder(kBuildJoinLimit)) {
       // The worker is still inside a scene build (nothing there can be
       // interrupted): exit without it, promptly, as SIGTERM asks. It has
       // opened no device yet (that is the quick last step), the control
       // socket is closed; std::_Exit skips the destructors that would wait
       // for or race with it.
-      write_stats(stats_json, lifecycle);
+      const bool stats_written = write_stats(stats_json, lifecycle);
       svc::log_notice("stopped during a scene build (the build did not end within 0.5 s; abandoned)");
-      std::_Exit(lifecycle.exit_code());
+      std::_Exit(!stats_written && lifecycle.exit_code() == kExitOk ? kExitStartFailed : lifecycle.exit_code());
     }
   } catch (const std::exception& e) {
     svc::log_err(e.what());
     if (!lifecycle.join_builder(kBuildJoinLimit)) std::_Exit(kExitStartFailed);
     return kExitStartFailed;
   }
-  write_stats(stats_json, lifecycle);
+  const bool stats_written = write_stats(stats_json, lifecycle);
   svc::log_info(lifecycle.exit_code() == kExitOk ? "stopped" : "stopped after a failure");
-  return lifecycle.exit_code();
+  return !stats_written && lifecycle.exit_code() == kExitOk ? kExitStartFailed : lifecycle.exit_code();
 }

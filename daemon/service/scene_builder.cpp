@@ -19,7 +19,7 @@ void run_scene_build_job(SceneBuildJob& job) {
   }
   scene::SceneConfig next = job.scene_path.empty() ? scene::default_scene() : scene::parse_scene_file(job.scene_path);
   const scene::SceneCheck check = scene::check_scene(next);
-  if (check.refused) throw std::runtime_error("link budget over 100 %:\n" + scene::to_text(check));
+  if (check.refused) throw std::runtime_error(scene::refusal_text(check) + ":\n" + scene::to_text(check));
   const bool live = scene::is_live(next.trajectory.kind);
   if (!live) {
     // The trajectory's content (a file that became malformed) is what most

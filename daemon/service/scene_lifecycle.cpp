@@ -11,6 +11,7 @@
 #include <utility>
 #include <vector>
 
+#include "daemon/scene/scene_check.hpp"
 #include "daemon/service/imuemud.hpp"
 #include "io/pose_source.hpp"
 #include "log/log.hpp"
@@ -36,8 +37,9 @@ std::string seconds_text(TimeNs ns) {
 
 SceneLifecycle::SceneLifecycle(boost::asio::io_context& io, std::string scene_path, scene::SceneConfig scene,
                                scene::RunnerOptions runner, std::optional<double> run_seconds, bool test_hooks,
-                               std::string fault_log_path)
+                               std::string fault_log_path, bool fault_log_fixed)
     : fault_log_(std::move(fault_log_path)),
+      fault_log_fixed_(fault_log_fixed),
       scene_path_(std::move(scene_path)),
       scene_(std::move(scene)),
       runner_(std::move(runner)),
@@ -84,6 +86,10 @@ void SceneLifecycle::reload() {
     return;
   }
   notify_reloading();
+  // A log rotation (rename, then SIGHUP): the fault log is opened again at
+  // its path, a new file (issue 26 N14); a changed [daemon] fault_log is
+  // taken when the new scene has been read (on_validated).
+  if (const std::string log_path = fault_log_.path(); !log_path.empty()) fault_log_.reopen(log_path);
   auto job = std::make_shared<SceneBuildJob>();
   job->kind = SceneBuildJob::Kind::validate;
   job->scene_path = scene_path_;
@@ -149,7 +155,21 @@ void SceneLifecycle::on_validated(SceneBuildJob& job) {
              "new time base)");
   previous_scene_ = scene_;
   scene::ReusableTransports kept;
-  stop_engine(&kept);
+  stop_engine(&kept);  // its last fault events go to the log they belong to
+  if (!fault_log_fixed_ && job.scene.daemon.fault_log != fault_log_.path()) {
+    try {  // the outputs' collisions, as at the start (issue 26 N15)
+      scene::check_start_paths(job.scene, runner_, "", scene::OutputPaths{job.scene.daemon.fault_log, ""});
+    } catch (const std::exception& e) {
+      log_err(std::string("reload: the new fault log is refused, keeping ") + fault_log_.path() + ": " + e.what());
+      job.scene.daemon.fault_log = fault_log_.path();
+    }
+  }
+  if (!fault_log_fixed_ && job.scene.daemon.fault_log != fault_log_.path()) {
+    log_notice("reload: the fault log is now " +
+               (job.scene.daemon.fault_log.empty() ? std::string("none") : job.scene.daemon.fault_log) + " (was " +
+               (fault_log_.path().empty() ? std::string("none") : fault_log_.path()) + ")");
+    fault_log_.reopen(job.scene.daemon.fault_log);
+  }
   retry_timer_.cancel();
   waiting_for_device_ = false;
   scene_ = std::move(job.scene);
@@ -316,6 +336,7 @@ void SceneLifecycle::on_status_tick(std::chrono::nanoseconds status_period) {
   }
   const auto now = std::chrono::steady_clock::now();
   report_.log_new_refusals(s, now);
+  report_.log_falling_behind(s, now);
   const bool alive = built_.engine->healthy(emission::monotonic_now_ns(), kAliveWithinNs);
   report_.publish(scene_.name, s, alive, now, status_period);
 }
@@ -329,6 +350,8 @@ nlohmann::json SceneLifecycle::status_json() const {
   status.imus = scene_.imus.size();
   status.waiting_for_device = waiting_for_device_;
   status.fault_log_path = fault_log_.path();
+  status.fault_log_output = fault_log_.counters();
+  status.log_lines_lost = log_lines_lost();
   if (job_)
     status.building = DaemonStatus::Build{job_->kind == SceneBuildJob::Kind::start,
                                           emission::monotonic_now_ns() - job_->started_ns};

@@ -40,10 +40,11 @@ class SceneLifecycle {
   // scene_path: empty for the built-in scene. run_seconds: --seconds (the
   // first start's emission time). test_hooks: only named in the ready line
   // (the hooks are control commands, daemon/service/control_commands.hpp).
-  // fault_log_path: empty for none.
+  // fault_log_path: empty for none. fault_log_fixed: it came from
+  // --fault-log (a reload keeps it; else the new scene's [daemon] fault_log).
   SceneLifecycle(boost::asio::io_context& io, std::string scene_path, scene::SceneConfig scene,
                  scene::RunnerOptions runner, std::optional<double> run_seconds, bool test_hooks,
-                 std::string fault_log_path);
+                 std::string fault_log_path, bool fault_log_fixed = false);
 
   int exit_code() const { return exit_code_; }
   // The engine's statistics when it last stopped (--stats-json).
@@ -55,8 +56,11 @@ class SceneLifecycle {
     petter_ = petter;
     watchdog_ = watchdog;
   }
-  // Opens (appends to) the fault log; throws naming the path.
+  // Opens (appends to) the fault log; throws naming the path and the reason
+  // (a FIFO without reader is not an error: retried, fault_log_writer.hpp).
   void open_fault_log() { fault_log_.open(); }
+  // At exit: the events still waiting get up to drain_limit to be written.
+  void close_fault_log(std::chrono::milliseconds drain_limit) { fault_log_.close(drain_limit); }
   // on_stopped: called once stop() has stopped everything (main closes the
   // control socket and stops the io_context).
   void on_stopped(std::function<void()> f) { on_stopped_ = std::move(f); }
@@ -123,6 +127,7 @@ class SceneLifecycle {
   void on_status_tick(std::chrono::nanoseconds status_period);
 
   FaultLogWriter fault_log_;
+  bool fault_log_fixed_ = false;
   std::string scene_path_;  // empty: the built-in scene
   scene::SceneConfig scene_;
   scene::RunnerOptions runner_;

@@ -11,6 +11,7 @@ namespace {
 
 constexpr auto kSummaryLogPeriod = std::chrono::seconds(60);
 constexpr auto kRefusalLogPeriod = std::chrono::seconds(10);
+constexpr auto kBehindLogPeriod = std::chrono::seconds(10);
 
 std::string us_text(TimeNs ns) { return std::to_string(ns / 1000) + " us"; }
 
@@ -26,7 +27,7 @@ std::string summary_line(const std::string& scene_name, const emission::EngineSt
     if (d.producer_late > 0) out << ", " << d.producer_late << " underruns";
     if (d.deadline_misses > 0) out << ", " << d.deadline_misses << " late";
     if (d.write_errors > 0) out << ", " << d.write_errors << " not written";
-    if (d.transport.dropped_link_down > 0) out << " (" << d.transport.dropped_link_down << " while no reader/link down)";
+    if (d.dropped_link_down > 0) out << ", " << d.dropped_link_down << " dropped (no reader/link down)";
     if (d.faults.active > 0) out << ", " << d.faults.active << " fault" << (d.faults.active == 1 ? "" : "s") << " acting";
     if (d.faults.silenced > 0) out << ", " << d.faults.silenced << " silenced by faults";
     first = false;
@@ -52,6 +53,8 @@ nlohmann::json status_json(const DaemonStatus& d) {
       {"imus", d.imus},
       {"waiting_for_device", d.waiting_for_device},
       {"fault_log", d.fault_log_path.empty() ? nlohmann::json(nullptr) : nlohmann::json(d.fault_log_path)},
+      {"fault_log_output", d.fault_log_output ? to_json(*d.fault_log_output) : nlohmann::json(nullptr)},
+      {"log_lines_lost", d.log_lines_lost},
   };
   if (d.building) {
     status["building"] = {{"what", d.building->start ? "start" : "reload"},
@@ -87,6 +90,32 @@ void StatusReport::log_new_refusals(const emission::EngineStats& s, Clock::time_
               (s.last_pose_refusal.empty() ? std::string("no reason recorded") : s.last_pose_refusal));
   refusals_logged_ = s.poses_refused;
   last_refusal_log_ = now;
+}
+
+void StatusReport::log_falling_behind(const emission::EngineStats& s, Clock::time_point now) {
+  if (behind_logged_.size() != s.devices.size()) behind_logged_.assign(s.devices.size(), {});
+  for (std::size_t i = 0; i < s.devices.size(); ++i) {
+    const emission::DeviceStats& d = s.devices[i];
+    if (d.producer_late < behind_logged_[i].underruns || d.deadline_misses < behind_logged_[i].deadline_misses)
+      behind_logged_[i] = {};  // a new engine (restart, reload)
+  }
+  if (behind_logged_once_ && now - last_behind_log_ < kBehindLogPeriod) return;
+  std::string text;
+  for (std::size_t i = 0; i < s.devices.size(); ++i) {
+    const emission::DeviceStats& d = s.devices[i];
+    const std::uint64_t under = d.producer_late - behind_logged_[i].underruns;
+    const std::uint64_t missed = d.deadline_misses - behind_logged_[i].deadline_misses;
+    if (under == 0 && missed == 0) continue;
+    text += (text.empty() ? "" : "; ") + d.name + " is falling behind: " + std::to_string(under) +
+            " underruns (no sample ready when due) and " + std::to_string(missed) +
+            " deadline misses (woken more than a period late) since the last report (" +
+            std::to_string(d.producer_late) + " and " + std::to_string(d.deadline_misses) + " in all)";
+    behind_logged_[i] = {d.producer_late, d.deadline_misses};
+  }
+  if (text.empty()) return;
+  log_warning(text);
+  last_behind_log_ = now;
+  behind_logged_once_ = true;
 }
 
 void StatusReport::publish(const std::string& scene_name, const emission::EngineStats& s, bool alive,

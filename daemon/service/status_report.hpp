@@ -12,11 +12,13 @@
 #include <cstdint>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include <nlohmann/json.hpp>
 
 #include "core/types.hpp"
 #include "daemon/engine/emission.hpp"
+#include "daemon/service/fault_log_writer.hpp"
 
 namespace imuemu::service {
 
@@ -34,6 +36,8 @@ struct DaemonStatus {
   TimeNs uptime_ns = 0;
   bool waiting_for_device = false;
   std::string fault_log_path;  // empty: no fault log
+  std::optional<FaultLogCounters> fault_log_output;  // the fault log's writer (issue 26 N2/N3/N13)
+  std::uint64_t log_lines_lost = 0;  // log lines stderr refused (EPIPE: its reader went away)
   struct Build {
     bool start = true;  // false: a reload's re-read
     TimeNs elapsed_ns = 0;
@@ -49,7 +53,7 @@ struct DaemonStatus {
 };
 
 // {"scene", "scene_file", "pid", "uptime_s", "imus", "waiting_for_device",
-//  "fault_log", "building", "samples_emitted", "emitter_progressing",
+//  "fault_log", "fault_log_output", "log_lines_lost", "building", "samples_emitted", "emitter_progressing",
 //  "engine", "watchdog"}; what is absent is null (samples_emitted 0).
 nlohmann::json status_json(const DaemonStatus& status);
 
@@ -67,6 +71,14 @@ class StatusReport {
   // counted. A count lower than the last one is a new engine (restart, reload).
   void log_new_refusals(const emission::EngineStats& stats, Clock::time_point now);
 
+  // A device that falls behind (underruns: the producer had nothing when the
+  // tick was due; deadline misses: the emission thread woke more than a
+  // period late) says so while it does (issue 26: only the exit summary did):
+  // a warning naming the device and what it missed since the last one, at
+  // most one per 10 s; quiet while nothing new is missed. Counts lower than
+  // the last seen are a new engine.
+  void log_falling_behind(const emission::EngineStats& stats, Clock::time_point now);
+
   // Once per status_period: STATUS=summary_line, logged at info once a
   // minute, at debug otherwise.
   void publish(const std::string& scene_name, const emission::EngineStats& stats, bool alive, Clock::time_point now,
@@ -75,6 +87,12 @@ class StatusReport {
  private:
   Clock::time_point last_status_{}, last_summary_{}, last_refusal_log_{};
   std::uint64_t refusals_logged_ = 0;  // of the running engine's poses_refused
+  struct Behind {
+    std::uint64_t underruns = 0, deadline_misses = 0;
+  };
+  std::vector<Behind> behind_logged_;  // per device, as of the last warning
+  Clock::time_point last_behind_log_{};
+  bool behind_logged_once_ = false;
 };
 
 }  // namespace imuemu::service

@@ -695,3 +695,19 @@ TEST_F(Cli, TrapNanHeadingAtAPoleSaysHowToWriteThePole) {
   EXPECT_NE(m.output.find("(not finite (NaN or infinity))"), std::string::npos) << m.output;
   EXPECT_EQ(m.output.find("at a pole"), std::string::npos) << m.output;
 }
+
+namespace {
+
+// Issue 26 N17: frames dropped while no process had the pty open were
+// called "write errors" (1847 in one run, with transport write_errors 0).
+TEST_F(Cli, EmitNamesFramesDroppedWhileNoReaderHadThePtyOpen) {
+  const CliRun r = run("emit --sample static --device pty:" + path("tty") + " --seconds 0.5");
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  const std::size_t at = r.output.find(" dropped (no reader), 0 write errors");
+  ASSERT_NE(at, std::string::npos) << r.output;
+  const std::size_t start = r.output.rfind(", ", at);
+  ASSERT_NE(start, std::string::npos) << r.output;
+  EXPECT_GT(std::stoull(r.output.substr(start + 2, at - start - 2)), 0u) << r.output;
+}
+
+}  // namespace

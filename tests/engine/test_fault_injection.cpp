@@ -211,6 +211,14 @@ TEST(FaultControl, ArgumentsAreCheckedBeforeAnythingReachesTheEngine) {
   };
   refused(json{{"type", "dead"}}, "missing \"imu\"");
   refused(json{{"imu", "imu0"}}, "missing \"type\"");
+  // Issue 26 N17: each says what is wrong.
+  refused(json{{"imu", "imu0"}, {"type", 5}}, "\"type\": expected a string (a fault type's name");
+  refused(json{{"imu", "imu0"}, {"type", "dead"}, {"after_s", 1e10}}, "\"after_s\": expected a finite number >= 0 and <= 9e9 s");
+  refused(json{{"imu", "imu0"}, {"type", "intermittent"}, {"params", {{"on_ms", 1e-7}, {"off_ms", 5}}}},
+          "expected a number in [1e-06, 1e+09] (the failing part of each cycle in ms, at least 1e-6 ms = 1 ns)");
+  // 9e9 s is 9e18 ns: within int64 (it was said not to fit).
+  EXPECT_EQ(service::parse_fault_inject(json{{"imu", "imu0"}, {"type", "dead"}, {"after_s", 9e9}}).after_ns,
+            9'000'000'000'000'000'000);
   refused(json{{"imu", "imu0"}, {"type", "melt"}}, "'melt' is not a fault type");
   refused(json{{"imu", "imu0"}, {"type", "dead"}, {"colour", 1}}, "unknown key 'colour'");
   refused(json{{"imu", "imu0"}, {"type", "dead"}, {"after_s", -1}}, "\"after_s\": expected a finite number >= 0");

@@ -33,7 +33,10 @@
 #include <boost/asio/post.hpp>
 #include <nlohmann/json.hpp>
 
+#include "daemon/scene/default_scene.hpp"
+#include "daemon/scene/scene_config.hpp"
 #include "daemon/service/control_socket.hpp"
+#include "daemon/service/imuemud.hpp"
 #include "daemon/engine/emission.hpp"
 #include "log/log.hpp"
 #include "tests/support/io_thread.hpp"
@@ -491,10 +494,15 @@ TEST(FaultCommand, SendsTheRequestAndReportsTheDaemonsAnswer) {
   }
   // Usage errors: nothing is sent.
   for (const std::string bad : {"inject --imu imu0 --type dead --param novalue", "clear --imu imu0",
-                                "clear --imu imu0 --id 1 --all", "inject --imu imu0"}) {
+                                "clear --imu imu0 --id 1 --all", "inject --imu imu0",
+                                // Issue 26 N17: -5 was sent as 18446744073709551611.
+                                "clear --imu imu0 --id -5", "clear --imu imu0 --id 0"}) {
     r = run_shell(cli + bad + " --socket " + path + " 2>&1");
     EXPECT_EQ(r.exit_code, 2) << bad << ": " << r.out;
   }
+  r = run_shell(cli + "clear --imu imu0 --id -5 --socket " + path + " 2>&1");
+  EXPECT_NE(r.out.find("expected a fault id (an integer >= 1, from inject or list), got '-5'"), std::string::npos)
+      << r.out;
   std::lock_guard lock(seen_mutex);
   EXPECT_EQ(seen.size(), 5u);
 }
@@ -513,8 +521,11 @@ TEST(StatusSummary, NamesEachCounterFromTheDaemonsJson) {
   d.producer_late = 11;
   d.deadline_misses = 3;
   d.dropped_late = 3;
-  d.write_errors = 8;
+  d.write_errors = 3;
+  d.dropped_link_down = 8;
   d.transport.frames_sent = 1995;
+  d.transport.dropped_queue_full = 1;
+  d.transport.write_errors = 2;
   d.transport.dropped_link_down = 8;
   d.engine_lag_ns = 8'500'000'000;
   d.lateness.p50_ns = 67'000;
@@ -534,7 +545,10 @@ TEST(StatusSummary, NamesEachCounterFromTheDaemonsJson) {
   EXPECT_NE(text.find("imu0 (native on pty:/tmp/x, 400 Hz): 2003 of 2017 ticks emitted (1990 exact, 9 extrapolated, 4 blending back); 11 underruns"), std::string::npos);
   EXPECT_NE(text.find("3 deadline misses (woken more than one period late; 3 not sent)"), std::string::npos);
   EXPECT_NE(text.find("p50 67 us, p99 220 us, max 96330 us; smoother running 8.5 s ahead"), std::string::npos);
-  EXPECT_NE(text.find("1995 frames sent, 0 queued; not taken: 8 packets (link down 8: e.g. no reader on the pty"), std::string::npos);
+  // Issue 26: the parts add up to the whole (8 + 3 = 11), each named for what it counts.
+  EXPECT_NE(text.find("1995 frames sent, 0 queued; not taken: 11 packets (8 dropped while the link was down: e.g. no "
+                      "reader on the pty; 3 write errors: queue full 1, refused by the kernel or invalid 2)"),
+            std::string::npos);
   EXPECT_EQ(text.find("pose source"), std::string::npos);  // a trajectory scene has none
 }
 
@@ -686,4 +700,68 @@ TEST(ControlClient, FullBacklogTimesOutInsteadOfBlocking) {
   EXPECT_TRUE(returned_in_time) << "query_control_socket blocked in connect() past its 200 ms timeout";
   EXPECT_NE(error.find("within 200 ms"), std::string::npos) << error;
   EXPECT_NE(error.find(path), std::string::npos) << error;
+}
+
+namespace {
+
+std::size_t occurrences(const std::string& text, const std::string& what) {
+  std::size_t n = 0;
+  for (std::size_t at = text.find(what); at != std::string::npos; at = text.find(what, at + 1)) ++n;
+  return n;
+}
+
+}  // namespace
+
+// Issue 26: `imuemud` with no arguments (the built-in scene) listens at
+// /tmp/imuemu/default.sock; `imuemu status`, `status --summary` and `imuemu
+// fault` looked only at /run/imuemu/SCENE.sock and said no daemon was
+// running. Without --socket they now try both places of
+// default_control_socket_paths(), in order. And a refusal is said once (it
+// was printed as JSON on stdout and again as a sentence on stderr).
+TEST(FaultCommand, ClientsFindTheBuiltInScenesSocketAndSayARefusalOnce) {
+  const std::string scene = "svcfix-test-" + std::to_string(::getpid());
+  const std::vector<std::string> places = svc::default_control_socket_paths(scene);
+  ASSERT_EQ(places.size(), 2u);
+  EXPECT_EQ(places[0], "/run/imuemu/" + scene + ".sock");
+  EXPECT_EQ(places[1], "/tmp/imuemu/" + scene + ".sock");
+  // The built-in scene's own setting is the second place (for its name).
+  EXPECT_EQ(imuemu::scene::default_scene().daemon.control_socket, svc::default_control_socket_paths("default")[1]);
+  std::filesystem::create_directories("/tmp/imuemu");
+  const std::string path = places[1];
+  Daemon daemon(path);
+  daemon.io.run([&] {
+    daemon.server->add_command_with_args("fault-clear", "refuses", [](const json&) -> json {
+      throw std::invalid_argument("no imu 'nope' in this scene");
+    });
+  });
+  const std::string cli = std::string(IMUEMU_CLI_PATH);
+  ShellRun r = run_shell(cli + " status --compact --scene " + scene + " 2>&1");
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  EXPECT_NE(r.out.find("\"samples_emitted\":12345"), std::string::npos) << r.out;
+  r = run_shell(cli + " status --summary --scene " + scene + " 2>&1");
+  EXPECT_EQ(r.exit_code, 0) << r.out;
+  r = run_shell(cli + " fault clear --imu nope --all --scene " + scene + " 2>&1");
+  EXPECT_EQ(r.exit_code, 4) << r.out;
+  EXPECT_EQ(occurrences(r.out, "no imu 'nope' in this scene"), 1u) << r.out;
+  r = run_shell(cli + " fault clear --imu nope --all --scene " + scene + " 2>/dev/null");
+  EXPECT_EQ(r.out, "") << "stdout carries only an accepted reply";
+  daemon.io.run([&] { daemon.server.reset(); });
+  r = run_shell(cli + " status --scene " + scene + " 2>&1");
+  EXPECT_EQ(r.exit_code, 4) << r.out;
+  EXPECT_NE(r.out.find("looked at /run/imuemu/" + scene + ".sock or /tmp/imuemu/" + scene + ".sock"), std::string::npos)
+      << r.out;
+}
+
+// Issue 26 N17: a number beyond a double in a request (1e400) was answered
+// with the raw "[json.exception.out_of_range.406] ..." text.
+TEST(ControlSocket, ANumberBeyondADoubleIsRefusedWithAClearMessage) {
+  try {
+    (void)svc::parse_control_request("fault-inject {\"imu\": \"imu0\", \"type\": \"dead\", \"after_s\": 1e400}");
+    ADD_FAILURE() << "accepted";
+  } catch (const std::invalid_argument& e) {
+    const std::string what = e.what();
+    EXPECT_NE(what.find("fault-inject: a number in the arguments is beyond the range of a double"), std::string::npos)
+        << what;
+    EXPECT_EQ(what.find("[json.exception"), std::string::npos) << what;
+  }
 }

@@ -10,6 +10,7 @@
 #include <poll.h>
 #include <signal.h>
 #include <sys/socket.h>
+#include <sys/stat.h>
 #include <sys/un.h>
 #include <netinet/in.h>
 #include <arpa/inet.h>
@@ -254,6 +255,24 @@ TEST_F(Imuemud, AnInvalidSceneIsRefusedNamingFileLineAndKey) {
   }
 }
 
+// N17: a fault the protocol cannot show (a CAN identifier on the native
+// stream) was refused as "a link is loaded beyond 100 %"; the refusal says
+// what it is.
+TEST_F(Imuemud, AFaultTheProtocolCannotShowIsRefusedAsSuchNotAsAnOverloadedLink) {
+  const fs::path scene = write("f.toml",
+                               "[scene]\nname = \"f\"\nphysics = \"flat\"\n[trajectory]\nsource = \"sample:static\"\n"
+                               "[[imu]]\nname = \"n\"\nrate_hz = 100\nprotocol = \"native\"\n[imu.transport]\ntype = \"null\"\n"
+                               "[[imu.fault]]\ntype = \"can_wrong_id\"\nafter_s = 1\n");
+  for (const std::string& args : {"--check-config " + scene.string(),
+                                  "--scene " + scene.string() + " --control-socket " + (dir_ / "c.sock").string()}) {
+    const ProcessResult r = run_imuemud(args);
+    EXPECT_EQ(r.exit_code, 4) << r.output;
+    EXPECT_EQ(r.output.find("loaded beyond 100 %"), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find("refused: a fault the protocol cannot show"), std::string::npos) << r.output;
+    EXPECT_NE(r.output.find("no CAN identifier"), std::string::npos) << r.output;
+  }
+}
+
 TEST_F(Imuemud, ALinkBeyondItsCapacityIsRefusedWithTheNumbers) {
   // DroneCAN RawIMU at 1 kHz: 7 frames per sample on a 500 kbit/s bus.
   const fs::path scene = write("busy.toml",
@@ -325,6 +344,9 @@ TEST_F(Imuemud, SigtermStopsCleanlyAndTheStatisticsAreComplete) {
   // Nobody read the pty: every frame was counted as dropped while no reader, none lost silently.
   EXPECT_EQ(d["transport"]["frames"], d["emitted"]);
   EXPECT_EQ(d["transport"]["dropped_link_down"], d["emitted"]);
+  // Issue 26: at the device level too they are dropped while no reader, not write errors.
+  EXPECT_EQ(d["dropped_link_down"], d["emitted"]) << d.dump();
+  EXPECT_EQ(d["write_errors"], 0) << d.dump();
 }
 
 TEST_F(Imuemud, TheEndOfTheTrajectoryStopsTheDaemonWithSuccess) {
@@ -890,6 +912,253 @@ TEST_F(Imuemud, AStalePtyLinkAfterSigkillIsReplacedButAFileOrDirectoryIsRefused)
   EXPECT_EQ(dir.exit_code, 1) << dir.output;
   EXPECT_NE(dir.output.find((dir_ / "ttyIMU0").string()), std::string::npos) << dir.output;
   EXPECT_TRUE(fs::is_directory(dir_ / "ttyIMU0"));
+}
+
+
+// ---- Issue 26: the fault log never kills, blocks or corrupts (N1-N3, N13-N15, N17) ----
+
+namespace flog {
+
+// A scene on the null transport whose device has `faults` short scene faults,
+// one every 50 ms from 0.1 s (two fault-log events each), and the given
+// [daemon] fault_log (empty: none).
+std::string fault_scene_text(const std::string& fault_log, int faults = 200) {
+  std::string text =
+      "[scene]\nname = \"flog\"\nphysics = \"ecef\"\n[trajectory]\nsource = \"sample:flight\"\nduration_s = 600\n"
+      "knot_interval_s = 1.0\n";
+  if (!fault_log.empty()) text += "[daemon]\nfault_log = \"" + fault_log + "\"\n";
+  text += "[[imu]]\nname = \"imu0\"\nrate_hz = 400\nprotocol = \"native\"\n[imu.transport]\ntype = \"null\"\n";
+  for (int i = 0; i < faults; ++i)
+    text += "[[imu.fault]]\ntype = \"bias_step\"\nafter_s = " + std::to_string(0.1 + 0.05 * i) +
+            "\nduration_s = 0.02\nbias_deg_s = 0.5\n";
+  return text;
+}
+
+// Reads what is there (non-blocking) for up to `limit`; the bytes read.
+std::string read_for(int fd, std::chrono::milliseconds limit) {
+  std::string got;
+  const auto until = std::chrono::steady_clock::now() + limit;
+  while (std::chrono::steady_clock::now() < until) {
+    pollfd p{fd, POLLIN, 0};
+    if (::poll(&p, 1, 50) > 0) {
+      char buffer[4096];
+      const ssize_t n = ::read(fd, buffer, sizeof buffer);
+      if (n > 0) got.append(buffer, static_cast<std::size_t>(n));
+    }
+  }
+  return got;
+}
+
+}  // namespace flog
+
+// N1: a fault-log reader that goes away (`--fault-log /dev/stdout | head -c
+// 100`) killed imuemud with SIGPIPE at its next event (exit 141, the control
+// socket left behind). Now SIGPIPE is ignored: the write's EPIPE is counted
+// and logged, the log is opened again when a reader comes back.
+TEST_F(Imuemud, AFaultLogReaderThatGoesAwayDoesNotKillTheDaemon) {
+  const fs::path fifo = dir_ / "faults.fifo";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  const int reader = ::open(fifo.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC);
+  ASSERT_GE(reader, 0);
+  Child c = spawn_imuemud({"--scene", write("s.toml", flog::fault_scene_text("")).string(), "--control-socket",
+                           (dir_ / "c.sock").string(), "--fault-log", fifo.string()},
+                          dir_ / "log");
+  ReapOnExit reap{c.pid};
+  const std::string first = flog::read_for(reader, 1500ms);
+  EXPECT_NE(first.find("\"phase\":\"start\""), std::string::npos) << "the log was written before the reader left\n"
+                                                                     << c.output();
+  ::close(reader);  // the reader goes away; the next events meet EPIPE
+  std::this_thread::sleep_for(1s);
+  const auto s = status_of(dir_ / "c.sock");
+  ASSERT_TRUE(s) << "the daemon answers status after its log's reader went away\n" << c.output();
+  EXPECT_GT((*s)["fault_log_output"]["dropped_events"].get<std::uint64_t>(), 0u) << s->dump();
+  ASSERT_EQ(::kill(c.pid, SIGTERM), 0);
+  EXPECT_EQ(wait_exit_within(c, 5s), std::optional<int>(0)) << c.output();
+  EXPECT_NE(c.output().find("the reader went away: Broken pipe"), std::string::npos) << c.output();
+  EXPECT_FALSE(fs::exists(dir_ / "c.sock"));
+}
+
+// N2: a FIFO as the fault log with no reader blocked imuemud in open()
+// before READY (its control socket existed but never answered). Now the log
+// counts as not open and is tried again every second; the start goes on.
+TEST_F(Imuemud, AFaultLogFifoWithoutReaderDoesNotHoldUpTheStart) {
+  const fs::path fifo = dir_ / "faults.fifo";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  Child c = spawn_imuemud({"--scene", write("s.toml", flog::fault_scene_text(fifo.string())).string(),
+                           "--control-socket", (dir_ / "c.sock").string()},
+                          dir_ / "log");
+  ReapOnExit reap{c.pid};
+  const auto up = status_when(dir_ / "c.sock", [](const nlohmann::json& s) { return emitted_of(s) > 0; }, 10s);
+  ASSERT_TRUE(up) << "status answers and the engine runs with nobody reading the FIFO\n" << c.output();
+  EXPECT_EQ((*up)["fault_log_output"]["open"], false) << up->dump();
+  EXPECT_NE(c.output().find("a FIFO with no reader"), std::string::npos) << c.output();
+  // A reader comes: the log opens within the retry period and the waiting events arrive.
+  const int reader = ::open(fifo.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC);
+  ASSERT_GE(reader, 0);
+  const std::string got = flog::read_for(reader, 2500ms);
+  EXPECT_NE(got.find("\"phase\":\"start\""), std::string::npos) << c.output();
+  ::close(reader);
+  ASSERT_EQ(::kill(c.pid, SIGTERM), 0);
+  EXPECT_EQ(wait_exit_within(c, 5s), std::optional<int>(0)) << c.output();
+}
+
+// N3: a reader that stops reading blocked the io thread once the pipe was
+// full: status got no answer and SIGTERM was not acted on. Now the lines
+// wait in a bounded queue of the log's own thread.
+TEST_F(Imuemud, AFaultLogReaderThatStopsReadingBlocksNeitherStatusNorSigterm) {
+  const fs::path fifo = dir_ / "faults.fifo";
+  ASSERT_EQ(::mkfifo(fifo.c_str(), 0600), 0);
+  const int reader = ::open(fifo.c_str(), O_RDONLY | O_NONBLOCK | O_CLOEXEC);
+  ASSERT_GE(reader, 0);
+  (void)::fcntl(reader, F_SETPIPE_SZ, 4096);  // one page: a dozen lines fill it
+  Child c = spawn_imuemud({"--scene", write("s.toml", flog::fault_scene_text("")).string(), "--control-socket",
+                           (dir_ / "c.sock").string(), "--fault-log", fifo.string()},
+                          dir_ / "log");
+  ReapOnExit reap{c.pid};
+  // 20 events a second of about 350 bytes: the pipe is full within a second.
+  ASSERT_TRUE(status_when(dir_ / "c.sock", [](const nlohmann::json& s) { return emitted_of(s) > 1200; }, 15s))
+      << c.output();
+  for (int i = 0; i < 3; ++i) {
+    const auto s = status_of(dir_ / "c.sock", 2000ms);
+    ASSERT_TRUE(s) << "status answers while the log's reader does not read\n" << c.output();
+    std::this_thread::sleep_for(300ms);
+  }
+  ASSERT_EQ(::kill(c.pid, SIGTERM), 0);
+  EXPECT_EQ(wait_exit_within(c, 5s), std::optional<int>(0)) << "SIGTERM is acted on\n" << c.output();
+  ::close(reader);
+}
+
+// N13 + N14: a full disk (/dev/full: every write is ENOSPC) drops events
+// whole and counts them (status said dropped_events 0); a SIGHUP whose scene
+// names another fault log moves the log there and the recording goes on; a
+// rotation (rename, SIGHUP) opens a new file at the path.
+TEST_F(Imuemud, AFullDiskIsCountedAndASighupMovesOrRotatesTheFaultLog) {
+  const fs::path scene = write("s.toml", flog::fault_scene_text("/dev/full"));
+  Child c = spawn_imuemud({"--scene", scene.string(), "--control-socket", (dir_ / "c.sock").string()}, dir_ / "log");
+  ReapOnExit reap{c.pid};
+  const auto full = status_when(dir_ / "c.sock", [](const nlohmann::json& s) {
+    return s.contains("fault_log_output") && s["fault_log_output"].is_object() &&
+           s["fault_log_output"]["dropped_events"].get<std::uint64_t>() >= 4;
+  }, 10s);
+  ASSERT_TRUE(full) << "events that do not fit are counted\n" << c.output();
+  EXPECT_NE((*full)["fault_log_output"]["last_error"].get<std::string>().find("No space left on device"),
+            std::string::npos) << full->dump();
+  EXPECT_EQ((*full)["fault_log_output"]["lines_written"], 0) << full->dump();
+
+  const fs::path log_file = dir_ / "faults.jsonl";
+  write("s.toml", flog::fault_scene_text(log_file.string()));
+  ASSERT_EQ(::kill(c.pid, SIGHUP), 0);
+  const auto moved = status_when(dir_ / "c.sock", [&](const nlohmann::json& s) {
+    return s["fault_log"] == log_file.string() && s["fault_log_output"]["lines_written"].get<std::uint64_t>() >= 4;
+  }, 15s);
+  ASSERT_TRUE(moved) << "the log moved with the reload\n" << c.output();
+  // Rotation: the file is renamed; SIGHUP opens a new one at the path.
+  fs::rename(log_file, dir_ / "faults.jsonl.1");
+  ASSERT_EQ(::kill(c.pid, SIGHUP), 0);
+  for (int i = 0; i < 100 && !(fs::exists(log_file) && fs::file_size(log_file) > 0); ++i) std::this_thread::sleep_for(100ms);
+  ASSERT_TRUE(fs::exists(log_file)) << c.output();
+  ASSERT_EQ(::kill(c.pid, SIGTERM), 0);
+  EXPECT_EQ(wait_exit_within(c, 5s), std::optional<int>(0)) << c.output();
+  for (const fs::path& p : {fs::path(dir_ / "faults.jsonl.1"), log_file}) {
+    std::ifstream in(p);
+    std::string line;
+    std::size_t lines = 0;
+    while (std::getline(in, line)) {
+      ++lines;
+      EXPECT_TRUE(nlohmann::json::accept(line)) << p << ": " << line;
+    }
+    EXPECT_GT(lines, 0u) << p;
+  }
+}
+
+// N15: outputs that collide with each other or with what the start creates
+// are refused before anything is opened or created (the stats file overwrote
+// the fault log at exit; a log on the pty link's .lock was deleted at exit;
+// a log on the link left a file that made every later start fail; a log on
+// another daemon's pty link opened that daemon's pty).
+TEST_F(Imuemud, OutputPathsThatCollideAreRefusedBeforeAnythingIsCreated) {
+  const fs::path run = dir_ / "run";
+  fs::create_directories(run);
+  // --seconds: a start that is not refused ends by itself.
+  const std::string base =
+      "--seconds 0.3 --pty-link-dir " + run.string() + " --control-socket " + (run / "c.sock").string();
+  // A pty of "another daemon": a symbolic link to a /dev/pts/N.
+  const int master = ::posix_openpt(O_RDWR | O_NOCTTY);
+  ASSERT_GE(master, 0);
+  ASSERT_EQ(::grantpt(master), 0);
+  ASSERT_EQ(::unlockpt(master), 0);
+  const std::string pts = ::ptsname(master);
+  fs::create_symlink(pts, dir_ / "otherIMU");
+  const struct {
+    std::string args, expected;
+  } cases[] = {
+      {"--fault-log " + (dir_ / "x.json").string() + " --stats-json " + (dir_ / "x.json").string(), "same path"},
+      {"--fault-log " + (run / "ttyIMU0").string(), "same path"},
+      {"--fault-log " + (run / "ttyIMU0.lock").string(), "same path"},
+      {"--fault-log " + (dir_ / "otherIMU").string(), "symbolic link to the terminal " + pts},
+      {"--fault-log " + pts, "is a terminal"},
+      {"--stats-json " + (dir_ / "otherIMU").string(), "symbolic link to the terminal"},
+  };
+  for (const auto& k : cases) {
+    const ProcessResult r = run_imuemud(base + " " + k.args);
+    EXPECT_EQ(r.exit_code, 1) << k.args << "\n" << r.output;
+    EXPECT_NE(r.output.find(k.expected), std::string::npos) << k.args << "\n" << r.output;
+    EXPECT_TRUE(fs::is_empty(run)) << k.args << ": nothing created";
+    EXPECT_FALSE(fs::exists(dir_ / "x.json")) << k.args;
+    EXPECT_TRUE(fs::is_symlink(dir_ / "otherIMU")) << k.args;
+  }
+  ::close(master);
+}
+
+// N17: an output that cannot be written says why, and fails the exit.
+TEST_F(Imuemud, AnUnwritableOutputIsRefusedWithTheReason) {
+  const ProcessResult stats =
+      run_imuemud("--control-socket " + (dir_ / "c.sock").string() + " --pty-link-dir " + dir_.string() +
+                  " --seconds 0.2 --stats-json " + (dir_ / "missing" / "s.json").string());
+  EXPECT_NE(stats.exit_code, 0) << stats.output;
+  EXPECT_NE(stats.output.find("--stats-json " + (dir_ / "missing" / "s.json").string()), std::string::npos)
+      << stats.output;
+  EXPECT_FALSE(fs::exists(dir_ / "c.sock"));
+  const ProcessResult log = run_imuemud("--control-socket " + (dir_ / "c.sock").string() + " --pty-link-dir " +
+                                        dir_.string() + " --seconds 0.2 --fault-log " + (dir_ / "missing" / "f").string());
+  EXPECT_NE(log.exit_code, 0) << log.output;
+  EXPECT_NE(log.output.find("fault log " + (dir_ / "missing" / "f").string() +
+                            ": cannot open it for writing: No such file or directory"),
+            std::string::npos)
+      << log.output;
+}
+
+// Issue 26: one time base in fault messages. The log said a fault was
+// injected "at 0 s since start" (the request's own start), `fault list` said
+// "at 24.448 s since start" (the engine's): both are now the engine's start,
+// since the device's first sample.
+TEST_F(Imuemud, AnInjectedFaultIsLoggedAndListedAtTheSameTimeSinceStart) {
+  Child c = spawn_imuemud({"--scene", write("s.toml", flog::fault_scene_text("", 0)).string(), "--control-socket",
+                           (dir_ / "c.sock").string()},
+                          dir_ / "log");
+  ReapOnExit reap{c.pid};
+  ASSERT_TRUE(status_when(dir_ / "c.sock", [](const nlohmann::json& s) { return emitted_of(s) > 400; })) << c.output();
+  const nlohmann::json injected = imuemu::cli::query_control_socket(
+      (dir_ / "c.sock").string(), "fault-inject",
+      {{"imu", "imu0"}, {"type", "bias_step"}, {"after_s", 0.5}, {"params", {{"bias_deg_s", 1.0}}}}, 2000ms);
+  ASSERT_TRUE(injected.contains("start_since_start_ns")) << injected.dump();
+  EXPECT_GT(injected["start_since_start_ns"].get<std::int64_t>(), 1'000'000'000) << injected.dump();
+  const nlohmann::json list = imuemu::cli::query_control_socket((dir_ / "c.sock").string(), "fault-list", 2000ms);
+  ASSERT_EQ(list["faults"].size(), 1u) << list.dump();
+  const std::string listed = list["faults"][0]["description"].get<std::string>();
+  const auto at_part = [](const std::string& text) {
+    const std::size_t at = text.find(" at ");
+    const std::size_t end = text.find(" since start", at);
+    return at == std::string::npos || end == std::string::npos ? std::string() : text.substr(at, end - at);
+  };
+  ASSERT_FALSE(at_part(listed).empty()) << listed;
+  ASSERT_EQ(::kill(c.pid, SIGTERM), 0);
+  EXPECT_EQ(wait_exit_within(c, 5s), std::optional<int>(0)) << c.output();
+  const std::string out = c.output();
+  const std::size_t line = out.find("fault injected on imu0");
+  ASSERT_NE(line, std::string::npos) << out;
+  const std::string logged = out.substr(line, out.find('\n', line) - line);
+  EXPECT_EQ(at_part(logged), at_part(listed)) << logged << "\n" << listed;
 }
 
 }  // namespace

@@ -325,6 +325,7 @@ imuemu::emission::EngineStats busy_engine() {
   d.producer_late = 4;
   d.deadline_misses = 5;
   d.write_errors = 6;
+  d.dropped_link_down = 9;
   d.transport.dropped_link_down = 9;
   d.faults.active = 2;
   d.faults.silenced = 7;
@@ -344,7 +345,7 @@ imuemu::emission::EngineStats busy_engine() {
 TEST(StatusReport, SummaryLineNamesEveryNonZeroCounter) {
   EXPECT_EQ(svc::summary_line("bench", busy_engine(), false),
             "scene bench: imu0 1000 samples; imu1 400 samples (3 extrapolated, 2 blending), 4 underruns, 5 late, "
-            "6 not written (9 while no reader/link down), 2 faults acting, 7 silenced by faults; "
+            "6 not written, 9 dropped (no reader/link down), 2 faults acting, 7 silenced by faults; "
             "lateness p99 12 us, max 345 us; input 50 poses, 2 lost, 1 rejected; 8 poses refused by the method; "
             "EMITTER STALLED");
   imuemu::emission::EngineStats quiet;
@@ -419,6 +420,43 @@ TEST(StatusReport, RefusalsWarnedAtMostEveryTenSecondsAndAgainForANewEngine) {
             "<4>1 poses refused by the method (1 in all); the newest: no reason recorded\n");
 }
 
+// Issue 26: a device that falls behind says so while it does (only the
+// exit summary did): a warning at most every 10 s with what it missed since
+// the last one; quiet while nothing new is missed; again for a new engine.
+TEST(StatusReport, ADeviceFallingBehindIsWarnedWhileItDoesAtMostEveryTenSeconds) {
+  using Clock = svc::StatusReport::Clock;
+  const Clock::time_point t0 = Clock::time_point{} + std::chrono::hours(1);
+  imuemu::emission::EngineStats s;
+  s.devices.resize(2);
+  s.devices[0].name = "imu0";
+  s.devices[1].name = "imu1";
+  const svc::LogLevel saved = svc::log_threshold();
+  svc::set_log_threshold(svc::LogLevel::info);
+  StderrCapture capture;
+  svc::StatusReport report;
+  report.start(t0);
+  report.log_falling_behind(s, t0);  // on time: nothing
+  s.devices[1].producer_late = 4;
+  s.devices[1].deadline_misses = 1;
+  report.log_falling_behind(s, t0 + 1s);  // at once
+  s.devices[1].producer_late = 9;
+  report.log_falling_behind(s, t0 + 5s);   // within 10 s: counted, quiet
+  report.log_falling_behind(s, t0 + 11s);  // the 5 new ones
+  report.log_falling_behind(s, t0 + 30s);  // caught up: quiet
+  s.devices[1].producer_late = 2;          // a new engine
+  s.devices[1].deadline_misses = 0;
+  report.log_falling_behind(s, t0 + 41s);
+  const std::string log = capture.finish();
+  svc::set_log_threshold(saved);
+  EXPECT_EQ(log,
+            "<4>imu1 is falling behind: 4 underruns (no sample ready when due) and 1 deadline misses (woken more than a "
+            "period late) since the last report (4 and 1 in all)\n"
+            "<4>imu1 is falling behind: 5 underruns (no sample ready when due) and 0 deadline misses (woken more than a "
+            "period late) since the last report (9 and 1 in all)\n"
+            "<4>imu1 is falling behind: 2 underruns (no sample ready when due) and 0 deadline misses (woken more than a "
+            "period late) since the last report (2 and 0 in all)\n");
+}
+
 TEST(StatusReport, StatusReplyNullsWhatIsAbsent) {
   svc::DaemonStatus idle;
   idle.scene_name = "bench";
@@ -431,7 +469,7 @@ TEST(StatusReport, StatusReplyNullsWhatIsAbsent) {
   idle.watchdog = svc::DaemonStatus::Watchdog{std::chrono::microseconds(3'000'000), 7, 1};
   EXPECT_EQ(svc::status_json(idle), nlohmann::json::parse(R"({
       "scene": "bench", "scene_file": "/etc/imuemu/bench.toml", "pid": 42, "uptime_s": 2.5, "imus": 2,
-      "waiting_for_device": true, "fault_log": null,
+      "waiting_for_device": true, "fault_log": null, "fault_log_output": null, "log_lines_lost": 0,
       "building": {"what": "reload", "elapsed_s": 0.25},
       "samples_emitted": 0, "emitter_progressing": false, "engine": null,
       "watchdog": {"interval_s": 3.0, "pets_sent": 7, "pets_withheld": 1}})"));
