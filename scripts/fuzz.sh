@@ -7,7 +7,7 @@
 set -euo pipefail
 cd "$(dirname "$0")/.."
 seconds=${1:-${FUZZ_SECONDS:-30}}
-targets=(trajectory_csv imu_csv decimal_time pose_line pose_datagram live_path mavlink_senders error_model fault_table scene)
+targets=(trajectory_csv imu_csv decimal_time pose_line pose_datagram live_path mavlink_senders error_model fault_table scene control_request)
 IMUEMU_BUILD_QUIET=${IMUEMU_BUILD_QUIET:-1} bash scripts/build.sh asan "${targets[@]/#/fuzz_}"
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
