@@ -66,6 +66,7 @@ void* operator new(std::size_t bytes) {
 }
 void operator delete(void* p) noexcept { std::free(p); }
 void operator delete(void* p, std::size_t) noexcept { std::free(p); }
+#include "tests/support/replaced_new_forms.hpp"  // the nothrow and array forms through these two
 
 using namespace imuemu;
 using namespace imuemu::drivers;
