@@ -43,9 +43,17 @@ const MessageSpec* inbound_spec(std::uint32_t id) {
 
 }  // namespace
 
-void FrameParser::feed(std::span<const std::uint8_t> bytes, const std::function<void(const InboundPacket&)>& on_packet) {
-  buffer_.insert(buffer_.end(), bytes.begin(), bytes.end());
+void FrameParser::feed(std::span<const std::uint8_t> bytes, std::chrono::steady_clock::time_point now,
+                       const std::function<void(const InboundPacket&)>& on_packet) {
+  // A candidate left waiting by the previous call, too old: its first byte
+  // is given up (the scan below restarts right after it).
   std::size_t pos = 0;
+  const bool was_empty = buffer_.empty();
+  if (!was_empty && now - candidate_since_ > kStaleAfter) {
+    ++skipped_;
+    pos = 1;
+  }
+  buffer_.insert(buffer_.end(), bytes.begin(), bytes.end());
   const std::size_t n = buffer_.size();
   std::array<std::uint8_t, 255> payload{};
   while (pos < n) {
@@ -104,6 +112,8 @@ void FrameParser::feed(std::span<const std::uint8_t> bytes, const std::function<
     pos += total;
   }
   buffer_.erase(buffer_.begin(), buffer_.begin() + static_cast<std::ptrdiff_t>(pos));
+  // The waiting candidate's age starts when it became the first byte.
+  if (was_empty || pos != 0) candidate_since_ = now;
 }
 
 Device::Device(const StreamEncoderOptions& options)
@@ -143,8 +153,12 @@ void Device::log(const std::string& line) {
 
 void Device::on_input(std::span<const std::uint8_t> bytes, ReplySink& replies) {
   (void)replies;  // see the header: replies are serialised by the encoder
+  on_input_at(bytes, std::chrono::steady_clock::now());
+}
+
+void Device::on_input_at(std::span<const std::uint8_t> bytes, std::chrono::steady_clock::time_point now) {
   const std::uint64_t skipped_before = parser_.skipped_bytes();
-  parser_.feed(bytes, [&](const InboundPacket& p) { handle(p); });
+  parser_.feed(bytes, now, [&](const InboundPacket& p) { handle(p); });
   not_command_.fetch_add(parser_.skipped_bytes() - skipped_before, std::memory_order_relaxed);
 }
 

@@ -17,6 +17,7 @@
 #pragma once
 
 #include <atomic>
+#include <chrono>
 #include <cstddef>
 #include <cstdint>
 #include <functional>
@@ -69,15 +70,21 @@ struct InboundPacket {
 // the message's CRC_EXTRA. A packet whose id has no CRC_EXTRA here cannot be
 // checked, so like a bad CRC or an unknown incompat flag it costs ONE byte
 // and the scan goes on (a real packet that starts inside it is still found);
-// those bytes count as not_command_bytes.
+// those bytes count as not_command_bytes. A partial candidate older than
+// kStaleAfter when more bytes arrive is given up the same way (a stray 0xFD
+// with a large length byte would otherwise hold real requests behind it), as
+// the MIP device's parser does.
 class FrameParser {
  public:
-  void feed(std::span<const std::uint8_t> bytes, const std::function<void(const InboundPacket&)>& on_packet);
+  static constexpr std::chrono::milliseconds kStaleAfter{100};
+  void feed(std::span<const std::uint8_t> bytes, std::chrono::steady_clock::time_point now,
+            const std::function<void(const InboundPacket&)>& on_packet);
   std::uint64_t skipped_bytes() const noexcept { return skipped_; }
   std::uint64_t packets() const noexcept { return packets_; }
 
  private:
   std::vector<std::uint8_t> buffer_;
+  std::chrono::steady_clock::time_point candidate_since_{};
   std::uint64_t skipped_ = 0, packets_ = 0;
 };
 
@@ -109,6 +116,8 @@ class Device final : public CommandResponder {
 
   // --- io thread ---
   void on_input(std::span<const std::uint8_t> bytes, ReplySink& replies) override;
+  // As on_input, at a given time (tests of the stale-candidate rule).
+  void on_input_at(std::span<const std::uint8_t> bytes, std::chrono::steady_clock::time_point now);
   // --- any thread but the emission thread ---
   CommandCounters command_counters() const override;
   void set_log(std::function<void(std::string_view)> log) override;

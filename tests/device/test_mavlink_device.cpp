@@ -420,6 +420,26 @@ TEST(MavlinkDevice, GarbageSplitFramesAndBadCrcResync) {
   EXPECT_EQ(c.not_command_bytes, garbage.size() + bad.size());
 }
 
+TEST(MavlinkDevice, AStrayFrameStartWithALargeLengthIsGivenUpAfter100ms) {
+  Bench b;
+  auto* device = dynamic_cast<mavlink2::Device*>(b.responder);
+  ASSERT_NE(device, nullptr);
+  // A stray v2 header of COMMAND_LONG claiming 200 payload bytes: it waits
+  // for them...
+  const Bytes stray{0xFD, 200, 0, 0, 0, kGcsSystem, kGcsComponent, 76, 0, 0};
+  const Bytes good = v2(1, kGcsSystem, kGcsComponent, 76, command_long(512, 0.0f, 0.0f), kExtraCommandLong);
+  const auto t0 = std::chrono::steady_clock::time_point{} + std::chrono::seconds(100);
+  device->on_input_at(stray, t0);
+  device->on_input_at(good, t0 + std::chrono::milliseconds(50));  // still waiting: not answered yet
+  b.samples(1);
+  EXPECT_EQ(of_id(b.frames(), 77).size(), 0u);
+  // ...until more bytes arrive more than 100 ms after it began to wait.
+  device->on_input_at(Bytes{}, t0 + std::chrono::milliseconds(150));
+  b.samples(2);
+  EXPECT_EQ(of_id(b.frames(), 77).size(), 1u);
+  EXPECT_EQ(b.responder->command_counters().not_command_bytes, stray.size());
+}
+
 TEST(MavlinkDevice, StreamGoesOnWhileCommandsArriveAndRepliesSitBetweenFrames) {
   Bench b;
   for (int i = 0; i < 200; ++i) {
