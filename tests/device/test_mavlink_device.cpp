@@ -98,6 +98,11 @@ const std::uint8_t kExtraCommandLong = crc_extra_of(
     "COMMAND_LONG", {{"float", "param1"}, {"float", "param2"}, {"float", "param3"}, {"float", "param4"},
                      {"float", "param5"}, {"float", "param6"}, {"float", "param7"}, {"uint16_t", "command"},
                      {"uint8_t", "target_system"}, {"uint8_t", "target_component"}, {"uint8_t", "confirmation"}});
+const std::uint8_t kExtraCommandInt = crc_extra_of(
+    "COMMAND_INT", {{"float", "param1"}, {"float", "param2"}, {"float", "param3"}, {"float", "param4"},
+                    {"int32_t", "x"}, {"int32_t", "y"}, {"float", "z"}, {"uint16_t", "command"},
+                    {"uint8_t", "target_system"}, {"uint8_t", "target_component"}, {"uint8_t", "frame"},
+                    {"uint8_t", "current"}, {"uint8_t", "autocontinue"}});
 const std::uint8_t kExtraCommandAck = crc_extra_of("COMMAND_ACK", {{"uint16_t", "command"}, {"uint8_t", "result"}});
 const std::uint8_t kExtraParamRequestList =
     crc_extra_of("PARAM_REQUEST_LIST", {{"uint8_t", "target_system"}, {"uint8_t", "target_component"}});
@@ -273,6 +278,7 @@ TEST(MavlinkDevice, CrcExtraFromDefinitionsMatchesTheDevicesTable) {
   EXPECT_EQ(kExtraHilSensor, mavlink2::kHilSensor.crc_extra);
   EXPECT_EQ(kExtraCommandLong, mavlink2::kCommandLong.crc_extra);
   EXPECT_EQ(kExtraCommandAck, mavlink2::kCommandAck.crc_extra);
+  EXPECT_EQ(kExtraCommandInt, mavlink2::kCommandInt.crc_extra);
   EXPECT_EQ(kExtraParamRequestList, mavlink2::kParamRequestList.crc_extra);
   EXPECT_EQ(kExtraParamRequestRead, mavlink2::kParamRequestRead.crc_extra);
   EXPECT_EQ(kExtraParamValue, mavlink2::kParamValue.crc_extra);
@@ -311,6 +317,27 @@ TEST(MavlinkDevice, RequestMessageHeartbeatGetsAckThenHeartbeat) {
   EXPECT_EQ(c.nacked, 0u);
   EXPECT_EQ(c.not_command_bytes, 0u);
   EXPECT_EQ(b.sink.replies, 0);  // replies go through the stream, never the transport's reply queue
+}
+
+TEST(MavlinkDevice, CommandIntRequestMessageIsAnsweredLikeCommandLong) {
+  // COMMAND_INT payload (35): param1..4 f32 at 0..15, x, y i32 at 16, 20,
+  // z f32 at 24, command u16 at 28, target system 30, target component 31,
+  // frame 32, current 33, autocontinue 34.
+  Bench b;
+  Bytes p(35, 0);
+  put_f32(p, 0, 0.0f);  // HEARTBEAT
+  put_u16(p, 28, 512);
+  p[30] = kDevSystem;
+  p[31] = kDevComponent;
+  b.send(v2(0, kGcsSystem, kGcsComponent, 75, p, kExtraCommandInt));
+  b.samples(1);
+  const auto frames = b.frames();
+  ASSERT_EQ(frames.size(), 4u);  // HIL_SENSOR, ACK, HEARTBEAT (requested), HEARTBEAT (1 Hz)
+  EXPECT_EQ(frames[1].msgid, 77u);
+  EXPECT_EQ(get_u16(frames[1].payload, 0), 512);
+  EXPECT_EQ(frames[1].payload[2], 0);
+  EXPECT_EQ(frames[2].msgid, 0u);
+  expect_consecutive_seq(frames);
 }
 
 TEST(MavlinkDevice, RequestMessageOfTheStreamedImuMessage) {
@@ -494,9 +521,10 @@ TEST(MavlinkDevice, SetMessageIntervalOnTheSampleGrid) {
 }
 
 TEST(MavlinkDevice, QGroundControlParameterLoadReplay) {
-  // ParameterManager.cc (see the file comment): the GCS heartbeat QGC
-  // sends every second (MAV_TYPE_GCS 6, MAV_AUTOPILOT_INVALID 8,
-  // MAV_MODE_MANUAL_ARMED 192, MAV_STATE_ACTIVE 4), then
+  // The GCS heartbeat QGC sends every second, MultiVehicleManager::
+  // _sendGCSHeartbeat (read through the search index; MAV_TYPE_GCS 6,
+  // MAV_AUTOPILOT_INVALID 8, MAV_MODE_MANUAL_ARMED 192, custom mode 0,
+  // MAV_STATE_ACTIVE 4), then ParameterManager.cc (see the file comment):
   // refreshAllParameters() -> PARAM_REQUEST_LIST(vehicle, MAV_COMP_ID_ALL),
   // then a retry of index 1 and a read by name.
   Bench b;
