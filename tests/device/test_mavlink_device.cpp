@@ -28,7 +28,9 @@
 
 #include <gtest/gtest.h>
 
+#include <algorithm>
 #include <atomic>
+#include <cstdio>
 #include <chrono>
 #include <thread>
 #include <cstdint>
@@ -694,4 +696,75 @@ TEST(MavlinkDevice, OnAPtyRequestsWhileStreamingAreAnsweredInSeqOrder) {
   EXPECT_EQ(status->nacked, 20u);
   EXPECT_EQ(status->not_command_bytes, 0u);
   dev->stop(std::chrono::milliseconds(100), false);
+}
+
+// A measurement, not a check (no timing is asserted anywhere): the time from
+// writing REQUEST_MESSAGE(HEARTBEAT) on the pty to reading its whole
+// COMMAND_ACK, while the device streams at 200 Hz. Run with
+// --gtest_also_run_disabled_tests; the numbers are in docs/mavlink-device.md.
+TEST(MavlinkDevice, DISABLED_MeasureReplyLatencyOnAPty) {
+  const std::string link = ::testing::TempDir() + "imuemu_mavlink_latency_" + std::to_string(::getpid());
+  drivers::PtyTransportOptions po;
+  po.link_path = link;
+  po.log = [](std::string_view) {};
+  StreamEncoderOptions o;
+  o.nominal_sample_rate_hz = 200.0;
+  auto transport = std::make_unique<drivers::PtyTransport>(po);
+  drivers::PtyTransport* pty = transport.get();
+  std::unique_ptr<device::Device> dev =
+      device::make_stream_device(std::make_unique<mavlink2::Encoder>(o), std::move(transport));
+  const int fd = ::open(link.c_str(), O_RDWR | O_NOCTTY | O_NONBLOCK);
+  ASSERT_GE(fd, 0);
+  termios t{};
+  ::tcgetattr(fd, &t);
+  ::cfmakeraw(&t);
+  ::tcsetattr(fd, TCSANOW, &t);
+  while (!pty->link_up()) std::this_thread::sleep_for(std::chrono::milliseconds(5));
+  std::atomic<bool> stop{false};
+  std::thread emission([&] {
+    drivers::LinkActions none;
+    ImuFrameInput s;
+    s.period_ns = 5'000'000;
+    auto next = std::chrono::steady_clock::now();
+    for (std::uint64_t k = 0; !stop.load(std::memory_order_relaxed); ++k) {
+      s.sample_counter = k;
+      s.t_ns = static_cast<TimeNs>(k) * s.period_ns;
+      (void)dev->emit(s, none, 0);
+      next += std::chrono::milliseconds(5);
+      std::this_thread::sleep_until(next);
+    }
+  });
+  Bytes received;
+  std::size_t scanned = 0, acks = 0;
+  auto count_acks = [&] {
+    while (scanned + 12 <= received.size()) {
+      const std::size_t total = 12u + received[scanned + 1];
+      if (scanned + total > received.size()) break;
+      acks += received[scanned + 7] == 77 ? 1 : 0;
+      scanned += total;
+    }
+  };
+  std::vector<double> ms;
+  for (int i = 0; i < 300; ++i) {
+    const Bytes req = v2(static_cast<std::uint8_t>(i), kGcsSystem, kGcsComponent, 76, command_long(512, 0.0f, 0.0f),
+                         kExtraCommandLong);
+    const auto t0 = std::chrono::steady_clock::now();
+    ASSERT_EQ(::write(fd, req.data(), req.size()), static_cast<ssize_t>(req.size()));
+    const std::size_t want = acks + 1;
+    while (acks < want && std::chrono::steady_clock::now() - t0 < std::chrono::seconds(2)) {
+      read_available(fd, received, 1);
+      count_acks();
+    }
+    ms.push_back(std::chrono::duration<double, std::milli>(std::chrono::steady_clock::now() - t0).count());
+    const auto until = t0 + std::chrono::milliseconds(10);
+    while (std::chrono::steady_clock::now() < until) read_available(fd, received, 1);
+    count_acks();
+  }
+  stop = true;
+  emission.join();
+  ::close(fd);
+  dev->stop(std::chrono::milliseconds(100), false);
+  std::sort(ms.begin(), ms.end());
+  std::printf("reply latency over %zu requests at a 200 Hz stream: p50 %.2f ms, p99 %.2f ms, max %.2f ms\n", ms.size(),
+              ms[ms.size() / 2], ms[ms.size() * 99 / 100], ms.back());
 }
