@@ -29,6 +29,7 @@
 #include <optional>
 
 #include "core/time_arith.hpp"
+#include "drivers/protocols/mavlink_device.hpp"
 #include "drivers/protocols/wire_bytes.hpp"
 
 namespace imuemu::drivers::mavlink2 {
@@ -151,7 +152,31 @@ void Encoder::append_packet(const MessageSpec& message, std::span<const std::uin
   out.insert(out.end(), packet.begin(), packet.begin() + static_cast<std::ptrdiff_t>(kHeaderBytes + len + kChecksumBytes));
 }
 
-void Encoder::encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out) {
+Encoder::Encoder(const StreamEncoderOptions& options) : options_(options) {
+  if (options_.mavlink_answers_commands) device_ = std::make_unique<Device>(options_);
+}
+
+Encoder::Encoder(const Encoder& other)
+    : options_(other.options_), sequence_(other.sequence_), next_heartbeat_ns_(other.next_heartbeat_ns_) {
+  if (options_.mavlink_answers_commands) device_ = std::make_unique<Device>(options_);
+}
+
+Encoder& Encoder::operator=(const Encoder& other) {
+  if (this != &other) {
+    Encoder fresh(other);
+    options_ = fresh.options_;
+    sequence_ = fresh.sequence_;
+    next_heartbeat_ns_ = fresh.next_heartbeat_ns_;
+    device_ = std::move(fresh.device_);
+  }
+  return *this;
+}
+
+Encoder::~Encoder() = default;
+
+CommandResponder* Encoder::command_responder() { return device_.get(); }
+
+void Encoder::append_imu(const ImuFrameInput& sample, std::vector<std::uint8_t>& out) {
   if (options_.mavlink_hil_sensor) {
     std::array<std::uint8_t, kHilSensor.payload_bytes> p{};
     const std::uint32_t updated = fill_imu_payload(p.data(), sample, options_);
@@ -166,6 +191,52 @@ void Encoder::encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out
     p[kOffHighresId] = options_.mavlink_sensor_id;
     append_packet(kHighresImu, p, out);
   }
+}
+
+void Encoder::encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out) {
+  if (!device_) {
+    append_imu(sample, out);
+    return;
+  }
+  // The driver's SET_MESSAGE_INTERVAL, on the sample grid: the IMU
+  // message(s) go out on sample counters that are multiples of the
+  // decimation (1 at power-up: every sample, the bytes of a device nobody
+  // talks to are unchanged).
+  device_->note_period(sample.period_ns);
+  const std::uint32_t decimation = device_->decimation();
+  if (decimation != 0 && sample.sample_counter % decimation == 0) append_imu(sample, out);
+  // Replies the io thread decided, after the sample's own packets: whole
+  // packets, numbered by the component's one seq (mavlink_device.hpp).
+  ReplyItem item;
+  for (int i = 0; i < Device::kMaxRepliesPerSample && device_->next_reply(item); ++i) append_reply(item, sample, out);
+}
+
+void Encoder::append_reply(const ReplyItem& item, const ImuFrameInput& sample, std::vector<std::uint8_t>& out) {
+  if (item.kind == ReplyItem::Kind::param_value) {
+    // [X] PARAM_VALUE wire order: param_value f32, param_count u16,
+    // param_index u16, param_id char[16], param_type u8.
+    const auto params = device_->params();
+    const DeviceParam& prm = params[item.param_index];
+    std::array<std::uint8_t, kParamValue.payload_bytes> p{};
+    wire::put_le<float>(p.data(), prm.value);
+    wire::put_le<std::uint16_t>(p.data() + 4, static_cast<std::uint16_t>(params.size()));
+    wire::put_le<std::uint16_t>(p.data() + 6, item.param_index);
+    for (std::size_t k = 0; k < 16 && prm.id[k] != 0; ++k) p[8 + k] = static_cast<std::uint8_t>(prm.id[k]);
+    p[24] = kParamTypeReal32;
+    append_packet(kParamValue, p, out);
+    return;
+  }
+  // [X] COMMAND_ACK wire order: command u16, result u8, then the
+  // extensions progress u8, result_param2 i32, target_system u8,
+  // target_component u8 (the requester).
+  std::array<std::uint8_t, kCommandAck.payload_bytes> a{};
+  wire::put_le<std::uint16_t>(a.data(), item.command);
+  a[2] = item.result;
+  a[8] = item.target_system;
+  a[9] = item.target_component;
+  append_packet(kCommandAck, a, out);
+  if (item.kind == ReplyItem::Kind::heartbeat) append_heartbeat(kMavStateActive, out);
+  else if (item.kind == ReplyItem::Kind::imu_message) append_imu(sample, out);
 }
 
 void Encoder::periodic(TimeNs now_ns, std::vector<std::uint8_t>& out) {

@@ -6,6 +6,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <map>
+#include <memory>
 #include <optional>
 #include <span>
 
@@ -42,9 +43,21 @@ inline constexpr std::uint32_t kUpdatedTemperature = 1u << 12;
 // Boost.CRC. Check value of "123456789" is 0x6F91.
 std::uint16_t crc16_mcrf4xx(std::span<const std::uint8_t> bytes);
 
+class Device;   // drivers/protocols/mavlink_device.hpp
+struct ReplyItem;
+
 class Encoder final : public StreamEncoder {
  public:
-  explicit Encoder(const StreamEncoderOptions& options) : options_(options) {}
+  // With options.mavlink_answers_commands the encoder carries the
+  // component's command side (mavlink_device.hpp, docs/mavlink-device.md):
+  // its replies go out after a sample's messages, numbered by the one seq.
+  explicit Encoder(const StreamEncoderOptions& options);
+  // A copy keeps the stream state (seq, heartbeat schedule) and gets a
+  // command side in its power-up state.
+  Encoder(const Encoder& other);
+  Encoder& operator=(const Encoder& other);
+  ~Encoder() override;
+  CommandResponder* command_responder() override;
   std::string name() const override { return "mavlink2"; }
   void encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out) override;
   void periodic(TimeNs now_ns, std::vector<std::uint8_t>& out) override;
@@ -66,8 +79,11 @@ class Encoder final : public StreamEncoder {
   void append_heartbeat(std::uint8_t system_status, std::vector<std::uint8_t>& out);
   void append_packet(const MessageSpec& message, std::span<const std::uint8_t> payload,
                      std::vector<std::uint8_t>& out);
+  void append_imu(const ImuFrameInput& sample, std::vector<std::uint8_t>& out);
+  void append_reply(const ReplyItem& item, const ImuFrameInput& sample, std::vector<std::uint8_t>& out);
 
   StreamEncoderOptions options_;
+  std::unique_ptr<Device> device_;
   std::uint8_t sequence_ = 0;  // one counter for every packet this component sends
   std::optional<TimeNs> next_heartbeat_ns_;
 };

@@ -48,6 +48,9 @@ struct StreamEncoderOptions {
   bool mavlink_hil_sensor = true;      // HIL_SENSOR (#107), what PX4 takes in HIL mode
   bool mavlink_highres_imu = false;    // HIGHRES_IMU (#105)
   std::uint8_t mavlink_sensor_id = 0;  // the messages' `id` extension field
+  // The component answers its ground station / autopilot (issue 27,
+  // docs/mavlink-device.md); false: input read and discarded.
+  bool mavlink_answers_commands = true;
   // HIL_SENSOR/HIGHRES_IMU `temperature` (degC, fields_updated bit 12) when
   // set; otherwise not sent (bit clear, field zero).
   std::optional<double> mavlink_temperature_degC;

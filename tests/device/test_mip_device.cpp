@@ -49,6 +49,7 @@
 #include "daemon/device/device.hpp"
 #include "daemon/scene/scene_config.hpp"
 #include "drivers/link_fault.hpp"
+#include "drivers/protocols/mavlink2.hpp"
 #include "drivers/protocols/mip.hpp"
 #include "drivers/protocols/mip_device.hpp"
 #include "drivers/protocols/stream_protocols.hpp"
@@ -799,6 +800,62 @@ TEST(MipDevice, OnAPtyCommandsAt100HzWhileStreamingAreAllAnsweredBetweenFramesAn
               static_cast<unsigned long long>(emitted.load()), data, replies);
   ::close(fd);
   dev->stop(std::chrono::milliseconds(100), false);
+}
+
+// The MAVLink device (tests/device/test_mavlink_device.cpp) serialises its
+// answers on the emission thread (one seq for every packet): that thread
+// still allocates nothing - the answers come through a fixed-capacity ring
+// and go into the output the device reserved. Here because this file owns
+// the room's allocation counter.
+TEST(MipDevice, MavlinkAnswersSerialisedOnTheEmissionThreadAllocateNothing) {
+  drivers::StreamEncoderOptions o;
+  o.nominal_sample_rate_hz = 100.0;
+  drivers::mavlink2::Encoder enc(o);
+  drivers::CommandResponder* r = enc.command_responder();
+  ASSERT_NE(r, nullptr);
+  struct UnusedSink final : drivers::ReplySink {
+    bool reply(std::span<const std::uint8_t>) override { return true; }
+    void change_baud_after_replies(std::uint32_t) override {}
+  } sink;
+  // COMMAND_LONG REQUEST_MESSAGE(HEARTBEAT) and PARAM_REQUEST_LIST as the
+  // device's own parser must accept them (CRC with CRC_EXTRA 152 / 159).
+  auto frame = [](std::uint32_t msgid, Bytes payload, std::uint8_t extra) {
+    Bytes f{0xFD, static_cast<std::uint8_t>(payload.size()), 0, 0, 0, 255, 190, static_cast<std::uint8_t>(msgid), 0, 0};
+    f.insert(f.end(), payload.begin(), payload.end());
+    Bytes crc_in(f.begin() + 1, f.end());
+    crc_in.push_back(extra);
+    const std::uint16_t crc = drivers::mavlink2::crc16_mcrf4xx(crc_in);
+    f.push_back(static_cast<std::uint8_t>(crc));
+    f.push_back(static_cast<std::uint8_t>(crc >> 8));
+    return f;
+  };
+  Bytes cmd(33, 0);
+  cmd[28] = 0x00;  // command 512 = 0x0200
+  cmd[29] = 0x02;
+  cmd[30] = 1;
+  cmd[31] = 200;
+  Bytes out;
+  out.reserve(4096);
+  drivers::ImuFrameInput s;
+  s.period_ns = 10'000'000;
+  std::uint64_t allocations = 0;
+  for (std::uint64_t k = 0; k < 200; ++k) {
+    if (k % 4 == 0) r->on_input(frame(76, cmd, 152), sink);
+    if (k % 4 == 2) r->on_input(frame(21, Bytes{1, 200}, 159), sink);
+    s.sample_counter = k;
+    s.t_ns = static_cast<TimeNs>(k) * s.period_ns;
+    out.clear();
+    const std::uint64_t before = g_emission_allocations.load();
+    t_counting = true;
+    enc.encode(s, out);
+    enc.periodic(s.t_ns, out);
+    t_counting = false;
+    allocations += g_emission_allocations.load() - before;
+  }
+  EXPECT_EQ(allocations, 0u);
+  const drivers::CommandCounters c = r->command_counters();
+  EXPECT_EQ(c.received, 100u);
+  EXPECT_EQ(c.answered, 100u);
 }
 
 TEST(MipDevice, OnAPtyABaudChangeIsRecordedAfterTheAck) {
