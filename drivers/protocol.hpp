@@ -148,9 +148,46 @@ class StreamEncoder {
 };
 
 // CAN protocols: frames appended to `out`.
+// ---- the command side of a CAN device (issue 27) ----
+//
+// Where a CAN device's replies go: the transport queues each frame and
+// writes it between the device's own frames, never blocking the emission
+// thread. Called on the transport's io thread only (inside on_frame).
+class CanReplySink {
+ public:
+  virtual ~CanReplySink() = default;
+  // Queues one frame; false (counted) when the bounded reply queue is full.
+  virtual bool reply(const CanFrame& frame) = 0;
+};
+
+// One kernel receive filter (SocketCAN struct can_filter): a frame matches
+// when (frame id & mask) == (id & mask) and its id width is `extended`.
+struct CanReceiveFilter {
+  std::uint32_t id = 0;
+  std::uint32_t mask = 0;
+  bool extended = true;
+};
+
+// What a CAN device does with the frames addressed to it (requests). on_frame
+// runs on the transport's io thread, never on the emission thread; it may
+// allocate and lock. Whatever it changes reaches the encoder without a lock.
+class CanCommandResponder {
+ public:
+  virtual ~CanCommandResponder() = default;
+  // The requests the protocol defines for this node (the transport installs
+  // exactly these filters; nothing else reaches on_frame).
+  virtual std::vector<CanReceiveFilter> receive_filters() const = 0;
+  virtual void on_frame(const CanFrame& frame, CanReplySink& replies) = 0;
+  virtual CommandCounters command_counters() const = 0;
+  virtual void set_log(std::function<void(std::string_view)> log) = 0;
+};
+
 class CanEncoder {
  public:
   virtual ~CanEncoder() = default;
+  // A device that answers requests addressed to it: its responder (owned by
+  // the encoder, alive as long as it); nullptr for a device that only sends.
+  virtual CanCommandResponder* command_responder() { return nullptr; }
   virtual std::string name() const = 0;
   virtual void encode(const ImuFrameInput& sample, std::vector<CanFrame>& out) = 0;
   virtual void periodic(TimeNs now_ns, std::vector<CanFrame>& out) { (void)now_ns; (void)out; }

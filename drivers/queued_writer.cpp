@@ -331,8 +331,11 @@ void QueuedWriter::drop_replies() {
 }
 
 void QueuedWriter::write_replies() {
+  // A datagram device (CAN) takes one reply frame per write; a byte stream
+  // takes what is queued.
+  const std::size_t end = device_->datagrams() ? reply_ends_[next_reply_] : replies_.size();
   const DeviceWrite result =
-      device_->write(std::span<const std::byte>(replies_).subspan(replies_pos_, replies_.size() - replies_pos_));
+      device_->write(std::span<const std::byte>(replies_).subspan(replies_pos_, end - replies_pos_));
   switch (result.outcome) {
     case DeviceWrite::Outcome::written:
       replies_pos_ += result.bytes;

@@ -10,6 +10,7 @@
 #include <array>
 #include <cerrno>
 #include <cstring>
+#include <vector>
 
 #include "drivers/queued_writer.hpp"
 #include "drivers/socketcan_wire.hpp"
@@ -26,8 +27,9 @@ std::string socket_error_reason(int error) {
 // The CAN_RAW socket of a CanTransport, as the queued writer sees it.
 class CanDevice final : public WriterDevice {
  public:
-  CanDevice(std::string interface, bool fd_frames, int socket, bool up)
-      : interface_(std::move(interface)), fd_frames_(fd_frames), socket_(socket), up_at_start_(up) {
+  CanDevice(std::string interface, bool fd_frames, int socket, bool up, std::vector<CanReceiveFilter> filters)
+      : interface_(std::move(interface)), fd_frames_(fd_frames), socket_(socket), up_at_start_(up),
+        filters_(std::move(filters)) {
     if (socket_ >= 0) configure_receive();
   }
   ~CanDevice() override { close_socket(); }
@@ -56,7 +58,6 @@ class CanDevice final : public WriterDevice {
   }
 
   std::optional<std::string> service(short revents, std::uint64_t* discarded_bytes) override {
-    (void)discarded_bytes;
     std::optional<std::string> lost;
     if (revents & POLLERR) {
       // CAN_RAW reports the interface going down (ENETDOWN) or away (ENODEV)
@@ -68,12 +69,18 @@ class CanDevice final : public WriterDevice {
       }
     }
     if (revents & POLLIN) {
-      // Only error frames arrive here (configure_receive filters data frames out).
+      // Error frames, and the data frames the receive filters let through
+      // (requests addressed to the device): those go to the input tap.
       canfd_frame frame{};
       for (;;) {
         const ssize_t n = ::recv(socket_, &frame, sizeof frame, MSG_DONTWAIT);
         if (n <= 0) break;
-        if ((frame.can_id & CAN_ERR_FLAG) && (frame.can_id & CAN_ERR_BUSOFF)) lost = "bus-off (controller error frame)";
+        if (frame.can_id & CAN_ERR_FLAG) {
+          if (frame.can_id & CAN_ERR_BUSOFF) lost = "bus-off (controller error frame)";
+          continue;
+        }
+        deliver_input(std::span<const std::byte>(reinterpret_cast<const std::byte*>(&frame), static_cast<std::size_t>(n)),
+                      discarded_bytes);
       }
     }
     if (revents & POLLNVAL) lost = "socket closed";
@@ -107,9 +114,18 @@ class CanDevice final : public WriterDevice {
 
  private:
   void configure_receive() {
-    // Receive no data frames (an empty filter list), only the error frames
-    // that tell a bus-off and a restart.
-    ::setsockopt(socket_, SOL_CAN_RAW, CAN_RAW_FILTER, nullptr, 0);
+    // Receive exactly the requests the device answers (none: an empty
+    // filter list), and the error frames that tell a bus-off and a restart.
+    std::vector<can_filter> filters;
+    for (const CanReceiveFilter& f : filters_) {
+      can_filter k{};
+      k.can_id = f.extended ? ((f.id & CAN_EFF_MASK) | CAN_EFF_FLAG) : (f.id & CAN_SFF_MASK);
+      // The frame format and "not a remote request" are part of the match.
+      k.can_mask = (f.extended ? (f.mask & CAN_EFF_MASK) : (f.mask & CAN_SFF_MASK)) | CAN_EFF_FLAG | CAN_RTR_FLAG;
+      filters.push_back(k);
+    }
+    ::setsockopt(socket_, SOL_CAN_RAW, CAN_RAW_FILTER, filters.empty() ? nullptr : filters.data(),
+                 static_cast<socklen_t>(filters.size() * sizeof(can_filter)));
     const can_err_mask_t errors = CAN_ERR_BUSOFF | CAN_ERR_RESTARTED;
     ::setsockopt(socket_, SOL_CAN_RAW, CAN_RAW_ERR_FILTER, &errors, sizeof errors);
   }
@@ -123,9 +139,48 @@ class CanDevice final : public WriterDevice {
   bool fd_frames_;
   int socket_;
   bool up_at_start_;
+  std::vector<CanReceiveFilter> filters_;
 };
 
 }  // namespace
+
+// Between the queued writer's byte input and a CanCommandResponder: the
+// kernel structure -> CanFrame, and reply frames -> the kernel structure
+// into the writer's reply queue (written between the device's frames).
+class CanTransport::FrameInput final : public InputHandler {
+ public:
+  FrameInput(bool fd_frames, bool bitrate_switch) : fd_frames_(fd_frames), bitrate_switch_(bitrate_switch) {}
+  CanCommandResponder* responder = nullptr;
+
+  void on_input(std::span<const std::uint8_t> bytes, ReplySink& replies) override {
+    if (responder == nullptr) return;
+    std::string what;
+    const std::optional<CanFrame> frame =
+        from_socketcan(std::span<const std::byte>(reinterpret_cast<const std::byte*>(bytes.data()), bytes.size()), what);
+    if (!frame) return;
+    Sink sink(*this, replies);
+    responder->on_frame(*frame, sink);
+  }
+
+ private:
+  class Sink final : public CanReplySink {
+   public:
+    Sink(FrameInput& input, ReplySink& replies) : input_(input), replies_(replies) {}
+    bool reply(const CanFrame& frame) override {
+      std::array<std::byte, kCanFdMtu> wire;
+      std::string error;
+      const std::size_t size = to_socketcan(frame, input_.fd_frames_, input_.bitrate_switch_, wire, error);
+      if (size == 0) return false;
+      return replies_.reply(std::span<const std::uint8_t>(reinterpret_cast<const std::uint8_t*>(wire.data()), size));
+    }
+
+   private:
+    FrameInput& input_;
+    ReplySink& replies_;
+  };
+  bool fd_frames_;
+  bool bitrate_switch_;
+};
 
 CanTransport::CanTransport(CanTransportOptions options) : options_(std::move(options)) {
   const CanInterfaceState state = inspect_can_interface(options_.interface, options_.fd_frames);
@@ -143,11 +198,20 @@ CanTransport::CanTransport(CanTransportOptions options) : options_(std::move(opt
   writer.link_lost_verb = "link down";
   writer.link_restored_verb = "link up again";
   writer.log = options_.log;
-  writer_ = std::make_unique<QueuedWriter>(std::make_unique<CanDevice>(options_.interface, options_.fd_frames, socket, up),
+  writer_ = std::make_unique<QueuedWriter>(std::make_unique<CanDevice>(options_.interface, options_.fd_frames, socket, up, options_.receive_filters),
                                            std::move(writer));
 }
 
-CanTransport::~CanTransport() = default;
+CanTransport::~CanTransport() {
+  if (writer_) writer_->set_input_handler(nullptr);
+}
+
+void CanTransport::set_command_responder(CanCommandResponder* responder) {
+  writer_->set_input_handler(nullptr);  // waits until the io thread is out of the previous one
+  if (!input_) input_ = std::make_unique<FrameInput>(options_.fd_frames, options_.fd_bitrate_switch);
+  input_->responder = responder;
+  if (responder != nullptr) writer_->set_input_handler(input_.get());
+}
 
 bool CanTransport::send(const CanFrame& frame) {
   std::array<std::byte, kCanFdMtu> wire;

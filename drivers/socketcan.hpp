@@ -25,6 +25,7 @@
 #include <optional>
 #include <string>
 #include <string_view>
+#include <vector>
 
 #include "core/types.hpp"
 #include "drivers/protocol.hpp"
@@ -45,6 +46,10 @@ struct CanTransportOptions {
   std::chrono::milliseconds restore_max{2000};
   // Receives each log line; empty: stderr.
   std::function<void(std::string_view)> log;
+  // The requests the device answers (CanCommandResponder::receive_filters):
+  // the socket receives exactly these data frames (none when empty), plus
+  // the bus-off / restarted error frames.
+  std::vector<CanReceiveFilter> receive_filters;
 };
 
 class CanTransport {
@@ -65,11 +70,19 @@ class CanTransport {
   bool link_up() const;
   bool flush(std::chrono::milliseconds timeout);
   void stop(std::chrono::milliseconds drain_timeout);  // Transport::stop
+  // Hands each received frame (those the receive filters let through) to
+  // `responder` on the writer (io) thread from now on; its replies are
+  // queued and written between the device's own frames. nullptr: received
+  // frames are read and discarded again. Returns once the io thread is no
+  // longer inside the previous responder. Not the emission thread.
+  void set_command_responder(CanCommandResponder* responder);
 
  private:
+  class FrameInput;
   CanTransportOptions options_;
   std::string description_;
   std::unique_ptr<QueuedWriter> writer_;
+  std::unique_ptr<FrameInput> input_;
 };
 
 struct ReceivedCanFrame {

@@ -257,6 +257,10 @@ int emit(const EmitArgs& a) {
       co.interface = a.device.substr(4);
       co.fd_frames = a.can_fd;
       co.log = log;
+      if (can_encoder && can_encoder->command_responder()) {
+        co.receive_filters = can_encoder->command_responder()->receive_filters();
+        can_encoder->command_responder()->set_log(log);
+      }
       can_output = device::can_transport_output(std::make_unique<drivers::CanTransport>(co));
     } else {
       throw std::invalid_argument("--device '" + a.device + "': expected pty:LINKPATH, serial:PATH[,baud=N] or can:IFACE");

@@ -25,6 +25,10 @@ class CanTransportOutput final : public CanOutput {
   drivers::TransportCounters counters() const override { return transport_->counters(); }
   bool flush(std::chrono::milliseconds timeout) override { return transport_->flush(timeout); }
   void stop(std::chrono::milliseconds drain_timeout) override { transport_->stop(drain_timeout); }
+  bool set_command_responder(drivers::CanCommandResponder* responder) override {
+    transport_->set_command_responder(responder);
+    return true;
+  }
 
  private:
   std::unique_ptr<drivers::CanTransport> transport_;
@@ -37,6 +41,28 @@ class CanDevice final : public EncoderDevice<drivers::CanEncoder, std::vector<dr
       : EncoderDevice(std::move(encoder), std::move(gpio)), output_(std::move(output)) {
     if (!encoder_ || !output_) throw std::invalid_argument("a CAN device needs a CAN encoder and a CAN output");
     encoded_.reserve(std::max(kReserveCanFrames, drivers::link_fault_reserve_can_frames(fault::kMaxBabbleFactor)));
+    // A node that answers requests addressed to it (GetNodeInfo, the J1939
+    // Request PGN) reads them on its output's io thread from now on.
+    responder_ = encoder_->command_responder();
+    if (responder_ && !output_->set_command_responder(responder_)) responder_ = nullptr;
+  }
+  ~CanDevice() override {
+    if (responder_) output_->set_command_responder(nullptr);
+  }
+
+  std::optional<CommandStatus> command_status() const override {
+    if (!responder_) return std::nullopt;
+    const drivers::CommandCounters c = responder_->command_counters();
+    CommandStatus s;
+    s.received = c.received;
+    s.answered = c.answered;
+    s.nacked = c.nacked;
+    s.not_command_bytes = c.not_command_bytes;
+    s.replies_dropped = c.replies_dropped + output_->counters().replies_dropped;
+    s.mode = c.mode;
+    s.format = c.format;
+    s.baud = c.baud;
+    return s;
   }
 
   SampleNeeds needs() const override {
@@ -48,6 +74,8 @@ class CanDevice final : public EncoderDevice<drivers::CanEncoder, std::vector<dr
 
   void stop(std::chrono::milliseconds drain_timeout, bool keep_transport) override {
     (void)keep_transport;  // nothing to keep: a CAN interface is not handed to the next engine
+    if (responder_) output_->set_command_responder(nullptr);
+    responder_ = nullptr;
     output_->stop(drain_timeout);
     sync_.release();
   }
@@ -67,6 +95,7 @@ class CanDevice final : public EncoderDevice<drivers::CanEncoder, std::vector<dr
   }
 
   std::unique_ptr<CanOutput> output_;
+  drivers::CanCommandResponder* responder_ = nullptr;
 };
 
 }  // namespace

@@ -149,6 +149,13 @@ class CanOutput {
   virtual bool flush(std::chrono::milliseconds timeout) { (void)timeout; return true; }
   // Bounded drain, then discard counted (drivers::Transport::stop).
   virtual void stop(std::chrono::milliseconds drain_timeout) { flush(drain_timeout); }
+  // Hands received requests to `responder` on the output's io thread
+  // (drivers::CanTransport::set_command_responder); nullptr: stop. False:
+  // this output receives nothing.
+  virtual bool set_command_responder(drivers::CanCommandResponder* responder) {
+    (void)responder;
+    return false;
+  }
 };
 std::unique_ptr<CanOutput> can_transport_output(std::unique_ptr<drivers::CanTransport> transport);
 

@@ -7,6 +7,8 @@
 
 #include <algorithm>
 #include <cstdio>
+#include <array>
+#include <cctype>
 #include <charconv>
 #include <cmath>
 #include <filesystem>
@@ -649,6 +651,69 @@ void parse_mip_device(const Table& t, drivers::MipDeviceConfig& d) {
   d.hardware_revision = t.string("hardware_revision", d.hardware_revision);
 }
 
+// "major.minor" of a DroneCAN SoftwareVersion / HardwareVersion (uint8 each).
+void parse_major_minor(const Table& t, const char* key, std::uint8_t& major, std::uint8_t& minor) {
+  const std::optional<std::string> v = t.opt_string(key);
+  if (!v) return;
+  unsigned a = 0, b = 0;
+  char extra = 0;
+  if (std::sscanf(v->c_str(), "%u.%u%c", &a, &b, &extra) != 2 || a > 255 || b > 255)
+    t.fail_at(key, "'" + *v + "': expected major.minor, each 0..255 (e.g. \"1.2\")");
+  major = static_cast<std::uint8_t>(a);
+  minor = static_cast<std::uint8_t>(b);
+}
+
+void check_printable(const Table& t, const char* key, const std::string& value, std::size_t max_bytes) {
+  if (value.size() > max_bytes)
+    t.fail_at(key, "'" + value + "' is longer than " + std::to_string(max_bytes) + " characters");
+  for (const char c : value)
+    if (c < 0x20 || c > 0x7E || c == '*') t.fail_at(key, "printable ASCII only (no '*')");
+}
+
+// [imu.device] for protocol dronecan (issue 27, docs/can-device.md): the
+// identity GetNodeInfo reports and the power-up NodeStatus.
+void parse_dronecan_device(const Table& t, drivers::dronecan::DroneCanOptions& d) {
+  t.allow_only({"power_up_initialization", "node_name", "software_version", "vcs_commit", "hardware_version",
+                "unique_id"});
+  d.initialization_at_power_up = t.boolean("power_up_initialization", d.initialization_at_power_up);
+  d.name = t.string("node_name", d.name);
+  if (d.name.empty()) t.fail_at("node_name", "must not be empty");
+  check_printable(t, "node_name", d.name, drivers::dronecan::kNodeNameMaxBytes);
+  parse_major_minor(t, "software_version", d.software_major, d.software_minor);
+  parse_major_minor(t, "hardware_version", d.hardware_major, d.hardware_minor);
+  d.software_vcs_commit = static_cast<std::uint32_t>(t.integer("vcs_commit", d.software_vcs_commit, 0, 0xFFFFFFFFLL));
+  if (const std::optional<std::string> u = t.opt_string("unique_id")) {
+    std::array<std::uint8_t, 16> id{};
+    bool ok = u->size() == 32;
+    for (std::size_t i = 0; ok && i < 16; ++i) {
+      unsigned byte = 0;
+      ok = std::sscanf(u->substr(2 * i, 2).c_str(), "%2x", &byte) == 1 && std::isxdigit(static_cast<unsigned char>((*u)[2 * i])) &&
+           std::isxdigit(static_cast<unsigned char>((*u)[2 * i + 1]));
+      id[i] = static_cast<std::uint8_t>(byte);
+    }
+    if (!ok) t.fail_at("unique_id", "'" + *u + "': expected 32 hexadecimal digits (the 128-bit unique id)");
+    d.unique_id = id;
+  }
+}
+
+// [imu.device] for protocol j1939 (issue 27, docs/can-device.md): what
+// Component and Software Identification report.
+void parse_j1939_device(const Table& t, drivers::j1939::J1939Options& d) {
+  t.allow_only({"make", "model", "serial_number", "unit_number", "software_id"});
+  d.make = t.string("make", d.make);
+  check_printable(t, "make", d.make, 5);  // SPN 586: up to 5 characters
+  d.model = t.string("model", d.model);
+  check_printable(t, "model", d.model, 32);
+  d.serial_number = t.string("serial_number", d.serial_number);
+  check_printable(t, "serial_number", d.serial_number, 32);
+  d.unit_number = t.string("unit_number", d.unit_number);
+  check_printable(t, "unit_number", d.unit_number, 32);
+  if (const std::optional<std::string> s = t.opt_string("software_id")) {
+    check_printable(t, "software_id", *s, 200);
+    d.software_ids = {*s};
+  }
+}
+
 ImuConfig parse_imu(const Table& t) {
   ImuConfig imu;
   imu.line = t.where().begin.line;
@@ -666,11 +731,13 @@ ImuConfig parse_imu(const Table& t) {
   if (const auto m = t.subtable("mounting")) parse_mounting(*m, imu.mounting);
   parse_protocol_options(t, imu);
   if (const auto dt = t.subtable("device")) {
-    // Only the MIP device answers its driver so far (issue 27).
-    if (imu.protocol != "mip")
-      t.fail_at("device", "applies to protocol mip (the device that answers its driver); this device's protocol is " +
-                              imu.protocol);
-    parse_mip_device(*dt, imu.stream_options.mip_device);
+    // The devices that answer their driver (issue 27): MIP, DroneCAN, J1939.
+    if (imu.protocol == "mip") parse_mip_device(*dt, imu.stream_options.mip_device);
+    else if (imu.protocol == "dronecan") parse_dronecan_device(*dt, imu.can_options.dronecan);
+    else if (imu.protocol == "j1939") parse_j1939_device(*dt, imu.can_options.j1939);
+    else
+      t.fail_at("device", "applies to protocols mip, dronecan and j1939 (the devices that answer their driver); "
+                          "this device's protocol is " + imu.protocol);
   }
   try {
     if (is_can_protocol(imu.protocol))

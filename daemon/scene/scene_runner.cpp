@@ -177,6 +177,11 @@ BuiltEngine build_engine(const SceneConfig& scene, const RunnerOptions& options,
       std::unique_ptr<device::CanOutput> can_output;
       if (is_can_protocol(imu.protocol)) {
         can_encoder = drivers::make_can_encoder(imu.protocol, imu.can_options);
+        if (drivers::CanCommandResponder* r = can_encoder->command_responder(); r && options.log) {
+          r->set_log([log = options.log, name = imu.name](std::string_view line) {
+            log(name + ": " + std::string(line));
+          });
+        }
       } else {
         drivers::StreamEncoderOptions so = imu.stream_options;
         so.nominal_sample_rate_hz = static_cast<double>(imu.rate_hz);
@@ -228,6 +233,9 @@ BuiltEngine build_engine(const SceneConfig& scene, const RunnerOptions& options,
           co.fd_frames = t.can.fd;
           co.fd_bitrate_switch = t.can.bitrate_switch;
           co.log = options.log;
+          // The requests the node answers (none for a send-only encoder).
+          if (can_encoder && can_encoder->command_responder())
+            co.receive_filters = can_encoder->command_responder()->receive_filters();
           can_output = device::can_transport_output(std::make_unique<drivers::CanTransport>(co));
           break;
         }

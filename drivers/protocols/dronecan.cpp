@@ -24,6 +24,9 @@ constexpr std::uint8_t kTailEnd = 0x40;
 constexpr std::uint8_t kTailToggle = 0x20;
 // RawIMU with a full covariance: 47 bytes + 36 float16 (tail array, no length).
 constexpr std::size_t kRawImuMaxPayloadBytes = kRawImuPayloadBytes + 2 * kRawImuMaxCovariance;
+// The largest payload this file serialises: a GetNodeInfo response with an
+// 80-byte name (7 + 15 + 18 + 1 + 80 = 121 bytes) or RawIMU's 119.
+constexpr std::size_t kMaxPayloadBytes = 128;
 
 // DSDL bit-level serialisation as libcanard's canardEncodeScalar does it: the
 // value's little-endian bytes, the bits of a trailing partial byte moved to
@@ -51,7 +54,7 @@ class BitWriter {
     if (bit) bytes_[bit_count_ / 8] = static_cast<std::uint8_t>(bytes_[bit_count_ / 8] | (0x80u >> (bit_count_ % 8)));
     ++bit_count_;
   }
-  std::array<std::uint8_t, kRawImuMaxPayloadBytes> bytes_{};
+  std::array<std::uint8_t, kMaxPayloadBytes> bytes_{};
   std::size_t bit_count_ = 0;
 };
 
@@ -112,7 +115,7 @@ void append_transfer(std::vector<CanFrame>& out, std::uint32_t can_id, std::uint
   const std::uint16_t crc = transfer_crc(signature, payload);
   // CRC little-endian in the first frame, then the payload (a fixed buffer:
   // no allocation on the emission thread).
-  std::array<std::uint8_t, 2 + kRawImuMaxPayloadBytes> buffer{};
+  std::array<std::uint8_t, 2 + kMaxPayloadBytes> buffer{};
   const std::size_t stream_bytes = std::min(buffer.size(), payload.size() + 2);
   buffer[0] = static_cast<std::uint8_t>(crc & 0xFF);
   buffer[1] = static_cast<std::uint8_t>(crc >> 8);
@@ -249,6 +252,9 @@ void validate(const DroneCanOptions& options) {
   if (options.node_status_priority > 31)
     throw std::invalid_argument("dronecan: node_status_priority must be 0..31 (5-bit CAN id field), got " +
                                 std::to_string(options.node_status_priority));
+  if (options.name.empty() || options.name.size() > kNodeNameMaxBytes)
+    throw std::invalid_argument("dronecan: name must be 1.." + std::to_string(kNodeNameMaxBytes) +
+                                " bytes (GetNodeInfo name uint8[<=80]), got " + std::to_string(options.name.size()));
   if (options.node_status_period_ns <= 0)
     throw std::invalid_argument("dronecan: node_status_period_ns must be > 0, got " +
                                 std::to_string(options.node_status_period_ns));
@@ -334,7 +340,13 @@ RawImuPayload serialize_raw_imu(const ImuFrameInput& sample, const DroneCanOptio
   return result;
 }
 
-DroneCanEncoder::DroneCanEncoder(const DroneCanOptions& options) : options_(options) { validate(options_); }
+DroneCanEncoder::DroneCanEncoder(const DroneCanOptions& options) : options_(options) {
+  validate(options_);
+  // Before any NodeStatus: uptime 0, health OK, mode INITIALIZATION.
+  shared_->node_status_payload.store(std::uint64_t{static_cast<std::uint8_t>(NodeMode::kInitialization)} << 35,
+                                     std::memory_order_relaxed);
+  node_ = std::make_unique<DroneCanNode>(options_, *shared_);
+}
 
 void DroneCanEncoder::note_time(TimeNs t_ns) {
   if (started_) return;
@@ -360,9 +372,16 @@ void DroneCanEncoder::encode(const ImuFrameInput& sample, std::vector<CanFrame>&
 
 void DroneCanEncoder::periodic(TimeNs now_ns, std::vector<CanFrame>& out) {
   note_time(now_ns);
+  // A RestartNode its node acknowledged: the device powers up again here.
+  if (shared_->restart_requested.exchange(false, std::memory_order_acq_rel)) {
+    restart(now_ns, out);
+    return;
+  }
   if (now_ns < next_node_status_ns_) return;
 
-  append_node_status(now_ns, NodeMode::kOperational, out);
+  const bool initializing =
+      options_.initialization_at_power_up && saturating_sub_ns(now_ns, start_ns_) < kNsPerSecond;
+  append_node_status(now_ns, initializing ? NodeMode::kInitialization : NodeMode::kOperational, out);
 
   // Next due: the first whole period after start that is later than now (a
   // long pause sends one NodeStatus, not a burst of missed ones).
@@ -396,12 +415,239 @@ void DroneCanEncoder::append_node_status(TimeNs now_ns, NodeMode mode, std::vect
   writer.put(0, 3);  // sub_mode: "keep zero when publishing"
   writer.put(status_since_node_status_ & 0xFFFFu, 16);
   const std::span<const std::uint8_t> payload = writer.bytes();
+  std::uint64_t packed = 0;
+  for (std::size_t i = 0; i < payload.size() && i < 8; ++i) packed |= std::uint64_t{payload[i]} << (8 * i);
+  shared_->node_status_payload.store(packed, std::memory_order_relaxed);
   append_transfer(out, message_can_id(options_.node_status_priority, kNodeStatusDataTypeId, options_.node_id),
                   kNodeStatusSignature, payload, node_status_transfer_id_);
   node_status_transfer_id_ = static_cast<std::uint8_t>((node_status_transfer_id_ + 1) & kTransferIdMask);
   status_since_node_status_ = 0;
   saturated_since_node_status_ = false;
   fault_since_node_status_ = false;
+}
+
+
+// ---- node (service side) ----
+
+std::array<std::uint8_t, 16> unique_id_of(const DroneCanOptions& options) {
+  if (options.unique_id) return *options.unique_id;
+  std::array<std::uint8_t, 16> id{'i', 'm', 'u', 'e', 'm', 'u'};
+  id[15] = options.node_id;
+  return id;
+}
+
+namespace {
+constexpr std::uint32_t kServiceFlag = 1u << 7;   // service_not_message
+constexpr std::uint32_t kRequestFlag = 1u << 15;  // request_not_response
+
+// 29-bit id of a service frame (spec 4.1: priority(5) | service type id(8) |
+// request_not_response(1) | destination node id(7) | service_not_message(1)=1 | source(7)).
+std::uint32_t service_can_id(std::uint8_t priority, std::uint8_t service, bool request, std::uint8_t destination,
+                             std::uint8_t source) {
+  return (std::uint32_t{priority} & 0x1Fu) << 24 | std::uint32_t{service} << 16 | (request ? kRequestFlag : 0u) |
+         (std::uint32_t{destination} & 0x7Fu) << 8 | kServiceFlag | (std::uint32_t{source} & 0x7Fu);
+}
+
+bool known_service(std::uint8_t service, std::uint64_t& signature) {
+  switch (service) {
+    case kGetNodeInfoServiceId: signature = kGetNodeInfoSignature; return true;
+    case kRestartNodeServiceId: signature = kRestartNodeSignature; return true;
+    case kParamGetSetServiceId: signature = kParamGetSetSignature; return true;
+    default: return false;
+  }
+}
+
+// The node's read-only parameters (param.GetSet): Value union tag 1
+// integer_value (int64) or 3 boolean_value (uint8).
+struct Param {
+  const char* name;
+  std::uint8_t tag;
+  std::int64_t value;
+};
+std::vector<Param> params_of(const DroneCanOptions& o) {
+  return {{"uavcan.node_id", 1, o.node_id},
+          {"imu.raw_imu_priority", 1, o.raw_imu_priority},
+          {"imu.node_status_period_ms", 1, o.node_status_period_ns / 1'000'000},
+          {"imu.send_integrals", 3, o.send_integrals ? 1 : 0}};
+}
+}  // namespace
+
+DroneCanNode::DroneCanNode(const DroneCanOptions& options, NodeShared& shared) : options_(options), shared_(shared) {}
+
+std::vector<CanReceiveFilter> DroneCanNode::receive_filters() const {
+  // Service requests addressed to this node, any service, any requester.
+  const std::uint32_t id = kRequestFlag | std::uint32_t{options_.node_id} << 8 | kServiceFlag;
+  const std::uint32_t mask = kRequestFlag | 0x7Fu << 8 | kServiceFlag;
+  return {CanReceiveFilter{id, mask, true}};
+}
+
+void DroneCanNode::set_log(std::function<void(std::string_view)> log) {
+  const std::lock_guard<std::mutex> lock(log_mutex_);
+  log_ = std::move(log);
+}
+
+CommandCounters DroneCanNode::command_counters() const {
+  CommandCounters c;
+  c.received = received_.load(std::memory_order_relaxed);
+  c.answered = answered_.load(std::memory_order_relaxed);
+  c.nacked = unsupported_.load(std::memory_order_relaxed);  // DroneCAN has no NACK: unsupported services are not answered
+  c.not_command_bytes = bad_bytes_.load(std::memory_order_relaxed);
+  c.replies_dropped = dropped_.load(std::memory_order_relaxed);
+  c.mode = "streaming";
+  c.format = "RawIMU + NodeStatus";
+  return c;
+}
+
+void DroneCanNode::on_frame(const CanFrame& frame, CanReplySink& replies) {
+  const auto bad = [this, &frame] { bad_bytes_.fetch_add(frame.len, std::memory_order_relaxed); };
+  if (!frame.extended || frame.fd || frame.len < 1 || frame.len > kClassicCanBytes) return bad();
+  const std::uint32_t id = frame.id;
+  if ((id & kServiceFlag) == 0 || (id & kRequestFlag) == 0 || ((id >> 8) & 0x7Fu) != options_.node_id) return bad();
+  const auto source = static_cast<std::uint8_t>(id & 0x7Fu);
+  if (source == 0) return bad();  // anonymous nodes cannot send service transfers (spec 4.1)
+  const auto service = static_cast<std::uint8_t>((id >> 16) & 0xFFu);
+  const auto priority = static_cast<std::uint8_t>((id >> 24) & 0x1Fu);
+  const std::uint8_t tail = frame.data[frame.len - 1];
+  const bool start = (tail & kTailStart) != 0, end = (tail & kTailEnd) != 0, toggle = (tail & kTailToggle) != 0;
+  const auto tid = static_cast<std::uint8_t>(tail & kTransferIdMask);
+  const std::span<const std::uint8_t> data(frame.data.data(), frame.len - 1u);
+
+  if (start && end) {
+    if (toggle) return bad();
+    handle(service, priority, source, tid, data, replies);
+    return;
+  }
+  Rx& rx = rx_[static_cast<std::uint16_t>(service << 8 | source)];
+  if (start) {
+    if (toggle || data.size() < 2) return bad();
+    rx.in_progress = true;
+    rx.transfer_id = tid;
+    rx.next_toggle = true;
+    rx.crc = static_cast<std::uint16_t>(data[0] | data[1] << 8);
+    rx.payload.assign(data.begin() + 2, data.end());
+    return;
+  }
+  if (!rx.in_progress || tid != rx.transfer_id || toggle != rx.next_toggle) {
+    rx.in_progress = false;
+    return bad();
+  }
+  rx.payload.insert(rx.payload.end(), data.begin(), data.end());
+  rx.next_toggle = !rx.next_toggle;
+  if (rx.payload.size() > 512) {
+    rx.in_progress = false;
+    return bad();
+  }
+  if (!end) return;
+  rx.in_progress = false;
+  std::uint64_t signature = 0;
+  if (!known_service(service, signature)) {
+    unsupported_.fetch_add(1, std::memory_order_relaxed);
+    return;
+  }
+  if (transfer_crc(signature, rx.payload) != rx.crc) {
+    bad_bytes_.fetch_add(rx.payload.size() + 2, std::memory_order_relaxed);
+    return;
+  }
+  handle(service, priority, source, tid, rx.payload, replies);
+}
+
+void DroneCanNode::respond(std::uint8_t service, std::uint64_t signature, std::uint8_t priority,
+                           std::uint8_t destination, std::uint8_t transfer_id, std::span<const std::uint8_t> payload,
+                           CanReplySink& replies) {
+  std::vector<CanFrame> frames;
+  append_transfer(frames, service_can_id(priority, service, false, destination, options_.node_id), signature, payload,
+                  transfer_id);
+  for (const CanFrame& f : frames) {
+    if (!replies.reply(f)) {
+      dropped_.fetch_add(1, std::memory_order_relaxed);
+      return;
+    }
+  }
+  answered_.fetch_add(1, std::memory_order_relaxed);
+}
+
+void DroneCanNode::handle(std::uint8_t service, std::uint8_t priority, std::uint8_t source, std::uint8_t transfer_id,
+                          std::span<const std::uint8_t> payload, CanReplySink& replies) {
+  std::uint64_t signature = 0;
+  if (!known_service(service, signature)) {
+    unsupported_.fetch_add(1, std::memory_order_relaxed);
+    return;
+  }
+  received_.fetch_add(1, std::memory_order_relaxed);
+  BitWriter w;
+  if (service == kGetNodeInfoServiceId) {
+    // status: the last NodeStatus sent (7 bytes, as on the wire).
+    const std::uint64_t status = shared_.node_status_payload.load(std::memory_order_relaxed);
+    for (unsigned i = 0; i < kNodeStatusPayloadBytes; ++i) w.put((status >> (8 * i)) & 0xFF, 8);
+    // SoftwareVersion: major, minor, optional_field_flags, vcs_commit, image_crc.
+    w.put(options_.software_major, 8);
+    w.put(options_.software_minor, 8);
+    w.put(options_.software_vcs_commit != 0 ? 1 : 0, 8);  // OPTIONAL_FIELD_FLAG_VCS_COMMIT = 1
+    w.put(options_.software_vcs_commit, 32);
+    w.put(0, 64);  // image_crc: not given (flag bit 1 clear)
+    // HardwareVersion: major, minor, unique_id[16], certificate_of_authenticity
+    // uint8[<=255] (nested, so with its 8-bit length: 0).
+    w.put(options_.hardware_major, 8);
+    w.put(options_.hardware_minor, 8);
+    for (std::uint8_t b : unique_id_of(options_)) w.put(b, 8);
+    w.put(0, 8);
+    // name uint8[<=80]: the top-level type's last array, no length field.
+    for (char c : options_.name) w.put(static_cast<std::uint8_t>(c), 8);
+  } else if (service == kRestartNodeServiceId) {
+    BitReader r(payload);
+    const bool ok = r.has(40) && r.get(40) == kRestartNodeMagic;
+    w.put(ok ? 1 : 0, 1);
+    w.put(0, 7);
+    if (ok) {
+      shared_.restart_requested.store(true, std::memory_order_release);
+      const std::lock_guard<std::mutex> lock(log_mutex_);
+      if (log_) log_("dronecan node " + std::to_string(options_.node_id) + ": RestartNode from node " +
+                     std::to_string(source) + ": restarting");
+    }
+  } else {  // param.GetSet
+    BitReader r(payload);
+    std::uint64_t index = r.has(13) ? r.get(13) : 0;
+    // Skip the request's Value (a set, refused: the current value is the answer).
+    std::uint64_t tag = r.has(3) ? r.get(3) : 0;
+    std::size_t value_bits = 0;
+    if (tag == 1) value_bits = 64;
+    else if (tag == 2) value_bits = 32;
+    else if (tag == 3) value_bits = 8;
+    std::string name;
+    if (tag == 4) {
+      const std::uint64_t n = r.has(8) ? r.get(8) : 0;
+      value_bits = 8 * n;
+    }
+    for (std::size_t i = 0; i < value_bits && r.has(1); ++i) (void)r.get(1);
+    while (r.has(8)) name.push_back(static_cast<char>(r.get(8)));
+    const std::vector<Param> params = params_of(options_);
+    const Param* found = nullptr;
+    if (!name.empty()) {
+      for (const Param& p : params)
+        if (name == p.name) found = &p;
+    } else if (index < params.size()) {
+      found = &params[index];
+    }
+    const auto put_value = [&w](const Param* p) {
+      w.put(0, 5);
+      if (p == nullptr) {
+        w.put(0, 3);  // Empty
+        return;
+      }
+      w.put(p->tag, 3);
+      if (p->tag == 1) w.put(static_cast<std::uint64_t>(p->value), 64);
+      else w.put(static_cast<std::uint64_t>(p->value), 8);
+    };
+    put_value(found);  // value
+    put_value(found);  // default_value: read-only, the value it always has
+    w.put(0, 6);
+    w.put(0, 2);  // max_value: Empty
+    w.put(0, 6);
+    w.put(0, 2);  // min_value: Empty
+    if (found != nullptr)
+      for (const char* c = found->name; *c != 0; ++c) w.put(static_cast<std::uint8_t>(*c), 8);
+  }
+  respond(service, signature, priority, source, transfer_id, w.bytes(), replies);
 }
 
 // ---- decoder ----

@@ -25,8 +25,13 @@
 //    DSDL text in tests/engine/test_protocols_can.cpp.
 #pragma once
 
+#include <array>
+#include <atomic>
 #include <cstdint>
+#include <functional>
 #include <map>
+#include <memory>
+#include <mutex>
 #include <optional>
 #include <span>
 #include <string>
@@ -49,6 +54,19 @@ inline constexpr std::uint16_t kNodeStatusDataTypeId = 341;
 // decoder's table (published value, libcanard/dronecan dsdlc headers).
 inline constexpr std::uint64_t kNodeStatusSignature = 0x0F0868D0C1A7C6F1ULL;
 inline constexpr std::size_t kNodeStatusPayloadBytes = 7;  // uint32 + 2+3+3 bits + uint16
+
+// Services the node answers (DroneCAN DSDL, uavcan/protocol): data type id
+// and signature (published values: libcanard / DroneCAN dsdlc headers, e.g.
+// UAVCAN_PROTOCOL_GETNODEINFO_SIGNATURE). Request and response of a service
+// share the signature; it seeds the CRC of their multi-frame transfers.
+inline constexpr std::uint8_t kGetNodeInfoServiceId = 1;      // 1.GetNodeInfo.uavcan
+inline constexpr std::uint64_t kGetNodeInfoSignature = 0xEE468A8121C46A9EULL;
+inline constexpr std::uint8_t kRestartNodeServiceId = 5;      // 5.RestartNode.uavcan
+inline constexpr std::uint64_t kRestartNodeSignature = 0x569E05394A3017F0ULL;
+inline constexpr std::uint64_t kRestartNodeMagic = 0xACCE551B1EULL;  // uint40 MAGIC_NUMBER
+inline constexpr std::uint8_t kParamGetSetServiceId = 11;     // param/11.GetSet.uavcan
+inline constexpr std::uint64_t kParamGetSetSignature = 0xA7B622F939D1A4D5ULL;
+inline constexpr std::size_t kNodeNameMaxBytes = 80;          // GetNodeInfo name uint8[<=80]
 
 // uavcan.protocol.NodeStatus constants (DSDL 341.NodeStatus.uavcan).
 enum class NodeHealth : std::uint8_t { kOk = 0, kWarning = 1, kError = 2, kCritical = 3 };
@@ -101,6 +119,71 @@ struct DroneCanOptions {
   // otherwise integration_interval = -1 ("non-positive: integrals not
   // available", RawIMU DSDL) and the integrals are 0.
   bool send_integrals = true;
+  // Spec NodeStatus at power-up: mode INITIALIZATION for the first second
+  // ("entered immediately after startup", NodeStatus DSDL), then
+  // OPERATIONAL. Off by default: the first NodeStatus of existing scenes
+  // stays OPERATIONAL (their frames are compared byte for byte).
+  bool initialization_at_power_up = false;
+  // Identity (GetNodeInfo): name "reverse internet domain", software and
+  // hardware version, the 128-bit unique id.
+  std::string name = "com.imuemu.imu";
+  std::uint8_t software_major = 1;
+  std::uint8_t software_minor = 0;
+  std::uint32_t software_vcs_commit = 0;  // sent with optional_field_flags bit 0 when not 0
+  std::uint8_t hardware_major = 1;
+  std::uint8_t hardware_minor = 0;
+  // Default: "imuemu" in ASCII, then zeros, the node id in the last byte.
+  std::optional<std::array<std::uint8_t, 16>> unique_id;
+};
+
+// The unique id GetNodeInfo reports (options.unique_id or the default).
+std::array<std::uint8_t, 16> unique_id_of(const DroneCanOptions& options);
+
+// The emitted NodeStatus (7 payload bytes) and a restart request, shared by
+// the encoder (emission thread) and its node (io thread) without a lock.
+struct NodeShared {
+  std::atomic<std::uint64_t> node_status_payload{0};  // LE bytes 0..6 of the last NodeStatus sent
+  std::atomic<bool> restart_requested{false};
+};
+
+// The service side of the node (issue 27): receives the service requests
+// addressed to node_id (the receive filters), reassembles single- and
+// multi-frame request transfers (tail byte, toggle, transfer CRC), answers
+//  - GetNodeInfo (1): status = the last NodeStatus sent, software_version,
+//    hardware_version (unique_id, empty certificate), name;
+//  - RestartNode (5): ok when magic_number = 0xACCE551B1E (then the encoder
+//    restarts at its next sample: NodeStatus INITIALIZATION, uptime 0),
+//    ok = false otherwise;
+//  - param.GetSet (11): read-only; by name, or by index when the name is
+//    empty; a set is refused by answering the current value; an unknown
+//    parameter gets the empty answer (value empty, name empty).
+// A response goes to the requester with the request's priority and transfer id.
+class DroneCanNode final : public CanCommandResponder {
+ public:
+  DroneCanNode(const DroneCanOptions& options, NodeShared& shared);
+  std::vector<CanReceiveFilter> receive_filters() const override;
+  void on_frame(const CanFrame& frame, CanReplySink& replies) override;
+  CommandCounters command_counters() const override;
+  void set_log(std::function<void(std::string_view)> log) override;
+
+ private:
+  struct Rx {
+    bool in_progress = false;
+    std::uint8_t transfer_id = 0;
+    bool next_toggle = false;
+    std::uint16_t crc = 0;
+    std::vector<std::uint8_t> payload;
+  };
+  void handle(std::uint8_t service, std::uint8_t priority, std::uint8_t source, std::uint8_t transfer_id,
+              std::span<const std::uint8_t> payload, CanReplySink& replies);
+  void respond(std::uint8_t service, std::uint64_t signature, std::uint8_t priority, std::uint8_t destination,
+               std::uint8_t transfer_id, std::span<const std::uint8_t> payload, CanReplySink& replies);
+  DroneCanOptions options_;
+  NodeShared& shared_;
+  std::map<std::uint16_t, Rx> rx_;  // key = service << 8 | source node
+  std::atomic<std::uint64_t> received_{0}, answered_{0}, unsupported_{0}, bad_bytes_{0}, dropped_{0};
+  std::mutex log_mutex_;
+  std::function<void(std::string_view)> log_;
 };
 
 // Throws std::invalid_argument naming the option that is out of range.
@@ -137,6 +220,7 @@ class DroneCanEncoder final : public CanEncoder {
  public:
   explicit DroneCanEncoder(const DroneCanOptions& options = {});
   std::string name() const override { return "dronecan"; }
+  CanCommandResponder* command_responder() override { return node_.get(); }
   void encode(const ImuFrameInput& sample, std::vector<CanFrame>& out) override;
   void periodic(TimeNs now_ns, std::vector<CanFrame>& out) override;
 
@@ -171,6 +255,8 @@ class DroneCanEncoder final : public CanEncoder {
   bool fault_since_node_status_ = false;
   std::uint64_t saturated_values_ = 0;
   std::uint64_t non_finite_values_ = 0;
+  std::unique_ptr<NodeShared> shared_ = std::make_unique<NodeShared>();
+  std::unique_ptr<DroneCanNode> node_;
 };
 
 // ---- decoder ----

@@ -199,9 +199,24 @@ void validate(const J1939Options& options) {
 
 // ---- encoder ----
 
-J1939Encoder::J1939Encoder(const J1939Options& options) : options_(options) { validate(options_); }
+J1939Encoder::J1939Encoder(const J1939Options& options) : options_(options) {
+  validate(options_);
+  shared_->address.store(options_.source_address, std::memory_order_relaxed);
+  node_ = std::make_unique<J1939Node>(options_, *shared_);
+}
 
 void J1939Encoder::encode(const ImuFrameInput& sample, std::vector<CanFrame>& out) {
+  // The address its node holds now (address-claim arbitration, issue 27); a
+  // node that could not claim one sends nothing (J1939-81).
+  const std::uint8_t address = shared_->address.load(std::memory_order_relaxed);
+  if (address == kNullAddress) return;
+  const std::size_t first = out.size();
+  encode_frames(sample, out);
+  if (address != options_.source_address)
+    for (std::size_t i = first; i < out.size(); ++i) out[i].id = (out[i].id & ~0xFFu) | address;
+}
+
+void J1939Encoder::encode_frames(const ImuFrameInput& sample, std::vector<CanFrame>& out) {
   auto count = [this](const Encoded& e) {
     if (e.clamped) ++clamped_values_;
   };
@@ -272,7 +287,8 @@ void J1939Encoder::encode(const ImuFrameInput& sample, std::vector<CanFrame>& ou
 void J1939Encoder::restart(TimeNs now_ns, std::vector<CanFrame>& out) {
   (void)now_ns;
   CanFrame frame;
-  frame.id = can_id(kAddressClaimedPriority, kPgnAddressClaimed | kGlobalAddress, options_.source_address);
+  frame.id = can_id(kAddressClaimedPriority, kPgnAddressClaimed | kGlobalAddress,
+                    shared_->address.load(std::memory_order_relaxed));
   frame.extended = true;
   frame.len = kFrameBytes;
   for (unsigned i = 0; i < kFrameBytes; ++i) frame.data[i] = static_cast<std::uint8_t>(options_.name >> (8 * i));
@@ -378,6 +394,202 @@ std::optional<std::uint64_t> J1939Decoder::claimed_name(std::uint8_t source_addr
   const auto it = claimed_names_.find(source_address);
   if (it == claimed_names_.end()) return std::nullopt;
   return it->second;
+}
+
+// ---- node (request side) ----
+
+namespace {
+constexpr std::uint32_t kPgnFieldMask = 0x03FF0000u;    // EDP, DP, PF of a 29-bit id
+constexpr std::uint32_t kPdu1Mask = 0x03FFFF00u;        // ... and PS (the destination of a PDU1 PGN)
+constexpr std::uint8_t kFirstArbitraryAddress = 128;    // J1939 table B2: 128..247 self-configurable
+constexpr std::uint8_t kLastArbitraryAddress = 247;
+
+std::vector<std::uint8_t> ascii_fields(const std::vector<std::string>& fields) {
+  std::vector<std::uint8_t> out;
+  for (const std::string& f : fields) {
+    out.insert(out.end(), f.begin(), f.end());
+    out.push_back('*');
+  }
+  return out;
+}
+}  // namespace
+
+J1939Node::J1939Node(const J1939Options& options, NodeShared& shared) : options_(options), shared_(shared) {}
+
+std::vector<std::uint8_t> J1939Node::component_identification(const J1939Options& o) {
+  return ascii_fields({o.make, o.model, o.serial_number, o.unit_number});
+}
+
+std::vector<std::uint8_t> J1939Node::software_identification(const J1939Options& o) {
+  std::vector<std::uint8_t> out{static_cast<std::uint8_t>(o.software_ids.size())};
+  const std::vector<std::uint8_t> fields = ascii_fields(o.software_ids);
+  out.insert(out.end(), fields.begin(), fields.end());
+  return out;
+}
+
+std::vector<CanReceiveFilter> J1939Node::receive_filters() const {
+  std::vector<CanReceiveFilter> f;
+  if ((options_.name >> 63) != 0) {
+    // Arbitrary-address capable: the address may move, so take Requests to
+    // any destination (on_frame keeps those to its address and global).
+    f.push_back({kPgnRequest << 8, kPgnFieldMask, true});
+  } else {
+    f.push_back({(kPgnRequest | options_.source_address) << 8, kPdu1Mask, true});
+    f.push_back({(kPgnRequest | kGlobalAddress) << 8, kPdu1Mask, true});
+  }
+  f.push_back({kPgnAddressClaimed << 8, kPgnFieldMask, true});  // claims of others (to global or to it)
+  return f;
+}
+
+void J1939Node::set_log(std::function<void(std::string_view)> log) {
+  const std::lock_guard<std::mutex> lock(log_mutex_);
+  log_ = std::move(log);
+}
+
+void J1939Node::log(const std::string& line) {
+  const std::lock_guard<std::mutex> lock(log_mutex_);
+  if (log_) log_(line);
+}
+
+CommandCounters J1939Node::command_counters() const {
+  CommandCounters c;
+  c.received = received_.load(std::memory_order_relaxed);
+  c.answered = answered_.load(std::memory_order_relaxed);
+  c.nacked = nacked_.load(std::memory_order_relaxed);
+  c.not_command_bytes = bad_bytes_.load(std::memory_order_relaxed);
+  c.replies_dropped = dropped_.load(std::memory_order_relaxed);
+  const std::uint8_t a = shared_.address.load(std::memory_order_relaxed);
+  c.mode = a == kNullAddress ? "cannot claim an address (silent)" : "streaming from address " + std::to_string(a);
+  c.format = "ARI/ACCS/SSI2 PGNs";
+  return c;
+}
+
+bool J1939Node::send(const CanFrame& frame, CanReplySink& replies) {
+  if (replies.reply(frame)) return true;
+  dropped_.fetch_add(1, std::memory_order_relaxed);
+  return false;
+}
+
+bool J1939Node::send_claim(std::uint8_t source, CanReplySink& replies) {
+  CanFrame frame;
+  frame.id = can_id(kAddressClaimedPriority, kPgnAddressClaimed | kGlobalAddress, source);
+  frame.extended = true;
+  frame.len = kFrameBytes;
+  for (unsigned i = 0; i < kFrameBytes; ++i) frame.data[i] = static_cast<std::uint8_t>(options_.name >> (8 * i));
+  return send(frame, replies);
+}
+
+bool J1939Node::send_pgn(std::uint32_t pgn, const std::vector<std::uint8_t>& data, CanReplySink& replies) {
+  const std::uint8_t source = shared_.address.load(std::memory_order_relaxed);
+  if (data.size() <= kFrameBytes) {
+    CanFrame frame;
+    frame.id = can_id(kIdentificationPriority, pgn, source);
+    frame.extended = true;
+    frame.len = static_cast<std::uint8_t>(data.size());
+    std::copy(data.begin(), data.end(), frame.data.begin());
+    return send(frame, replies);
+  }
+  // BAM (J1939-21 5.10.3.5): TP.CM to global announces size, packets and
+  // PGN; TP.DT packets 1..n carry 7 bytes each, the last padded with 0xFF.
+  const std::size_t packets = (data.size() + 6) / 7;
+  CanFrame cm;
+  cm.id = can_id(kTpPriority, kPgnTpCm | kGlobalAddress, source);
+  cm.extended = true;
+  cm.len = kFrameBytes;
+  cm.data = {kTpCmBam, static_cast<std::uint8_t>(data.size() & 0xFF), static_cast<std::uint8_t>(data.size() >> 8),
+             static_cast<std::uint8_t>(packets), 0xFF, static_cast<std::uint8_t>(pgn & 0xFF),
+             static_cast<std::uint8_t>((pgn >> 8) & 0xFF), static_cast<std::uint8_t>((pgn >> 16) & 0xFF)};
+  if (!send(cm, replies)) return false;
+  for (std::size_t p = 0; p < packets; ++p) {
+    CanFrame dt;
+    dt.id = can_id(kTpPriority, kPgnTpDt | kGlobalAddress, source);
+    dt.extended = true;
+    dt.len = kFrameBytes;
+    dt.data.fill(0xFF);
+    dt.data[0] = static_cast<std::uint8_t>(p + 1);
+    for (std::size_t i = 0; i < 7 && 7 * p + i < data.size(); ++i) dt.data[1 + i] = data[7 * p + i];
+    if (!send(dt, replies)) return false;
+  }
+  return true;
+}
+
+void J1939Node::on_frame(const CanFrame& frame, CanReplySink& replies) {
+  if (!frame.extended || frame.fd) {
+    bad_bytes_.fetch_add(frame.len, std::memory_order_relaxed);
+    return;
+  }
+  const std::uint32_t id = frame.id & 0x1FFFFFFFu;
+  const auto pf = static_cast<std::uint8_t>((id >> 16) & 0xFF);
+  const auto ps = static_cast<std::uint8_t>((id >> 8) & 0xFF);
+  const auto sa = static_cast<std::uint8_t>(id & 0xFF);
+  const bool dp_edp_zero = ((id >> 24) & 0x3u) == 0;
+  const std::uint8_t address = shared_.address.load(std::memory_order_relaxed);
+
+  if (dp_edp_zero && pf == (kPgnAddressClaimed >> 8)) {
+    if (frame.len != kFrameBytes || sa == kNullAddress || sa == kGlobalAddress) return;
+    std::uint64_t theirs = 0;
+    for (unsigned i = 0; i < kFrameBytes; ++i) theirs |= std::uint64_t{frame.data[i]} << (8 * i);
+    others_[sa] = theirs;
+    if (sa != address || theirs == options_.name) return;
+    received_.fetch_add(1, std::memory_order_relaxed);
+    if (theirs > options_.name) {
+      // Ours is the higher priority (lower NAME): claim again (J1939-81 4.5.3).
+      if (send_claim(address, replies)) answered_.fetch_add(1, std::memory_order_relaxed);
+      return;
+    }
+    // Lost the address to a lower NAME.
+    if ((options_.name >> 63) != 0) {
+      for (unsigned a = kFirstArbitraryAddress; a <= kLastArbitraryAddress; ++a) {
+        const auto candidate = static_cast<std::uint8_t>(a);
+        if (candidate == address) continue;
+        const auto other = others_.find(candidate);
+        if (other != others_.end() && other->second < options_.name) continue;
+        shared_.address.store(candidate, std::memory_order_relaxed);
+        log("j1939: address " + std::to_string(address) + " lost to a lower NAME; claiming " + std::to_string(a));
+        if (send_claim(candidate, replies)) answered_.fetch_add(1, std::memory_order_relaxed);
+        return;
+      }
+    }
+    shared_.address.store(kNullAddress, std::memory_order_relaxed);
+    log("j1939: address " + std::to_string(address) + " lost to a lower NAME; Cannot Claim, silent from now on");
+    if (send_claim(kNullAddress, replies)) answered_.fetch_add(1, std::memory_order_relaxed);
+    return;
+  }
+
+  if (dp_edp_zero && pf == (kPgnRequest >> 8)) {
+    const bool to_me = address != kNullAddress && ps == address;
+    if (!to_me && ps != kGlobalAddress) return;  // another node's request (arbitrary-address filters)
+    if (frame.len < 3) {
+      bad_bytes_.fetch_add(frame.len, std::memory_order_relaxed);
+      return;
+    }
+    received_.fetch_add(1, std::memory_order_relaxed);
+    const std::uint32_t pgn = frame.data[0] | frame.data[1] << 8 | std::uint32_t{frame.data[2]} << 16;
+    bool sent = false;
+    if (pgn == kPgnAddressClaimed) {
+      sent = send_claim(address, replies);  // from 254 = Cannot Claim
+    } else if (address == kNullAddress) {
+      return;  // without an address, only Cannot Claim may be sent
+    } else if (pgn == kPgnComponentIdentification) {
+      sent = send_pgn(pgn, component_identification(options_), replies);
+    } else if (pgn == kPgnSoftwareIdentification) {
+      sent = send_pgn(pgn, software_identification(options_), replies);
+    } else if (to_me) {
+      // J1939-21 5.4.4: NACK a destination-specific request for a PGN not supported.
+      CanFrame ack;
+      ack.id = can_id(kIdentificationPriority, kPgnAcknowledgement | kGlobalAddress, address);
+      ack.extended = true;
+      ack.len = kFrameBytes;
+      ack.data = {1, 0xFF, 0xFF, 0xFF, sa, frame.data[0], frame.data[1], frame.data[2]};
+      if (send(ack, replies)) nacked_.fetch_add(1, std::memory_order_relaxed);
+      return;
+    } else {
+      return;  // a global request for a PGN it does not have: no answer (J1939-21)
+    }
+    if (sent) answered_.fetch_add(1, std::memory_order_relaxed);
+    return;
+  }
+  bad_bytes_.fetch_add(frame.len, std::memory_order_relaxed);
 }
 
 }  // namespace imuemu::drivers::j1939

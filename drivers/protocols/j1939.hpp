@@ -64,8 +64,12 @@
 #pragma once
 
 #include <array>
+#include <atomic>
 #include <cstdint>
+#include <functional>
 #include <map>
+#include <memory>
+#include <mutex>
 #include <optional>
 #include <string>
 #include <vector>
@@ -88,6 +92,21 @@ inline constexpr std::uint8_t kDefaultPriority = 3;
 inline constexpr std::uint32_t kPgnAddressClaimed = 0xEE00;
 inline constexpr std::uint8_t kGlobalAddress = 0xFF;
 inline constexpr std::uint8_t kAddressClaimedPriority = 6;
+inline constexpr std::uint8_t kNullAddress = 0xFE;  // source of Cannot Claim (J1939-81)
+// J1939-21: Request (PDU1 0xEA00, data = the requested PGN, 3 bytes LE),
+// Acknowledgement (0xE800), transport protocol connection management
+// (TP.CM 0xEC00; BAM control byte 32) and data transfer (TP.DT 0xEB00).
+inline constexpr std::uint32_t kPgnRequest = 0xEA00;              // 59904
+inline constexpr std::uint32_t kPgnAcknowledgement = 0xE800;      // 59392
+inline constexpr std::uint32_t kPgnTpCm = 0xEC00;                 // 60416
+inline constexpr std::uint32_t kPgnTpDt = 0xEB00;                 // 60160
+inline constexpr std::uint8_t kTpCmBam = 32;
+inline constexpr std::uint8_t kTpPriority = 7;
+// J1939-71 identification PGNs (PDU2, default priority 6): fields of ASCII
+// each ended by '*'.
+inline constexpr std::uint32_t kPgnComponentIdentification = 0xFEEB;  // 65259: make*model*serial*unit*
+inline constexpr std::uint32_t kPgnSoftwareIdentification = 0xFEDA;   // 65242: count, then id*...
+inline constexpr std::uint8_t kIdentificationPriority = 6;
 
 // One SPN's linear scaling: physical = raw * resolution + offset, raw valid in
 // 0..max_valid_raw.
@@ -152,6 +171,57 @@ struct J1939Options {
   // Default: identity number 1, every other field 0 (manufacturer codes and
   // functions are SAE-assigned; 0 is J1939_NO_NAME, so not that).
   std::uint64_t name = 1;
+  // Component Identification (65259) fields: SPN 586 make (up to 5
+  // characters), 587 model, 588 serial number, 233 unit number.
+  std::string make = "IMUEM";
+  std::string model = "imuemu-j1939";
+  std::string serial_number = "00000001";
+  std::string unit_number;
+  // Software Identification (65242) fields (SPN 234), each '*'-terminated.
+  std::vector<std::string> software_ids{"imuemu 1.0"};
+};
+
+// The address the node holds now, shared by the encoder (emission thread)
+// and its node (io thread) without a lock; kNullAddress after it lost
+// address-claim arbitration without an address to move to.
+struct NodeShared {
+  std::atomic<std::uint8_t> address{0x80};
+};
+
+// The request side of the node (issue 27):
+//  - Request (59904) to its address or global for Address Claimed (60928):
+//    its claim to global (Cannot Claim from 254 when it has no address);
+//    for Component Identification (65259) / Software Identification (65242):
+//    the data, one frame when it fits 8 bytes, else a BAM (TP.CM + TP.DT to
+//    global, J1939-21); another PGN requested to its own address: NACK
+//    (Acknowledgement 59392, control 1) to global; to global: nothing.
+//  - Address Claimed (J1939-81) from another node for its address: a lower
+//    (higher-priority) NAME wins: the node moves to a free address in
+//    128..247 when its NAME is arbitrary-address capable (bit 63), else
+//    sends Cannot Claim and falls silent; a higher NAME gets the node's
+//    claim again.
+class J1939Node final : public CanCommandResponder {
+ public:
+  J1939Node(const J1939Options& options, NodeShared& shared);
+  std::vector<CanReceiveFilter> receive_filters() const override;
+  void on_frame(const CanFrame& frame, CanReplySink& replies) override;
+  CommandCounters command_counters() const override;
+  void set_log(std::function<void(std::string_view)> log) override;
+  // The payloads of the identification PGNs.
+  static std::vector<std::uint8_t> component_identification(const J1939Options& options);
+  static std::vector<std::uint8_t> software_identification(const J1939Options& options);
+
+ private:
+  bool send(const CanFrame& frame, CanReplySink& replies);
+  bool send_claim(std::uint8_t source, CanReplySink& replies);
+  bool send_pgn(std::uint32_t pgn, const std::vector<std::uint8_t>& data, CanReplySink& replies);
+  void log(const std::string& line);
+  J1939Options options_;
+  NodeShared& shared_;
+  std::map<std::uint8_t, std::uint64_t> others_;  // address -> NAME claimed by another node
+  std::atomic<std::uint64_t> received_{0}, answered_{0}, nacked_{0}, bad_bytes_{0}, dropped_{0};
+  std::mutex log_mutex_;
+  std::function<void(std::string_view)> log_;
 };
 
 // Throws std::invalid_argument naming the option that is out of range.
@@ -166,6 +236,7 @@ class J1939Encoder final : public CanEncoder {
  public:
   explicit J1939Encoder(const J1939Options& options = {});
   std::string name() const override { return "j1939"; }
+  CanCommandResponder* command_responder() override { return node_.get(); }
   void encode(const ImuFrameInput& sample, std::vector<CanFrame>& out) override;
   bool needs_level_attitude() const override { return options_.send_slope; }
   std::uint64_t clamped_values() const { return clamped_values_; }
@@ -174,8 +245,11 @@ class J1939Encoder final : public CanEncoder {
   void restart(TimeNs now_ns, std::vector<CanFrame>& out) override;
 
  private:
+  void encode_frames(const ImuFrameInput& sample, std::vector<CanFrame>& out);
   J1939Options options_;
   std::uint64_t clamped_values_ = 0;
+  std::unique_ptr<NodeShared> shared_ = std::make_unique<NodeShared>();
+  std::unique_ptr<J1939Node> node_;
 };
 
 struct J1939ErrorDetail {
