@@ -52,17 +52,7 @@ class CanDevice final : public EncoderDevice<drivers::CanEncoder, std::vector<dr
 
   std::optional<CommandStatus> command_status() const override {
     if (!responder_) return std::nullopt;
-    const drivers::CommandCounters c = responder_->command_counters();
-    CommandStatus s;
-    s.received = c.received;
-    s.answered = c.answered;
-    s.nacked = c.nacked;
-    s.not_command_bytes = c.not_command_bytes;
-    s.replies_dropped = c.replies_dropped + output_->counters().replies_dropped;
-    s.mode = c.mode;
-    s.format = c.format;
-    s.baud = c.baud;
-    return s;
+    return command_status_of(responder_->command_counters(), output_->counters().replies_dropped);
   }
 
   SampleNeeds needs() const override {

@@ -81,6 +81,22 @@ struct CommandStatus {
   std::uint32_t baud = 0;            // the serial rate it was told to use (0: not a UART setting)
 };
 
+// The status of a device whose responder counted `c`, its output having
+// dropped `output_replies_dropped` queued replies (queue full, link lost
+// before they left): one mapping for the byte-stream and the CAN devices.
+inline CommandStatus command_status_of(const drivers::CommandCounters& c, std::uint64_t output_replies_dropped) {
+  CommandStatus s;
+  s.received = c.received;
+  s.answered = c.answered;
+  s.nacked = c.nacked;
+  s.not_command_bytes = c.not_command_bytes;
+  s.replies_dropped = c.replies_dropped + output_replies_dropped;
+  s.mode = c.mode;
+  s.format = c.format;
+  s.baud = c.baud;
+  return s;
+}
+
 class Device {
  public:
   virtual ~Device() = default;

@@ -38,20 +38,9 @@ class StreamDevice final : public EncoderDevice<drivers::StreamEncoder, std::vec
 
   std::optional<CommandStatus> command_status() const override {
     if (!responder_) return std::nullopt;
-    const drivers::CommandCounters c = responder_->command_counters();
-    CommandStatus s;
-    s.received = c.received;
-    s.answered = c.answered;
-    s.nacked = c.nacked;
-    s.not_command_bytes = c.not_command_bytes;
     // Replies the device could not queue, and queued ones the transport
     // dropped (its reply queue full, the link lost before they left).
-    const drivers::TransportCounters t = counters();
-    s.replies_dropped = c.replies_dropped + t.replies_dropped;
-    s.mode = c.mode;
-    s.format = c.format;
-    s.baud = c.baud;
-    return s;
+    return command_status_of(responder_->command_counters(), counters().replies_dropped);
   }
 
   SampleNeeds needs() const override { return encoder_needs(); }
