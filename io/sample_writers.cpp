@@ -45,7 +45,7 @@ void require_increasing(const char* who, std::size_t index, TimeNs previous_ns, 
 
 // ---------------------------------------------------------------- reading
 
-[[noreturn]] void fail(const std::string& file, std::size_t line, std::string column,
+[[noreturn]] void fail_sample_csv(const std::string& file, std::size_t line, std::string column,
                        std::size_t column_index, std::string expected, std::string detail) {
   throw SampleFormatError(CsvLocation{file, line, std::move(column), column_index},
                           std::move(expected), std::move(detail));
@@ -72,11 +72,11 @@ std::vector<std::size_t> map_header(const std::vector<std::string_view>& fields,
     std::size_t k = 0;
     while (k < schema.size() && schema[k] != fields[i]) ++k;
     if (k == schema.size()) {
-      fail(file, line, std::string(fields[i]), i + 1, expected,
+      fail_sample_csv(file, line, std::string(fields[i]), i + 1, expected,
            "unknown column name; expected " + expected);
     }
     if (seen_at[k] != 0) {
-      fail(file, line, std::string(fields[i]), i + 1, expected,
+      fail_sample_csv(file, line, std::string(fields[i]), i + 1, expected,
            "duplicate column (also column " + std::to_string(seen_at[k]) + ")");
     }
     seen_at[k] = i + 1;
@@ -84,7 +84,7 @@ std::vector<std::size_t> map_header(const std::vector<std::string_view>& fields,
   }
   for (std::size_t k = 0; k < schema.size(); ++k) {
     if (seen_at[k] == 0) {
-      fail(file, line, "", 0, expected,
+      fail_sample_csv(file, line, "", 0, expected,
            "missing column '" + std::string(schema[k]) + "'; expected " + expected);
     }
   }
@@ -94,7 +94,7 @@ std::vector<std::size_t> map_header(const std::vector<std::string_view>& fields,
 void check_width(const std::vector<std::string_view>& fields, std::size_t width, std::size_t line,
                  std::size_t header_line, const std::string& file) {
   if (fields.size() != width) {
-    fail(file, line, "", 0, std::to_string(width) + " fields",
+    fail_sample_csv(file, line, "", 0, std::to_string(width) + " fields",
          "expected " + std::to_string(width) + " comma-separated fields as named by the header (line " +
              std::to_string(header_line) + "), got " + std::to_string(fields.size()));
   }
@@ -104,7 +104,7 @@ double field_double(std::string_view field, const std::string& file, std::size_t
                     std::string_view column, std::size_t column_index) {
   const DoubleParse v = try_parse_double(field);
   if (v.status != NumberStatus::ok) {
-    fail(file, line, std::string(column), column_index, "a finite number",
+    fail_sample_csv(file, line, std::string(column), column_index, "a finite number",
          "expected a finite number, got '" + detail::printable(field) + "' (" +
              std::string(describe(v.status)) + ")");
   }
@@ -113,7 +113,7 @@ double field_double(std::string_view field, const std::string& file, std::size_t
 
 void header_or_fail(detail::CsvLineReader& reader, const std::string& file) {
   if (!reader.next()) {
-    fail(file, 0, "", 0, "a header row",
+    fail_sample_csv(file, 0, "", 0, "a header row",
          "no header row: the file is empty or holds only comments and blank lines");
   }
 }
@@ -122,7 +122,7 @@ void header_or_fail(detail::CsvLineReader& reader, const std::string& file) {
                                   std::size_t column_index, std::string_view unit,
                                   std::string_view now_text, std::string_view previous_text,
                                   std::size_t previous_line) {
-  fail(file, line, std::string(column), column_index, "a time after the previous record's",
+  fail_sample_csv(file, line, std::string(column), column_index, "a time after the previous record's",
        "time " + detail::printable(now_text) + std::string(unit) + " is not after the previous record's " +
            detail::printable(previous_text) + std::string(unit) + " (line " + std::to_string(previous_line) +
            ")");
@@ -131,7 +131,7 @@ void header_or_fail(detail::CsvLineReader& reader, const std::string& file) {
 std::string read_or_fail(const std::string& path, std::string_view what) {
   std::string text;
   if (const int error = read_whole_file(path, text); error != 0) {
-    fail(path, 0, "", 0, "a readable file",
+    fail_sample_csv(path, 0, "", 0, "a readable file",
          "cannot read the " + std::string(what) + ": " + std::generic_category().message(error));
   }
   return text;
@@ -226,7 +226,7 @@ std::vector<ImuSample> parse_imu_csv(std::string_view text, const std::string& s
       if (k == 0) {
         const Int64Parse t = try_parse_int64(fields[i]);
         if (t.status != NumberStatus::ok) {
-          fail(file, line, "time_ns", i + 1, "an integer time in nanoseconds",
+          fail_sample_csv(file, line, "time_ns", i + 1, "an integer time in nanoseconds",
                "expected an integer time in nanoseconds, got '" + detail::printable(fields[i]) + "' (" +
                    std::string(describe(t.status)) + ")");
         }
@@ -250,7 +250,7 @@ std::vector<ImuSample> parse_imu_csv(std::string_view text, const std::string& s
     samples.push_back(s);
   }
   if (samples.empty()) {
-    fail(file, 0, "", 0, "at least one sample",
+    fail_sample_csv(file, 0, "", 0, "at least one sample",
          "no samples after the header (line " + std::to_string(header_line) + ")");
   }
   return samples;
@@ -381,7 +381,7 @@ KinematicsTrajectory parse_kinematics_csv(std::string_view text, const std::stri
       if (k == 0) {
         const TimeParse t = try_parse_decimal_seconds(fields[i]);
         if (t.status != NumberStatus::ok) {
-          fail(file, line, "time_s", i + 1, "a time in decimal seconds",
+          fail_sample_csv(file, line, "time_s", i + 1, "a time in decimal seconds",
                "expected a time in decimal seconds, got '" + detail::printable(fields[i]) + "' (" +
                    std::string(describe(t.status)) + ")");
         }
@@ -398,7 +398,7 @@ KinematicsTrajectory parse_kinematics_csv(std::string_view text, const std::stri
     Eigen::Vector4d q(values[4], values[5], values[6], values[7]);
     const double norm = q.norm();
     if (!(std::abs(norm - 1.0) <= kQuaternionNormTolerance)) {
-      fail(file, line, std::string(schema[4]), qw_column + 1, "a unit quaternion",
+      fail_sample_csv(file, line, std::string(schema[4]), qw_column + 1, "a unit quaternion",
            "expected a unit quaternion (|q| within 1e-6 of 1), got |q| = " + detail::format_double(norm));
     }
     q /= norm;
@@ -413,7 +413,7 @@ KinematicsTrajectory parse_kinematics_csv(std::string_view text, const std::stri
     out.quaternions.push_back(q);
   }
   if (out.states.empty()) {
-    fail(file, 0, "", 0, "at least one state",
+    fail_sample_csv(file, 0, "", 0, "at least one state",
          "no records after the header (line " + std::to_string(header_line) + ")");
   }
   return out;

@@ -272,7 +272,7 @@ struct HeaderLayout {
   std::size_t time_column = 0;          // 0-based index of time_s
 };
 
-[[noreturn]] void fail(const std::string& file, std::size_t line, std::string column,
+[[noreturn]] void fail_trajectory_csv(const std::string& file, std::size_t line, std::string column,
                        std::size_t column_index, std::string expected, std::string detail) {
   throw TrajectoryFormatError(CsvLocation{file, line, std::move(column), column_index},
                               std::move(expected), std::move(detail));
@@ -299,7 +299,7 @@ Group resolve_group(const std::array<GroupInfo, N>& groups, const std::vector<He
   for (std::size_t g = 0; g < N; ++g) {
     if (present[g] == 0) continue;
     if (chosen != N) {
-      fail(file, header_line, "", 0, expected,
+      fail_trajectory_csv(file, header_line, "", 0, expected,
            "ambiguous " + std::string(what) + ": the header has columns of both the " +
                std::string(groups[chosen].label) + " (" + group_columns(groups[chosen]) +
                ") and the " + std::string(groups[g].label) + " (" + group_columns(groups[g]) +
@@ -308,7 +308,7 @@ Group resolve_group(const std::array<GroupInfo, N>& groups, const std::vector<He
     chosen = g;
   }
   if (chosen == N) {
-    fail(file, header_line, "", 0, expected,
+    fail_trajectory_csv(file, header_line, "", 0, expected,
          "missing " + std::string(what) + " columns: expected " + expected);
   }
   if (present[chosen] != groups[chosen].size) {
@@ -320,7 +320,7 @@ Group resolve_group(const std::array<GroupInfo, N>& groups, const std::vector<He
       });
       if (!found) missing += (missing.empty() ? "'" : ", '") + std::string(name) + "'";
     }
-    fail(file, header_line, "", 0, expected,
+    fail_trajectory_csv(file, header_line, "", 0, expected,
          "incomplete " + std::string(groups[chosen].label) + ": missing column(s) " + missing +
              "; expected all of " + group_columns(groups[chosen]));
   }
@@ -334,19 +334,19 @@ void parse_header(const std::vector<std::string_view>& fields, std::size_t line,
   for (std::size_t i = 0; i < fields.size(); ++i) {
     const std::string_view name = fields[i];
     if (name.empty()) {
-      fail(file, line, "", i + 1, "a column name",
+      fail_trajectory_csv(file, line, "", i + 1, "a column name",
            "header column " + std::to_string(i + 1) + " has an empty name (a stray comma?)");
     }
     const ColumnSpec* spec = find_column(name);
     if (spec == nullptr && !options.allow_extra_columns) {
-      fail(file, line, std::string(name), i + 1, "a known column name",
+      fail_trajectory_csv(file, line, std::string(name), i + 1, "a known column name",
            "unknown column name; expected one of " + all_column_names() +
                " (names are case-sensitive)");
     }
     if (spec != nullptr) {
       for (std::size_t j = 0; j < i; ++j) {
         if (layout.columns[j].spec == spec) {
-          fail(file, line, std::string(name), i + 1, "each column once",
+          fail_trajectory_csv(file, line, std::string(name), i + 1, "each column once",
                "duplicate column (also column " + std::to_string(j + 1) + ")");
         }
       }
@@ -356,7 +356,7 @@ void parse_header(const std::vector<std::string_view>& fields, std::size_t line,
   const bool has_time = std::any_of(layout.columns.begin(), layout.columns.end(), [](const HeaderColumn& c) {
     return c.spec != nullptr && c.spec->group == Group::time;
   });
-  if (!has_time) fail(file, line, "", 0, "a time_s column", "missing column 'time_s'");
+  if (!has_time) fail_trajectory_csv(file, line, "", 0, "a time_s column", "missing column 'time_s'");
 
   switch (resolve_group(kPositionGroups, layout.columns, file, line, "position")) {
     case Group::geodetic: layout.position_kind = PositionKind::geodetic; break;
@@ -369,7 +369,7 @@ void parse_header(const std::vector<std::string_view>& fields, std::size_t line,
     default: layout.attitude_kind = AttitudeKind::quaternion_ecef; break;
   }
   if (!kinds_compatible(layout.position_kind, layout.attitude_kind)) {
-    fail(file, line, "", 0, "an Earth-fixed position with an ECEF attitude",
+    fail_trajectory_csv(file, line, "", 0, "an Earth-fixed position with an ECEF attitude",
          "an ECEF attitude (qw_ecef, ...) needs an Earth-fixed position (lat_deg,lon_deg,h_m or "
          "x_m,y_m,z_m), not a local NED one");
   }
@@ -455,7 +455,7 @@ void parse_record_fields(const HeaderLayout& layout, const std::string& file,
                          const TrajectoryLineParser::Predecessor* predecessor) {
   const std::size_t width = layout.columns.size();
   if (fields.size() != width) {
-    fail(file, line, "", 0, std::to_string(width) + " fields",
+    fail_trajectory_csv(file, line, "", 0, std::to_string(width) + " fields",
          "expected " + std::to_string(width) + " comma-separated fields as named by the header (line " +
              std::to_string(layout.header_line) + "), got " + std::to_string(fields.size()));
   }
@@ -470,7 +470,7 @@ void parse_record_fields(const HeaderLayout& layout, const std::string& file,
     if (spec->group == Group::time) {
       const TimeParse t = try_parse_decimal_seconds(field);
       if (t.status != NumberStatus::ok) {
-        fail(file, line, layout.columns[i].name, i + 1, std::string(spec->expected),
+        fail_trajectory_csv(file, line, layout.columns[i].name, i + 1, std::string(spec->expected),
              "expected " + std::string(spec->expected) + ", got '" + detail::printable(field) + "' (" +
                  std::string(describe(t.status)) + ")" + integer_time_hint(field, t.status));
       }
@@ -480,15 +480,15 @@ void parse_record_fields(const HeaderLayout& layout, const std::string& file,
     const DoubleParse v = try_parse_double(field);
     if (v.status == NumberStatus::not_finite && spec->group == Group::hpr && spec->slot == 0 &&
         record_at_pole(layout, fields)) {
-      fail(file, line, layout.columns[i].name, i + 1, std::string(spec->expected), pole_heading_message(field));
+      fail_trajectory_csv(file, line, layout.columns[i].name, i + 1, std::string(spec->expected), pole_heading_message(field));
     }
     if (v.status != NumberStatus::ok) {
-      fail(file, line, layout.columns[i].name, i + 1, std::string(spec->expected),
+      fail_trajectory_csv(file, line, layout.columns[i].name, i + 1, std::string(spec->expected),
            "expected " + std::string(spec->expected) + ", got '" + detail::printable(field) + "' (" +
                std::string(describe(v.status)) + ")");
     }
     if (v.value < spec->min || v.value > spec->max) {
-      fail(file, line, layout.columns[i].name, i + 1, std::string(spec->expected),
+      fail_trajectory_csv(file, line, layout.columns[i].name, i + 1, std::string(spec->expected),
            "expected " + std::string(spec->expected) + ", got '" + detail::printable(field) + "'");
     }
     switch (spec->group) {
@@ -500,7 +500,7 @@ void parse_record_fields(const HeaderLayout& layout, const std::string& file,
   }
   if (predecessor != nullptr && record.t_ns <= predecessor->t_ns) {
     const std::size_t tc = layout.time_column;
-    fail(file, line, layout.columns[tc].name, tc + 1, "a time after the previous record's",
+    fail_trajectory_csv(file, line, layout.columns[tc].name, tc + 1, "a time after the previous record's",
          "time " + detail::printable(fields[tc]) + " s is not after the previous record's " +
              detail::printable(predecessor->time_text) + " s (line " + std::to_string(predecessor->line) + ")");
   }
@@ -510,7 +510,7 @@ void parse_record_fields(const HeaderLayout& layout, const std::string& file,
     double norm = 0.0;
     if (!normalise_unit_quaternion(record.attitude, norm)) {
       const std::size_t qc = layout.quaternion_w_column;
-      fail(file, line, layout.columns[qc].name, qc + 1, "a unit quaternion",
+      fail_trajectory_csv(file, line, layout.columns[qc].name, qc + 1, "a unit quaternion",
            "expected a unit quaternion (|q| within 1e-6 of 1), got |q| = " + detail::format_double(norm));
     }
   }
@@ -598,7 +598,7 @@ Trajectory parse_trajectory_csv(std::string_view text, const std::string& source
   const std::string& file = source_name;
   detail::CsvLineReader reader(text);
   if (!reader.next()) {
-    fail(file, 0, "", 0, "a header row",
+    fail_trajectory_csv(file, 0, "", 0, "a header row",
          "no header row: the file is empty or holds only comments and blank lines");
   }
   TrajectoryLineParser parser(source_name, options);
@@ -623,7 +623,7 @@ Trajectory parse_trajectory_csv(std::string_view text, const std::string& source
     // its newline may be a number cut short (`2.` of `2.900`), which would
     // parse; a file still being written must not yield a wrong knot.
     if (reader.unterminated()) {
-      fail(file, reader.line_number(), "", 0, "a line ending in a newline",
+      fail_trajectory_csv(file, reader.line_number(), "", 0, "a line ending in a newline",
            "the file ends inside this record (no final newline): it is cut off or still being written; a "
            "partial record is not used (add the newline if the line is complete)");
     }
@@ -633,7 +633,7 @@ Trajectory parse_trajectory_csv(std::string_view text, const std::string& source
     previous = {record.t_ns, reader.fields()[parser.time_column()], record.line};
   }
   if (trajectory.records.empty()) {
-    fail(file, 0, "", 0, "at least one record",
+    fail_trajectory_csv(file, 0, "", 0, "at least one record",
          "no records after the header (line " + std::to_string(parser.header_line()) + ")");
   }
   return trajectory;
@@ -642,7 +642,7 @@ Trajectory parse_trajectory_csv(std::string_view text, const std::string& source
 Trajectory read_trajectory_csv(const std::string& path, const TrajectoryReadOptions& options) {
   std::string text;
   if (const int error = read_whole_file(path, text); error != 0) {
-    fail(path, 0, "", 0, "a readable file",
+    fail_trajectory_csv(path, 0, "", 0, "a readable file",
          "cannot read the trajectory file: " + std::generic_category().message(error));
   }
   return parse_trajectory_csv(text, path, options);
