@@ -64,20 +64,21 @@ void make_raw(int fd, const std::string& where, const SerialSettings* settings) 
   if (::tcsetattr(fd, TCSANOW, &tio) != 0) throw TransportError(where + ": tcsetattr: " + errno_message(errno));
 }
 
-int open_for_reading(const std::string& path, const std::string& where) {
-  const int fd = ::open(path.c_str(), O_RDONLY | O_NOCTTY | O_NONBLOCK | O_CLOEXEC);
+int open_for_reading(const std::string& path, const std::string& where, bool writable = false) {
+  const int fd = ::open(path.c_str(), (writable ? O_RDWR : O_RDONLY) | O_NOCTTY | O_NONBLOCK | O_CLOEXEC);
   if (fd < 0) throw TransportError(where + ": cannot open: " + errno_message(errno));
   return fd;
 }
 
 }  // namespace
 
-ByteStreamReader::ByteStreamReader(const std::string& path, const SerialSettings& settings) : path_(path) {
+ByteStreamReader::ByteStreamReader(const std::string& path, const SerialSettings& settings, Access access)
+    : path_(path), writable_(access == Access::read_write) {
   const std::string where = "byte stream " + path;
   struct stat st {};
   if (::stat(path.c_str(), &st) != 0) throw TransportError(where + ": not found (" + errno_message(errno) + ")");
   if (is_pty_slave(path)) {
-    fd_ = open_for_reading(path, where);
+    fd_ = open_for_reading(path, where, writable_);
     try {
       make_raw(fd_, where, nullptr);
     } catch (...) {
@@ -95,14 +96,14 @@ ByteStreamReader::ByteStreamReader(const std::string& path, const SerialSettings
     ::close(probe);
     if (tty) {
       try {
-        SerialPortHandle port = open_serial_port(path, settings, SP_MODE_READ);
+        SerialPortHandle port = open_serial_port(path, settings, writable_ ? SP_MODE_READ_WRITE : SP_MODE_READ);
         fd_ = serial_port_fd(port.get());
         port_ = port.release();
         kind_ = Kind::serial_libserialport;
         description_ = "serial " + path + " " + to_string(settings) + " (libserialport)";
         return;
       } catch (const TransportError& libserialport_failure) {
-        fd_ = open_for_reading(path, where);
+        fd_ = open_for_reading(path, where, writable_);
         try {
           make_raw(fd_, where, &settings);
         } catch (...) {
@@ -116,6 +117,7 @@ ByteStreamReader::ByteStreamReader(const std::string& path, const SerialSettings
       }
     }
   }
+  if (writable_) throw TransportError(where + ": not a tty: nothing to write requests to");
   fd_ = open_for_reading(path, where);
   kind_ = Kind::other;
   description_ = "file " + path;
@@ -148,6 +150,25 @@ ReadResult ByteStreamReader::read_some(std::span<std::uint8_t> buffer, std::chro
   }
   if (p.revents & (POLLHUP | POLLERR | POLLNVAL)) return {0, true};
   return {};
+}
+
+void ByteStreamReader::write_all(std::span<const std::uint8_t> bytes, std::chrono::milliseconds timeout) {
+  if (!writable_) throw TransportError("byte stream " + path_ + ": opened for reading only");
+  const auto deadline = std::chrono::steady_clock::now() + timeout;
+  std::size_t done = 0;
+  while (done < bytes.size()) {
+    const ssize_t n = ::write(fd_, bytes.data() + done, bytes.size() - done);
+    if (n > 0) {
+      done += static_cast<std::size_t>(n);
+      continue;
+    }
+    if (n < 0 && errno != EAGAIN && errno != EINTR)
+      throw TransportError("byte stream " + path_ + ": write: " + errno_message(errno));
+    const auto left = std::chrono::duration_cast<std::chrono::milliseconds>(deadline - std::chrono::steady_clock::now());
+    if (left.count() <= 0) throw TransportError("byte stream " + path_ + ": the port took no bytes for the timeout");
+    pollfd p{fd_, POLLOUT, 0};
+    ::poll(&p, 1, static_cast<int>(left.count()));
+  }
 }
 
 }  // namespace imuemu::drivers

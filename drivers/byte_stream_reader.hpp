@@ -29,8 +29,14 @@ class ByteStreamReader {
  public:
   enum class Kind { pty, serial_libserialport, tty_termios, other };
 
+  // read_write: a tty (pty or serial port) the caller also writes to, as a
+  // driver writes its requests (`imuemu listen --handshake`); a file or FIFO
+  // is refused then.
+  enum class Access { read_only, read_write };
+
   // Throws TransportError naming the path: missing, cannot open, settings refused.
-  explicit ByteStreamReader(const std::string& path, const SerialSettings& settings = {});
+  explicit ByteStreamReader(const std::string& path, const SerialSettings& settings = {},
+                            Access access = Access::read_only);
   ~ByteStreamReader();
   ByteStreamReader(const ByteStreamReader&) = delete;
   ByteStreamReader& operator=(const ByteStreamReader&) = delete;
@@ -40,6 +46,10 @@ class ByteStreamReader {
   // the stream.
   ReadResult read_some(std::span<std::uint8_t> buffer, std::chrono::milliseconds timeout);
 
+  // Writes all of `bytes`, waiting at most `timeout` for the port to take
+  // them. Throws TransportError (opened read-only, write error, timeout).
+  void write_all(std::span<const std::uint8_t> bytes, std::chrono::milliseconds timeout);
+
   Kind kind() const noexcept { return kind_; }
   std::string describe() const { return description_; }
 
@@ -47,6 +57,7 @@ class ByteStreamReader {
   std::string path_;
   std::string description_;
   Kind kind_ = Kind::other;
+  bool writable_ = false;
   int fd_ = -1;
   sp_port* port_ = nullptr;  // set when libserialport opened the port (it owns fd_ then)
 };

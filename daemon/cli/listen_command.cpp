@@ -279,7 +279,13 @@ void validate(const ListenArgs& args) {
   if (!std::isfinite(args.rate_tolerance) || args.rate_tolerance <= 0.0 || args.rate_tolerance > 1.0)
     throw std::invalid_argument("--rate-tolerance: expected a fraction in (0, 1]");
   if (args.every == 0) throw std::invalid_argument("--every: expected >= 1");
+  if (args.handshake && !drivers::handshake::make_client(args.protocol))
+    throw std::invalid_argument("--handshake: " + args.protocol +
+                                " has no start-up commands to send (the handshake knows mip and mavlink2)");
+  if (args.handshake_timeout_ms < 1 || args.handshake_timeout_ms > 60000)
+    throw std::invalid_argument("--handshake-timeout-ms: expected 1..60000");
 }
+
 
 // The time left before --duration-s, as a poll timeout of at most 100 ms
 // (the stop flag is checked that often).
@@ -287,6 +293,49 @@ std::chrono::milliseconds next_timeout(TimeNs now_ns, TimeNs end_ns) {
   const TimeNs left_ns = end_ns - now_ns;
   const TimeNs capped = std::clamp<TimeNs>(left_ns, 0, 100'000'000);
   return std::chrono::milliseconds((capped + 999'999) / 1'000'000);
+}
+
+// --handshake: each step's request written, then the replies read until the
+// step's answer is complete or its timeout; stream packets read meanwhile
+// are skipped (not decoded: the listening starts after the handshake).
+void run_handshake(const ListenArgs& args, drivers::ByteStreamReader& reader, std::ostream& out,
+                   const std::atomic<bool>& stop, std::vector<drivers::handshake::StepResult>& results) {
+  const std::unique_ptr<drivers::handshake::Client> client = drivers::handshake::make_client(args.protocol);
+  std::vector<std::uint8_t> buffer(4096);
+  for (std::size_t step = 0; step < client->step_count() && !stop.load(); ++step) {
+    drivers::handshake::StepResult r;
+    r.step = client->step_name(step);
+    const std::vector<std::uint8_t> request = client->request(step);
+    const TimeNs start_ns = monotonic_now_ns();
+    const TimeNs end_ns = start_ns + static_cast<TimeNs>(args.handshake_timeout_ms) * 1'000'000;
+    reader.write_all(request, std::chrono::milliseconds(args.handshake_timeout_ms));
+    bool complete = false;
+    while (!complete && !stop.load()) {
+      const TimeNs now = monotonic_now_ns();
+      if (now >= end_ns) break;
+      const drivers::ReadResult got = reader.read_some(buffer, next_timeout(now, end_ns));
+      if (got.bytes > 0)
+        complete = client->feed(step, std::span<const std::uint8_t>(buffer.data(), got.bytes), r);
+      if (got.end_of_stream) break;
+    }
+    r.latency_ms = static_cast<double>(monotonic_now_ns() - start_ns) / 1e6;
+    if (!complete) {
+      client->timed_out(step, r);
+      if (r.reply.empty()) r.reply = "no reply in " + std::to_string(args.handshake_timeout_ms) + " ms";
+    }
+    if (args.json) {
+      out << nlohmann::json{{"type", "handshake"}, {"step", r.step}, {"answered", r.answered},
+                            {"accepted", r.accepted}, {"reply", r.reply}, {"latency_ms", r.latency_ms}}
+                 .dump()
+          << "\n";
+    } else {
+      char ms[32];
+      std::snprintf(ms, sizeof ms, "%.1f ms", r.latency_ms);
+      out << "handshake: " << r.step << ": " << r.reply << (complete ? std::string(" (") + ms + ")" : "") << "\n";
+    }
+    out.flush();
+    results.push_back(std::move(r));
+  }
 }
 
 }  // namespace
@@ -355,8 +404,11 @@ ListenSummary listen(const ListenArgs& args, std::ostream& out, const std::atomi
     }
     summary.can_kernel_drops = reader.counters().kernel_drops;
   } else {
-    drivers::ByteStreamReader reader(args.device, args.serial);  // throws TransportError naming the path
+    drivers::ByteStreamReader reader(args.device, args.serial,  // throws TransportError naming the path
+                                     args.handshake ? drivers::ByteStreamReader::Access::read_write
+                                                    : drivers::ByteStreamReader::Access::read_only);
     summary.device_description = reader.describe();
+    if (args.handshake) run_handshake(args, reader, out, stop, summary.handshake);
     std::vector<std::uint8_t> buffer(4096);
     try {
       for (;;) {
@@ -410,6 +462,13 @@ nlohmann::json summary_json(const ListenSummary& s) {
                    {"rate_of_sample_time_grid_hz", opt(s.rate_of_sample_time_grid_hz)},
                    {"missing_samples", opt(s.missing_samples)},
                    {"rate_ok", opt(s.rate_ok)}};
+  if (!s.handshake.empty()) {
+    nlohmann::json steps = nlohmann::json::array();
+    for (const auto& r : s.handshake)
+      steps.push_back({{"step", r.step}, {"answered", r.answered}, {"accepted", r.accepted}, {"reply", r.reply},
+                       {"latency_ms", r.latency_ms}});
+    j["handshake"] = steps;
+  }
   if (is_can_protocol(s.protocol)) {
     j["can_frames_received"] = s.can_frames_received;
     j["can_frames_other_source"] = s.can_frames_other_source;
@@ -436,6 +495,15 @@ std::string summary_text(const ListenSummary& s) {
   };
   o << "listen " << s.protocol << " on " << (s.device_description.empty() ? s.device : s.device_description)
     << ": ended (" << s.end_reason << ") after " << s.wall_time_s << " s\n";
+  if (!s.handshake.empty()) {
+    std::size_t answered = 0, accepted = 0;
+    for (const auto& r : s.handshake) {
+      answered += r.answered ? 1 : 0;
+      accepted += r.accepted ? 1 : 0;
+    }
+    o << "  handshake: " << s.handshake.size() << " steps, " << answered << " answered, " << accepted
+      << " accepted\n";
+  }
   o << "  samples " << s.samples << ", frames " << s.frames << ", checksum errors " << s.checksum_errors
     << ", resync bytes " << s.resync_bytes << ", other errors " << s.other_errors << "\n";
   o << "  sequence gaps " << s.sequence_gaps << " (decoder), "
@@ -527,6 +595,12 @@ void add_listen_command(CLI::App& app, int& exit_code) {
       ->check(CLI::IsMember({"none", "rtscts", "xonxoff"}));
   c->add_option("--duration-s", a.duration_s, "Stop after this many seconds of wall time (0: no limit)")->check(seconds_in(0.0, kMaxDurationS));
   c->add_option("--count", a.count, "Stop after this many samples (0: no limit)");
+  c->add_flag("--handshake", a.handshake,
+              "Act as the driver first: send the start-up sequence a common driver sends (mip: mip_sdk's; mavlink2: a "
+              "ground station's) and report each reply, then listen");
+  c->add_option("--handshake-timeout-ms", a.handshake_timeout_ms, "--handshake: how long to wait for each reply")
+      ->capture_default_str()
+      ->check(CLI::Range(1, 60000));
   c->add_flag("--json", a.json, "NDJSON: one object per sample line and a final summary object");
   c->add_flag("--quiet", a.quiet, "Print the summary only");
   c->add_option("--every", a.every, "Print every Nth sample")->capture_default_str()->check(CLI::PositiveNumber);

@@ -17,12 +17,14 @@
 #include <iosfwd>
 #include <optional>
 #include <string>
+#include <vector>
 
 #include <nlohmann/json_fwd.hpp>
 
 #include "core/types.hpp"
 #include "drivers/protocol.hpp"
 #include "drivers/protocols/can_protocols.hpp"
+#include "drivers/protocols/handshake.hpp"
 #include "drivers/protocols/stream_protocols.hpp"
 #include "drivers/serial_transport.hpp"
 
@@ -49,6 +51,12 @@ struct ListenArgs {
   std::string out_path;         // CSV of every decoded sample (empty: none)
   double expect_rate_hz = 0.0;  // > 0: the summary says whether the measured rate matches
   double rate_tolerance = 0.01; // relative tolerance of that match
+  // Before listening, act as the device's driver: write the start-up
+  // sequence a common driver sends (drivers/protocols/handshake.hpp; mip and
+  // mavlink2) and report each reply, waiting at most handshake_timeout_ms
+  // for each.
+  bool handshake = false;
+  int handshake_timeout_ms = 1000;
 };
 
 struct ListenSummary {
@@ -84,6 +92,7 @@ struct ListenSummary {
   std::optional<double> rate_of_sample_time_grid_hz;
   std::optional<std::uint64_t> missing_samples;
   std::optional<bool> rate_ok;  // with expect_rate_hz: the grid rate (else the arrival rate) within tolerance
+  std::vector<drivers::handshake::StepResult> handshake;  // --handshake: each step as it ended
 };
 
 // A decoded sample and when it arrived (CLOCK_MONOTONIC ns).

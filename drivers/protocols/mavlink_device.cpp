@@ -30,18 +30,13 @@ namespace {
 
 using X25Engine = boost::crc_optimal<16, 0x1021, 0xFFFF, 0, true, true>;
 
-// The inbound messages whose CRC_EXTRA the parser knows: the ones the device
-// acts on, and HEARTBEAT (what every peer sends; read, not a command).
-constexpr std::array<const MessageSpec*, 6> kInbound{&kHeartbeat,   &kParamRequestRead, &kParamRequestList,
-                                                     &kParamSet,    &kCommandInt,       &kCommandLong};
+}  // namespace
 
-const MessageSpec* inbound_spec(std::uint32_t id) {
-  for (const MessageSpec* m : kInbound)
+const MessageSpec* FrameParser::spec_of(std::uint32_t id) const {
+  for (const MessageSpec* m : known_)
     if (m->id == id) return m;
   return nullptr;
 }
-
-}  // namespace
 
 void FrameParser::feed(std::span<const std::uint8_t> bytes, std::chrono::steady_clock::time_point now,
                        const std::function<void(const InboundPacket&)>& on_packet) {
@@ -80,7 +75,7 @@ void FrameParser::feed(std::span<const std::uint8_t> bytes, std::chrono::steady_
     } else {
       msgid = c[5];
     }
-    const MessageSpec* spec = ok ? inbound_spec(msgid) : nullptr;
+    const MessageSpec* spec = ok ? spec_of(msgid) : nullptr;
     if (spec == nullptr) {  // cannot be checked: one byte, scan on
       ++skipped_;
       ++pos;

@@ -16,6 +16,7 @@
 // sample period late.
 #pragma once
 
+#include <array>
 #include <atomic>
 #include <chrono>
 #include <cstddef>
@@ -43,6 +44,11 @@ inline constexpr MessageSpec kParamSet{23, 168, 23};
 inline constexpr MessageSpec kCommandInt{75, 158, 35};
 inline constexpr MessageSpec kCommandLong{76, 152, 33};
 inline constexpr MessageSpec kCommandAck{77, 143, 10};
+
+// The inbound messages whose CRC_EXTRA a device's parser knows: the ones it
+// acts on, and HEARTBEAT (what every peer sends; read, not a command).
+inline constexpr std::array<const MessageSpec*, 6> kDeviceInbound{&kHeartbeat,   &kParamRequestRead, &kParamRequestList,
+                                                                  &kParamSet,    &kCommandInt,       &kCommandLong};
 
 inline constexpr std::uint8_t kMagicV1 = 0xFE;  // MAVLink 1 STX
 inline constexpr std::size_t kHeaderBytesV1 = 6;
@@ -77,12 +83,19 @@ struct InboundPacket {
 class FrameParser {
  public:
   static constexpr std::chrono::milliseconds kStaleAfter{100};
+  // The messages whose CRC_EXTRA the parser knows (the table must outlive
+  // the parser): by default what a device reads from its driver; a ground
+  // station's side (drivers/protocols/handshake.cpp) passes its own.
+  explicit FrameParser(std::span<const MessageSpec* const> known = kDeviceInbound) : known_(known) {}
   void feed(std::span<const std::uint8_t> bytes, std::chrono::steady_clock::time_point now,
             const std::function<void(const InboundPacket&)>& on_packet);
   std::uint64_t skipped_bytes() const noexcept { return skipped_; }
   std::uint64_t packets() const noexcept { return packets_; }
 
  private:
+  const MessageSpec* spec_of(std::uint32_t id) const;
+
+  std::span<const MessageSpec* const> known_;
   std::vector<std::uint8_t> buffer_;
   std::chrono::steady_clock::time_point candidate_since_{};
   std::uint64_t skipped_ = 0, packets_ = 0;

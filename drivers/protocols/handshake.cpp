@@ -1,0 +1,302 @@
+// The driver's side of a start-up: see handshake.hpp.
+#include "drivers/protocols/handshake.hpp"
+
+#include <algorithm>
+#include <array>
+#include <cstdio>
+#include <cstring>
+#include <string_view>
+
+#include "drivers/protocols/mavlink2.hpp"
+#include "drivers/protocols/mavlink_device.hpp"
+#include "drivers/protocols/mip_device.hpp"
+#include "drivers/protocols/wire_bytes.hpp"
+
+namespace imuemu::drivers::handshake {
+namespace {
+
+std::string hex2(unsigned x) {
+  char b[8];
+  std::snprintf(b, sizeof b, "0x%02X", x & 0xFFu);
+  return b;
+}
+
+// ---------------------------------------------------------------- MIP
+
+// [DCP] ACK/NACK error codes.
+std::string mip_ack_text(std::uint8_t code) {
+  switch (code) {
+    case 0x00: return "ACK";
+    case 0x01: return "NACK 0x01 (unknown command)";
+    case 0x02: return "NACK 0x02 (invalid checksum)";
+    case 0x03: return "NACK 0x03 (invalid parameter)";
+    case 0x04: return "NACK 0x04 (command failed)";
+    case 0x05: return "NACK 0x05 (command timed out)";
+    default: return "NACK " + hex2(code);
+  }
+}
+
+// A 16-character [DCP] string field, its padding (spaces or NULs) removed.
+std::string mip_string16(std::span<const std::uint8_t> data, std::size_t at) {
+  if (data.size() < at + 16) return "?";
+  std::string s(reinterpret_cast<const char*>(data.data() + at), 16);
+  while (!s.empty() && (s.back() == ' ' || s.back() == '\0')) s.pop_back();
+  while (!s.empty() && s.front() == ' ') s.erase(s.begin());
+  return s;
+}
+
+struct MipStep {
+  const char* name;
+  std::uint8_t descriptor_set;
+  std::vector<std::uint8_t> field;  // descriptor, then data
+};
+
+class MipClient final : public Client {
+ public:
+  MipClient()
+      : steps_{{"Ping (0x01,0x01)", 0x01, {0x01}},
+               {"Set To Idle (0x01,0x02)", 0x01, {0x02}},
+               {"Get Device Information (0x01,0x03)", 0x01, {0x03}},
+               {"Get Device Descriptors (0x01,0x04)", 0x01, {0x04}},
+               {"Get Base Rate of 0x80 (0x0C,0x0E)", 0x0C, {0x0E, 0x80}},
+               {"Read Message Format of 0x80 (0x0C,0x0F)", 0x0C, {0x0F, 0x02, 0x80}},
+               {"Resume (0x01,0x06)", 0x01, {0x06}}} {}
+
+  std::size_t step_count() const override { return steps_.size(); }
+  std::string step_name(std::size_t step) const override { return steps_.at(step).name; }
+  std::vector<std::uint8_t> request(std::size_t step) override {
+    const MipStep& s = steps_.at(step);
+    const std::array<std::vector<std::uint8_t>, 1> fields{s.field};
+    return mip::make_packet(s.descriptor_set, fields);
+  }
+
+  bool feed(std::size_t step, std::span<const std::uint8_t> bytes, StepResult& result) override {
+    const MipStep& s = steps_.at(step);
+    bool done = false;
+    parser_.feed(bytes, std::chrono::steady_clock::now(),
+                 [&](std::uint8_t set, std::span<const std::uint8_t> payload) {
+                   if (done || set != s.descriptor_set) return;  // stream data, or another set's reply
+                   done = read_reply(s, payload, result);
+                 });
+    return done;
+  }
+
+ private:
+  // A reply packet: an ACK/NACK field (0xF1: command echo, error code) for
+  // this step's command, then its data fields.
+  static bool read_reply(const MipStep& s, std::span<const std::uint8_t> payload, StepResult& result) {
+    bool ours = false;
+    std::string text;
+    for (std::size_t at = 0; at + 2 <= payload.size();) {
+      const std::size_t len = payload[at];
+      if (len < 2 || at + len > payload.size()) break;
+      const std::uint8_t descriptor = payload[at + 1];
+      const std::span<const std::uint8_t> data = payload.subspan(at + 2, len - 2);
+      at += len;
+      if (descriptor == 0xF1 && data.size() >= 2) {
+        if (data[0] != s.field[0]) return false;  // the ACK of another command
+        ours = true;
+        result.accepted = data[1] == 0x00;
+        text = mip_ack_text(data[1]);
+      } else if (ours) {
+        text += "; " + describe_field(descriptor, data);
+      }
+    }
+    if (!ours) return false;
+    result.answered = true;
+    result.reply = text;
+    return true;
+  }
+
+  static std::string describe_field(std::uint8_t descriptor, std::span<const std::uint8_t> data) {
+    switch (descriptor) {
+      case 0x81:  // Device Information [DCP 0x01,0x03]: u16 firmware, five 16-char strings
+        if (data.size() >= 2 + 5 * 16) {
+          const unsigned fw = wire::get_be<std::uint16_t>(data.data());
+          char firmware[32];
+          // mip_sdk prints version v as v/1000 . v/100%10 . v%100 (1108 -> 1.1.08).
+          std::snprintf(firmware, sizeof firmware, "%u.%u.%02u", fw / 1000, fw / 100 % 10, fw % 100);
+          return "model '" + mip_string16(data, 2) + "', model number '" + mip_string16(data, 18) + "', serial '" +
+                 mip_string16(data, 34) + "', lot '" + mip_string16(data, 50) + "', options '" +
+                 mip_string16(data, 66) + "', firmware " + firmware;
+        }
+        break;
+      case 0x82:  // Device Descriptors: u16 each
+        return std::to_string(data.size() / 2) + " descriptors";
+      case 0x8E:  // Base Rate: set, u16 Hz
+        if (data.size() >= 3)
+          return "base rate of " + hex2(data[0]) + ": " + std::to_string(wire::get_be<std::uint16_t>(data.data() + 1)) +
+                 " Hz";
+        break;
+      case 0x8F: {  // Message Format: set, count, (field, u16 decimation) each
+        if (data.size() < 2) break;
+        std::string s = "format of " + hex2(data[0]) + ":";
+        const std::size_t n = data[1];
+        if (n == 0) s += " no fields";
+        for (std::size_t i = 0; i < n && 2 + 3 * i + 3 <= data.size(); ++i) {
+          const std::uint8_t* f = data.data() + 2 + 3 * i;
+          s += " " + hex2(f[0]) + "/" + std::to_string(wire::get_be<std::uint16_t>(f + 1));
+        }
+        return s + " (field/decimation)";
+      }
+      default: break;
+    }
+    return "field " + hex2(descriptor) + " (" + std::to_string(data.size()) + " bytes)";
+  }
+
+  std::vector<MipStep> steps_;
+  mip::CommandParser parser_;
+};
+
+// ---------------------------------------------------------------- MAVLink
+
+// [X] common.xml messages the ground station side writes or reads.
+constexpr std::uint32_t kAutopilotVersionMessageId = 148;  // [X] AUTOPILOT_VERSION
+constexpr std::uint8_t kGcsSystemId = 255, kGcsComponentId = 190;  // QGC's defaults
+constexpr std::uint8_t kMavTypeGcs = 6, kMavAutopilotInvalid = 8;
+constexpr std::array<const mavlink2::MessageSpec*, 3> kGroundStationInbound{
+    &mavlink2::kHeartbeat, &mavlink2::kCommandAck, &mavlink2::kParamValue};
+
+std::string mav_result_text(std::uint8_t r) {
+  static constexpr std::array<const char*, 7> kNames{"ACCEPTED", "TEMPORARILY_REJECTED", "DENIED", "UNSUPPORTED",
+                                                     "FAILED",   "IN_PROGRESS",          "CANCELLED"};
+  return r < kNames.size() ? std::string("MAV_RESULT_") + kNames[r] : "MAV_RESULT " + std::to_string(r);
+}
+
+class MavlinkClient final : public Client {
+ public:
+  MavlinkClient() : parser_(kGroundStationInbound) {}
+
+  std::size_t step_count() const override { return 3; }
+  std::string step_name(std::size_t step) const override {
+    static constexpr std::array<const char*, 3> kNames{
+        "HEARTBEAT (ground station) -> the component's HEARTBEAT",
+        "COMMAND_LONG REQUEST_MESSAGE (512) AUTOPILOT_VERSION (148)", "PARAM_REQUEST_LIST (21)"};
+    return kNames.at(step);
+  }
+
+  std::vector<std::uint8_t> request(std::size_t step) override {
+    switch (step) {
+      case 0: {  // [X] HEARTBEAT, fields in wire order (by size)
+        std::array<std::uint8_t, 9> p{};
+        p[4] = kMavTypeGcs;
+        p[5] = kMavAutopilotInvalid;
+        p[8] = 3;  // mavlink_version
+        return frame(mavlink2::kHeartbeat, p);
+      }
+      case 1: {  // COMMAND_LONG: param1..7 (f32), command, target system/component, confirmation
+        std::array<std::uint8_t, 33> p{};
+        wire::put_le<float>(p.data(), static_cast<float>(kAutopilotVersionMessageId));
+        wire::put_le<std::uint16_t>(p.data() + 28, mavlink2::kCmdRequestMessage);
+        p[30] = target_system_;
+        p[31] = target_component_;
+        return frame(mavlink2::kCommandLong, p);
+      }
+      default: {  // PARAM_REQUEST_LIST: target system, component
+        const std::array<std::uint8_t, 2> p{target_system_, target_component_};
+        params_seen_.clear();
+        param_count_ = -1;
+        return frame(mavlink2::kParamRequestList, p);
+      }
+    }
+  }
+
+  bool feed(std::size_t step, std::span<const std::uint8_t> bytes, StepResult& result) override {
+    bool done = false;
+    parser_.feed(bytes, std::chrono::steady_clock::now(), [&](const mavlink2::InboundPacket& p) {
+      if (done) return;
+      if (step == 0 && p.message_id == mavlink2::kHeartbeat.id) {
+        target_system_ = p.system_id;
+        target_component_ = p.component_id;
+        result.answered = result.accepted = true;
+        result.reply = "HEARTBEAT from system " + std::to_string(p.system_id) + " component " +
+                       std::to_string(p.component_id) + ", MAV_TYPE " + std::to_string(p.payload[4]) +
+                       ", system status " + std::to_string(p.payload[7]);
+        done = true;
+      } else if (step == 1 && p.message_id == mavlink2::kCommandAck.id) {
+        if (wire::get_le<std::uint16_t>(p.payload.data()) != mavlink2::kCmdRequestMessage) return;
+        const std::uint8_t r = p.payload[2];
+        result.answered = true;
+        result.accepted = r == mavlink2::kResultAccepted;
+        result.reply = "COMMAND_ACK " + mav_result_text(r);
+        done = true;
+      } else if (step == 2 && p.message_id == mavlink2::kParamValue.id) {
+        const float value = wire::get_le<float>(p.payload.data());
+        param_count_ = wire::get_le<std::uint16_t>(p.payload.data() + 4);
+        const std::uint16_t index = wire::get_le<std::uint16_t>(p.payload.data() + 6);
+        char id[17] = {};
+        std::memcpy(id, p.payload.data() + 8, 16);
+        char line[96];
+        std::snprintf(line, sizeof line, "%s%s = %g [%u]", params_seen_.empty() ? "" : ", ", id,
+                      static_cast<double>(value), static_cast<unsigned>(index));
+        if (params_seen_.size() <= index) params_seen_.resize(index + 1u, false);
+        if (!params_seen_[index]) {
+          params_seen_[index] = true;
+          params_text_ += line;
+        }
+        if (seen() >= static_cast<std::size_t>(param_count_)) {
+          result.answered = result.accepted = true;
+          result.reply = std::to_string(param_count_) + " parameter(s): " + params_text_;
+          done = true;
+        }
+      }
+    });
+    return done;
+  }
+
+  void timed_out(std::size_t step, StepResult& result) override {
+    if (step == 2 && param_count_ >= 0) {
+      result.answered = true;
+      result.reply = std::to_string(seen()) + " of " + std::to_string(param_count_) + " parameter(s): " + params_text_;
+    }
+  }
+
+ private:
+  std::size_t seen() const {
+    std::size_t n = 0;
+    for (const bool b : params_seen_) n += b ? 1 : 0;
+    return n;
+  }
+
+  // [G] a MAVLink 2 frame (unsigned, no payload truncation needed: the
+  // receiver zero-extends either way).
+  std::vector<std::uint8_t> frame(const mavlink2::MessageSpec& m, std::span<const std::uint8_t> payload) {
+    const std::size_t len = payload.size();
+    std::vector<std::uint8_t> f(mavlink2::kHeaderBytes + len + mavlink2::kChecksumBytes + 1, 0);
+    f[0] = mavlink2::kMagic;
+    f[1] = static_cast<std::uint8_t>(len);
+    f[4] = sequence_++;  // [2], [3]: incompat and compat flags, none
+    f[5] = kGcsSystemId;
+    f[6] = kGcsComponentId;
+    f[7] = static_cast<std::uint8_t>(m.id);
+    f[8] = static_cast<std::uint8_t>(m.id >> 8);
+    f[9] = static_cast<std::uint8_t>(m.id >> 16);
+    std::copy(payload.begin(), payload.end(), f.begin() + mavlink2::kHeaderBytes);
+    // [G] the checksum covers everything after the magic, then CRC_EXTRA
+    // (put where the checksum goes, then overwritten).
+    const std::size_t crc_at = mavlink2::kHeaderBytes + len;
+    f[crc_at] = m.crc_extra;
+    const std::uint16_t crc = mavlink2::crc16_mcrf4xx(std::span<const std::uint8_t>(f.data() + 1, crc_at));
+    f[crc_at] = static_cast<std::uint8_t>(crc);
+    f[crc_at + 1] = static_cast<std::uint8_t>(crc >> 8);
+    f.pop_back();
+    return f;
+  }
+
+  mavlink2::FrameParser parser_;
+  std::uint8_t sequence_ = 0;
+  std::uint8_t target_system_ = 0, target_component_ = 0;  // 0: broadcast until a HEARTBEAT names them
+  int param_count_ = -1;
+  std::vector<bool> params_seen_;
+  std::string params_text_;
+};
+
+}  // namespace
+
+std::unique_ptr<Client> make_client(const std::string& protocol) {
+  if (protocol == "mip") return std::make_unique<MipClient>();
+  if (protocol == "mavlink2") return std::make_unique<MavlinkClient>();
+  return nullptr;
+}
+
+}  // namespace imuemu::drivers::handshake
