@@ -5,11 +5,14 @@
 #include <gtest/gtest.h>
 
 #include <cmath>
+#include <filesystem>
 #include <fstream>
 #include <limits>
 #include <numbers>
 #include <sstream>
 #include <string>
+
+#include <GeographicLib/MagneticModel.hpp>
 
 #include "core/aiding/calendar.hpp"
 #include "core/aiding/magnetometer.hpp"
@@ -68,6 +71,75 @@ TEST(Wmm2025, MatchesTheOfficialTestValuesWithinTheirPrintedDigits) {
   }
   std::printf("WMM2025 against the 12 official test values: max |dX|,|dY|,|dZ| %.4f nT, max |dD| %.5f deg\n",
               max_nt, max_d_deg);
+}
+
+// An independent evaluation: GeographicLib's MagneticModel (its own
+// Clenshaw summation and geocentric conversion; Karney, GeographicLib
+// "Magnetic models" data format) loaded with the same coefficients,
+// written here in its format: a text metadata file "<name>.wmm" (WMMF-1)
+// and "<name>.wmm.cof" (8-byte ID, then per model int32 N, M and the C and
+// S coefficients as little-endian doubles in column-major order, m = 0..N,
+// n = m..N, S without m = 0); model 0 the main field at the epoch, model 1
+// its rate per year (NumModels 1: linear in time). GeographicLib returns
+// east, north, up.
+std::string write_geographiclib_model(const std::string& dir) {
+  int count = 0;
+  const WmmCoefficient* table = wmm2025_coefficients(count);
+  const std::string name = "imuemu_wmm2025";
+  std::ofstream meta(dir + "/" + name + ".wmm");
+  meta << "WMMF-1\nName " << name << "\nDescription WMM2025 from config/wmm/WMM2025.COF\nRadius 6371200\n"
+       << "NumModels 1\nEpoch 2025\nDeltaEpoch 5\nMinTime 2025\nMaxTime 2030\nMinHeight -1000\n"
+       << "MaxHeight 850000\nNormalization Schmidt\nByteOrder Little\nID WMM2025A\n";
+  std::ofstream cof(dir + "/" + name + ".wmm.cof", std::ios::binary);
+  cof.write("WMM2025A", 8);
+  auto put_int = [&](std::int32_t v) { cof.write(reinterpret_cast<const char*>(&v), 4); };
+  auto put = [&](double v) { cof.write(reinterpret_cast<const char*>(&v), 8); };
+  for (int model = 0; model < 2; ++model) {
+    auto coefficient = [&](int n, int m, bool sine) {
+      for (int i = 0; i < count; ++i)
+        if (table[i].n == n && table[i].m == m)
+          return model == 0 ? (sine ? table[i].h_nt : table[i].g_nt)
+                            : (sine ? table[i].h_dot_nt_per_year : table[i].g_dot_nt_per_year);
+      return 0.0;  // n = 0
+    };
+    put_int(kWmmDegree);
+    put_int(kWmmDegree);
+    for (int m = 0; m <= kWmmDegree; ++m)
+      for (int n = m; n <= kWmmDegree; ++n) put(coefficient(n, m, false));
+    for (int m = 1; m <= kWmmDegree; ++m)
+      for (int n = m; n <= kWmmDegree; ++n) put(coefficient(n, m, true));
+  }
+  return name;
+}
+
+TEST(Wmm2025, AgreesWithGeographicLibsMagneticModelOnAGlobalGrid) {
+  const std::string dir = ::testing::TempDir();
+  const std::string name = write_geographiclib_model(dir);
+  const GeographicLib::MagneticModel reference(name, dir);
+  double max_nt = 0.0;
+  int points = 0;
+  for (double year : {2025.0, 2026.37, 2029.99})
+    for (double h : {-1000.0, 0.0, 12000.0, 400000.0, 850000.0})
+      for (double lat = -90.0; lat <= 90.0; lat += 7.5)
+        for (double lon = -180.0; lon < 180.0; lon += 15.0) {
+          double bx = 0.0, by = 0.0, bz = 0.0;
+          reference(year, lat, lon, h, bx, by, bz);
+          const Vec3 ref(by, bx, -bz);  // east, north, up -> NED
+          const Vec3 ours = wmm2025(at(lat, lon, h), year).ned_nt;
+          // At a pole NED's north depends on longitude; compare the
+          // horizontal magnitude and the vertical there.
+          const double dev = std::abs(lat) == 90.0
+                                 ? std::max(std::abs(ours.head<2>().norm() - ref.head<2>().norm()),
+                                            std::abs(ours.z() - ref.z()))
+                                 : (ours - ref).cwiseAbs().maxCoeff();
+          max_nt = std::max(max_nt, dev);
+          ++points;
+          ASSERT_LT(dev, 1e-6) << year << " " << h << " " << lat << " " << lon;
+        }
+  std::filesystem::remove(dir + "/" + name + ".wmm");
+  std::filesystem::remove(dir + "/" + name + ".wmm.cof");
+  std::printf("WMM2025 against GeographicLib::MagneticModel with the same coefficients: %d points, max deviation %.3g nT\n",
+              points, max_nt);
 }
 
 TEST(Wmm2025, CarriedTableEqualsTheCoefficientFile) {
