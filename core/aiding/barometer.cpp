@@ -4,6 +4,7 @@
 #include <cmath>
 #include <stdexcept>
 
+#include "core/aiding/sample_index.hpp"
 #include "core/setting_error.hpp"
 
 namespace imuemu::aiding {
@@ -103,9 +104,7 @@ BarometerSample Barometer::step(std::uint64_t k, double p_pa, double t_k) noexce
 }
 
 BarometerSample Barometer::measure(std::uint64_t k, double true_pressure_pa, double true_temperature_k) {
-  if (k < next_k_)
-    throw std::invalid_argument("barometer: sample " + std::to_string(k) + " is before the next one, " +
-                                std::to_string(next_k_));
+  check_sample_index("barometer", k, next_k_);
   require_within("pressure_pa", "true pressure", true_pressure_pa,
                  {0.0, kBaroMaxPressurePa, "Pa", "absolute pressure up to 2 bar"});
   require_within("temperature_k", "true temperature", true_temperature_k,

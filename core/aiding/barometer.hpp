@@ -88,8 +88,9 @@ class Barometer {
   // Sample k (k >= next_index(); skipped samples are simulated with the
   // given input held, so the noise of sample k does not depend on which
   // samples were asked for). Throws std::invalid_argument for a k below
-  // next_index() or a true value outside [0, 2e5] Pa / (0, 1000] K or NaN;
-  // a refused call changes nothing.
+  // next_index() or more than 2^28 after it (sample_index.hpp), or a true
+  // value outside [0, 2e5] Pa / (0, 1000] K or NaN; a refused call changes
+  // nothing.
   BarometerSample measure(std::uint64_t k, double true_pressure_pa, double true_temperature_k);
 
   std::uint64_t next_index() const { return next_k_; }

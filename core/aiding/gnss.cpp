@@ -6,6 +6,7 @@
 #include <string>
 
 #include "core/attitude.hpp"
+#include "core/aiding/sample_index.hpp"
 #include "core/setting_error.hpp"
 #include "core/time_arith.hpp"
 
@@ -128,8 +129,7 @@ std::optional<TimeNs> GnssReceiverModel::epoch_gps_ns(std::uint64_t j) const {
 }
 
 GnssError GnssReceiverModel::error(std::uint64_t j) {
-  if (j < next_j_)
-    throw std::invalid_argument("GNSS: fix " + std::to_string(j) + " is before the next one, " + std::to_string(next_j_));
+  check_sample_index("GNSS", j, next_j_);
   GnssError e;
   for (; next_j_ <= j; ++next_j_) {
     for (int a = 0; a < 3; ++a) {

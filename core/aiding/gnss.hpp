@@ -123,7 +123,8 @@ class GnssReceiverModel {
   std::optional<TimeNs> epoch_gps_ns(std::uint64_t j) const;
   // The error of fix j (j >= next_index(); skipped fixes are simulated so
   // fix j's error does not depend on which were asked for). Throws
-  // std::invalid_argument for j < next_index().
+  // std::invalid_argument for j < next_index() or more than 2^28 after it
+  // (sample_index.hpp).
   GnssError error(std::uint64_t j);
   std::uint64_t next_index() const { return next_j_; }
 

@@ -5,6 +5,7 @@
 #include <stdexcept>
 #include <string>
 
+#include "core/aiding/sample_index.hpp"
 #include "core/setting_error.hpp"
 
 namespace imuemu::aiding {
@@ -68,9 +69,7 @@ Vec3 Magnetometer::noise() noexcept {
 }
 
 MagnetometerSample Magnetometer::measure(std::uint64_t k, const Vec3& field_body_ut) {
-  if (k < next_k_)
-    throw std::invalid_argument("magnetometer: sample " + std::to_string(k) + " is before the next one, " +
-                                std::to_string(next_k_));
+  check_sample_index("magnetometer", k, next_k_);
   require_within("field_ut", "true field", field_body_ut,
                  {-kMagMaxField_ut, kMagMaxField_ut, "uT", "10 mT; the Earth's is below 70 uT"});
   for (; next_k_ < k; ++next_k_) noise();

@@ -71,8 +71,9 @@ class Magnetometer {
   Magnetometer(const MagnetometerSpec& spec, double rate_hz, const std::string& device);
   // Sample k (k >= next_index(); skipped samples' noise is drawn, so sample
   // k is the same whichever samples were asked for) of the true field in
-  // body axes (uT). Throws for k < next_index() or a non-finite field or
-  // one beyond kMagMaxField_ut; a refused call changes nothing.
+  // body axes (uT). Throws for k < next_index() or more than 2^28 after it
+  // (sample_index.hpp), or a non-finite field or one beyond kMagMaxField_ut;
+  // a refused call changes nothing.
   MagnetometerSample measure(std::uint64_t k, const Vec3& field_body_ut);
   std::uint64_t next_index() const { return next_k_; }
 

@@ -194,6 +194,8 @@ TEST(Barometer, RefusesBadSpecsAndInputsAndARefusedCallChangesNothing) {
   EXPECT_EQ(a.next_index(), 1u);
   EXPECT_EQ(a.measure(1, 100000.0, 288.0).pressure_pa, b.measure(1, 100000.0, 288.0).pressure_pa);
   EXPECT_THROW(a.measure(0, 100000.0, 288.0), std::invalid_argument);
+  EXPECT_THROW(a.measure(std::numeric_limits<std::uint64_t>::max(), 100000.0, 288.0), std::invalid_argument);
+  EXPECT_EQ(a.next_index(), 2u);
 }
 
 }  // namespace

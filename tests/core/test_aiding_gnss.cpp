@@ -238,6 +238,7 @@ TEST(GnssErrors, SameSeedSameBitsSkippingIncluded) {
   EXPECT_EQ(last.velocity_ned_m_s, skipped.velocity_ned_m_s);
   EXPECT_NE(c.error(49).position_ned_m, skipped.position_ned_m);
   EXPECT_THROW(a.error(10), std::invalid_argument);
+  EXPECT_THROW(a.error(std::numeric_limits<std::uint64_t>::max()), std::invalid_argument);  // would never end
   EXPECT_EQ(a.next_index(), 50u);
 }
 

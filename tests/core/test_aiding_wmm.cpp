@@ -296,6 +296,7 @@ TEST(Magnetometer, RefusesBadSpecsAndInputs) {
   EXPECT_THROW(Magnetometer(MagnetometerSpec{}, -1.0, "m"), SettingError);
   Magnetometer m(MagnetometerSpec{}, 10.0, "m");
   EXPECT_THROW(m.measure(0, Vec3(nan, 0.0, 0.0)), SettingError);
+  EXPECT_THROW(m.measure(std::numeric_limits<std::uint64_t>::max(), Vec3(20.0, 0.0, 40.0)), std::invalid_argument);
   EXPECT_EQ(m.next_index(), 0u);
   EXPECT_THROW(body_field_ut(Mat3::Identity(), Vec3(nan, 0.0, 0.0)), SettingError);
 }
