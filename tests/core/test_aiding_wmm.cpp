@@ -12,6 +12,8 @@
 #include <sstream>
 #include <string>
 
+#include <unistd.h>
+
 #include <GeographicLib/MagneticModel.hpp>
 
 #include "core/aiding/calendar.hpp"
@@ -85,7 +87,9 @@ TEST(Wmm2025, MatchesTheOfficialTestValuesWithinTheirPrintedDigits) {
 std::string write_geographiclib_model(const std::string& dir) {
   int count = 0;
   const WmmCoefficient* table = wmm2025_coefficients(count);
-  const std::string name = "imuemu_wmm2025";
+  // One name per process: the release and sanitizer flavours may run this
+  // test at the same time in the same TempDir.
+  const std::string name = "imuemu_wmm2025_" + std::to_string(::getpid());
   std::ofstream meta(dir + "/" + name + ".wmm");
   meta << "WMMF-1\nName " << name << "\nDescription WMM2025 from config/wmm/WMM2025.COF\nRadius 6371200\n"
        << "NumModels 1\nEpoch 2025\nDeltaEpoch 5\nMinTime 2025\nMaxTime 2030\nMinHeight -1000\n"
