@@ -84,8 +84,10 @@ BarometerSample Barometer::step(std::uint64_t k, double p_pa, double t_k) noexce
   const double t_s = static_cast<double>(k) * dt_s_;
   double p = lag_state_pa_ + turn_on_pa_ + spec_.drift_pa_per_year * (t_s / kSecondsPerJulianYear) + gm_state_;
   if (sigma_pa_ > 0.0) p += sigma_pa_ * white_.gaussian();
-  // A sensor reads no negative absolute pressure (only reachable with
-  // offsets above the ISA's 0.37 Pa at its top).
+  // Quantise, then clip: the converter's extreme codes are the range's
+  // ends. A sensor reads no negative absolute pressure (reachable only with
+  // offsets above the ISA's 0.37 Pa at its top), nor one beyond the bounds.
+  if (spec_.resolution_pa > 0.0) p = std::round(p / spec_.resolution_pa) * spec_.resolution_pa;
   double lo = 0.0, hi = kBaroMaxPressurePa + kBaroMaxOffsetPa * 2.0 + kBaroMaxDriftPaPerYear;
   if (spec_.range_max_pa != 0.0) {
     lo = spec_.range_min_pa;
@@ -95,7 +97,6 @@ BarometerSample Barometer::step(std::uint64_t k, double p_pa, double t_k) noexce
     out.clipped = spec_.range_max_pa != 0.0;
     p = p <= lo ? lo : hi;
   }
-  if (spec_.resolution_pa > 0.0) p = std::round(p / spec_.resolution_pa) * spec_.resolution_pa;
   out.pressure_pa = p;
   double t = lag_state_k_ + spec_.temperature_bias_k;
   if (spec_.temperature_noise_rms_k > 0.0) t += spec_.temperature_noise_rms_k * temperature_white_.gaussian();

@@ -29,7 +29,7 @@
 //  * temperature_noise_rms_k, temperature_bias_k, temperature_lag_s: the
 //    same for the die-temperature output (lag: the package's thermal time
 //    constant).
-// The order: lag (the physics) -> + offsets and noise -> clip -> quantise.
+// The order: lag (the physics) -> + offsets and noise -> quantise -> clip.
 // Every random term has its own stream keyed by (seed, device, sensor 16,
 // axis, term), as the IMU's (core/sensor/sensor_model.hpp), so the same seed
 // gives the same bits.
