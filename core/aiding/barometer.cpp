@@ -12,7 +12,6 @@ namespace imuemu::aiding {
 namespace {
 
 constexpr unsigned kSensorBarometer = 16;  // beside the IMU's gyro 0 / accel 1
-enum Term : unsigned { kTermWhite = 1, kTermGaussMarkov = 4, kTermTurnOn = 5 };
 constexpr double kSecondsPerJulianYear = 365.25 * 86400.0;
 
 }  // namespace
@@ -57,10 +56,10 @@ Barometer::Barometer(const BarometerSpec& spec, double rate_hz, const std::strin
   sigma_pa_ = std::sqrt(spec.noise_rms_pa * spec.noise_rms_pa +
                         spec.noise_density_pa_rt_hz * spec.noise_density_pa_rt_hz * rate_hz);
   const std::uint64_t dev = sensor::device_hash(device);
-  white_.state = sensor::stream_key(spec.seed, dev, kSensorBarometer, 0, kTermWhite, 0);
-  temperature_white_.state = sensor::stream_key(spec.seed, dev, kSensorBarometer, 1, kTermWhite, 0);
-  gm_.state = sensor::stream_key(spec.seed, dev, kSensorBarometer, 0, kTermGaussMarkov, 0);
-  sensor::Stream turn_on{sensor::stream_key(spec.seed, dev, kSensorBarometer, 0, kTermTurnOn, 0)};
+  white_.state = sensor::stream_key(spec.seed, dev, kSensorBarometer, 0, sensor::kTermWhite, 0);
+  temperature_white_.state = sensor::stream_key(spec.seed, dev, kSensorBarometer, 1, sensor::kTermWhite, 0);
+  gm_.state = sensor::stream_key(spec.seed, dev, kSensorBarometer, 0, sensor::kTermGaussMarkov, 0);
+  sensor::Stream turn_on{sensor::stream_key(spec.seed, dev, kSensorBarometer, 0, sensor::kTermTurnOn, 0)};
   turn_on_pa_ = spec.bias_pa + spec.bias_sigma_pa * turn_on.gaussian();
   lag_phi_ = spec.lag_s > 0.0 ? std::exp(-dt_s_ / spec.lag_s) : 0.0;
   temperature_lag_phi_ = spec.temperature_lag_s > 0.0 ? std::exp(-dt_s_ / spec.temperature_lag_s) : 0.0;

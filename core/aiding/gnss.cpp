@@ -15,7 +15,6 @@ namespace imuemu::aiding {
 namespace {
 
 constexpr unsigned kSensorGnss = 18;
-enum Term : unsigned { kTermWhite = 1, kTermGaussMarkov = 4, kTermVelocity = 6 };
 
 void need_finite(const Vec3& v, const char* key) {
   if (!v.allFinite()) throw SettingError(key, std::string("GNSS: ") + key + " is not finite");
@@ -115,9 +114,9 @@ GnssReceiverModel::GnssReceiverModel(const GnssSpec& spec, TimeNs gps_at_start_n
     const double sigma = h ? spec.horizontal_gm_sigma_m : spec.vertical_gm_sigma_m;
     phi_[a] = std::exp(-dt_s / (h ? spec.horizontal_gm_tau_s : spec.vertical_gm_tau_s));
     drive_[a] = sigma * std::sqrt(1.0 - phi_[a] * phi_[a]);
-    white_stream_[a].state = sensor::stream_key(spec.seed, dev, kSensorGnss, a, kTermWhite, 0);
-    gm_stream_[a].state = sensor::stream_key(spec.seed, dev, kSensorGnss, a, kTermGaussMarkov, 0);
-    vel_stream_[a].state = sensor::stream_key(spec.seed, dev, kSensorGnss, a, kTermVelocity, 0);
+    white_stream_[a].state = sensor::stream_key(spec.seed, dev, kSensorGnss, a, sensor::kTermWhite, 0);
+    gm_stream_[a].state = sensor::stream_key(spec.seed, dev, kSensorGnss, a, sensor::kTermGaussMarkov, 0);
+    vel_stream_[a].state = sensor::stream_key(spec.seed, dev, kSensorGnss, a, sensor::kTermVelocity, 0);
     gm_[a] = sigma > 0.0 ? sigma * gm_stream_[a].gaussian() : 0.0;  // stationary start
   }
 }

@@ -13,7 +13,6 @@ namespace imuemu::aiding {
 namespace {
 
 constexpr unsigned kSensorMagnetometer = 17;
-constexpr unsigned kTermWhite = 1;
 
 bool all_finite(const Mat3& m) { return m.allFinite(); }
 
@@ -57,7 +56,7 @@ Magnetometer::Magnetometer(const MagnetometerSpec& spec, double rate_hz, const s
   for (unsigned a = 0; a < 3; ++a) {
     sigma_ut_[a] = std::sqrt(spec.noise_rms_ut[a] * spec.noise_rms_ut[a] +
                              spec.noise_density_ut_rt_hz[a] * spec.noise_density_ut_rt_hz[a] * rate_hz);
-    stream_[a].state = sensor::stream_key(spec.seed, dev, kSensorMagnetometer, a, kTermWhite, 0);
+    stream_[a].state = sensor::stream_key(spec.seed, dev, kSensorMagnetometer, a, sensor::kTermWhite, 0);
   }
 }
 

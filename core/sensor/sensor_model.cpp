@@ -279,8 +279,6 @@ std::uint32_t hold_period(double tau_s, double dt_s) {
   return m > 1e6 ? 1'000'000u : static_cast<std::uint32_t>(m);
 }
 
-// Terms of the stream keys (never renumber: it would change the noise).
-enum Term : unsigned { kTermWhite = 1, kTermFlicker = 2, kTermWalk = 3, kTermGaussMarkov = 4, kTermTurnOn = 5 };
 
 SensorModel::SensorModel(const SensorModelSpec& spec, double sample_rate_hz, const std::string& device)
     : spec_(spec), rate_hz_(sample_rate_hz) {

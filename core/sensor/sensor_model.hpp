@@ -187,6 +187,19 @@ struct Stream {
   double uniform() noexcept;   // [0, 1), 53 bits
 };
 
+// The `term` of a stream key: which random process of a sensor axis draws
+// from the stream. One list for every model (the IMU's, and the barometer,
+// magnetometer and GNSS of core/aiding); never renumber: it would change the
+// noise every seed gives.
+enum NoiseTerm : unsigned {
+  kTermWhite = 1,
+  kTermFlicker = 2,
+  kTermWalk = 3,
+  kTermGaussMarkov = 4,
+  kTermTurnOn = 5,
+  kTermVelocity = 6,  // GNSS velocity noise
+};
+
 // The key of one noise stream: a hash of everything that names it.
 std::uint64_t stream_key(std::uint64_t seed, std::uint64_t device_hash, unsigned sensor, unsigned axis,
                          unsigned term, unsigned sub) noexcept;
