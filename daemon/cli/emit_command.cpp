@@ -38,6 +38,7 @@
 #include "drivers/protocols/can_protocols.hpp"
 #include "drivers/protocols/protocol_options.hpp"
 #include "drivers/protocols/stream_protocols.hpp"
+#include "drivers/net_transport.hpp"
 #include "drivers/pty_transport.hpp"
 #include "drivers/serial_transport.hpp"
 #include "drivers/socketcan.hpp"
@@ -233,7 +234,7 @@ int emit(const EmitArgs& a) {
       if (drivers::CommandResponder* r = stream_encoder->command_responder())
         r->set_log([](std::string_view line) { std::cerr << "imuemu emit: " << line << "\n"; });
       if (a.device.rfind("can:", 0) == 0)
-        throw std::invalid_argument("--device " + a.device + ": protocol " + a.protocol + " is a byte stream (pty: or serial:)");
+        throw std::invalid_argument("--device " + a.device + ": protocol " + a.protocol + " is a byte stream (pty:, serial:, udp: or tcp-listen:)");
     }
   } catch (const std::exception& e) {
     std::cerr << "imuemu emit: " << e.what() << "\n";
@@ -252,6 +253,10 @@ int emit(const EmitArgs& a) {
       drivers::SerialTransportOptions so = serial_options_of(a.device);
       so.log = log;
       transport = std::make_unique<drivers::SerialTransport>(so);
+    } else if (drivers::is_net_device(a.device)) {
+      drivers::NetTransportOptions no = drivers::parse_net_device(a.device);
+      no.log = log;
+      transport = std::make_unique<drivers::NetTransport>(no);
     } else if (a.device.rfind("can:", 0) == 0) {
       drivers::CanTransportOptions co;
       co.interface = a.device.substr(4);
@@ -263,7 +268,7 @@ int emit(const EmitArgs& a) {
       }
       can_output = device::can_transport_output(std::make_unique<drivers::CanTransport>(co));
     } else {
-      throw std::invalid_argument("--device '" + a.device + "': expected pty:LINKPATH, serial:PATH[,baud=N] or can:IFACE");
+      throw std::invalid_argument("--device '" + a.device + "': expected pty:LINKPATH, serial:PATH[,baud=N], udp:HOST:PORT[,bind=PORT], tcp-listen:[HOST:]PORT or can:IFACE");
     }
     std::unique_ptr<drivers::GpioSyncOutput> gpio;
     if (!a.gpio.empty()) {
@@ -367,7 +372,7 @@ void add_emit_command(CLI::App& app, int& exit_code) {
   c->add_option("--rate", a.rate_hz, "Output rate in Hz (integer)")->capture_default_str()->check(CLI::Range(1, 1000000));
   c->add_option("--delta", a.delta, "Window half-length Delta (samples); default one median knot interval")->check(CLI::Range(std::int64_t{1}, limits::kMaxWindowSamples));
   c->add_option("--protocol", a.protocol, "Wire protocol")->capture_default_str()->check(CLI::IsMember(protocols));
-  c->add_option("--device", a.device, "pty:LINKPATH | serial:PATH[,baud=N] | can:IFACE")->required();
+  c->add_option("--device", a.device, "pty:LINKPATH | serial:PATH[,baud=N] | udp:HOST:PORT[,bind=PORT] | tcp-listen:[HOST:]PORT | can:IFACE")->required();
   c->add_flag("--can-fd", a.can_fd, "can: send CAN FD frames (the interface needs MTU 72)");
   c->add_option("--seconds", a.seconds, "Stop after this many seconds of emission (default: end of the trajectory)")->check(seconds_in(0.0, kMaxDurationS));
   c->add_option("--gpio", a.gpio, "Sync pulse output CHIP:LINE (libgpiod), edge at the sample instant");

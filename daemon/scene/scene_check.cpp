@@ -34,6 +34,11 @@ std::string describe_transport(const TransportConfig& t) {
       return "serial " + t.serial.port + " " + drivers::to_string(t.serial.settings);
     case TransportType::can:
       return "can " + t.can.interface + (t.can.fd ? " (CAN FD)" : "");
+    case TransportType::udp:
+      return "udp -> " + t.net.host + ":" + std::to_string(t.net.port) +
+             (t.net.bind_port != 0 ? " from port " + std::to_string(t.net.bind_port) : "");
+    case TransportType::tcp_server:
+      return "tcp server " + t.net.host + ":" + std::to_string(t.net.port);
     case TransportType::null:
       return "null";
   }
@@ -101,6 +106,20 @@ void check_start_paths(const SceneConfig& scene, const RunnerOptions& options, c
     if (dir != fs::path(control_socket).parent_path() && ::access(dir.c_str(), W_OK) != 0)
       throw std::invalid_argument(scene.file + ": control socket " + control_socket + ": its directory does not exist and " +
                                   dir.string() + " is not writable");
+  }
+  // Two devices cannot listen on one local port (the second bind fails at
+  // start, after the first device is already open): said before anything opens.
+  std::map<std::string, std::string> local_ports;
+  for (const ImuConfig& imu : scene.imus) {
+    const NetConfig& n = imu.transport.net;
+    std::string key;
+    if (imu.transport.type == TransportType::tcp_server) key = "tcp " + std::to_string(n.port);
+    if (imu.transport.type == TransportType::udp && n.bind_port != 0) key = "udp " + std::to_string(n.bind_port);
+    if (key.empty()) continue;
+    const auto [it, fresh] = local_ports.emplace(key, imu.name);
+    if (!fresh)
+      throw std::invalid_argument(scene.file + ": imu '" + imu.name + "': local " + key.substr(0, 3) + " port " +
+                                  key.substr(4) + " is also imu '" + it->second + "''s");
   }
   for (const ImuConfig& imu : scene.imus) {
     if (imu.transport.type != TransportType::pty) continue;

@@ -523,8 +523,8 @@ void parse_protocol_options(const Table& imu, ImuConfig& out) {
 }
 
 void parse_transport(const Table& t, const ImuConfig& imu, TransportConfig& out) {
-  t.require("type", "pty, serial, can or null");
-  const std::string type = t.choice("type", "", {"pty", "serial", "can", "null"});
+  t.require("type", "pty, serial, udp, tcp_server, can or null");
+  const std::string type = t.choice("type", "", {"pty", "serial", "udp", "tcp_server", "can", "null"});
   const bool can_protocol = is_can_protocol(imu.protocol);
   if (type == "pty") {
     out.type = TransportType::pty;
@@ -565,6 +565,25 @@ void parse_transport(const Table& t, const ImuConfig& imu, TransportConfig& out)
       t.ctx().fail(t.where(), t.path(), e.what());
     }
     out.serial.queue_bytes = static_cast<std::size_t>(t.integer("queue_bytes", 0, 0, 64 << 20));
+  } else if (type == "udp") {
+    // MAVLink's convention: a ground station listens on 14550 and answers to
+    // the port a datagram came from (drivers/net_transport.hpp).
+    out.type = TransportType::udp;
+    t.allow_only({"type", "host", "port", "bind_port", "queue_bytes"}, " (type udp)");
+    out.net.host = t.string("host", "127.0.0.1");
+    if (out.net.host.empty()) t.fail_at("host", "expected an IPv4 address or host name");
+    out.net.port = static_cast<std::uint16_t>(t.integer("port", 14550, 1, 65535));
+    out.net.bind_port = static_cast<std::uint16_t>(t.integer("bind_port", 0, 0, 65535));
+    out.net.queue_bytes = static_cast<std::size_t>(t.integer("queue_bytes", 32 * 1024, 1024, 64 << 20));
+  } else if (type == "tcp_server") {
+    // One client at a time (as PX4's simulator link: the simulator listens, PX4 connects).
+    out.type = TransportType::tcp_server;
+    t.allow_only({"type", "listen", "port", "queue_bytes"}, " (type tcp_server)");
+    out.net.host = t.string("listen", "0.0.0.0");
+    if (out.net.host.empty()) t.fail_at("listen", "expected an IPv4 address to listen on, e.g. 0.0.0.0");
+    t.require("port", "the TCP port to listen on, 1..65535");
+    out.net.port = static_cast<std::uint16_t>(t.integer("port", 0, 1, 65535));
+    out.net.queue_bytes = static_cast<std::size_t>(t.integer("queue_bytes", 32 * 1024, 1024, 64 << 20));
   } else if (type == "can") {
     out.type = TransportType::can;
     t.allow_only({"type", "interface", "fd", "bitrate_switch", "bitrate", "data_bitrate"}, " (type can)");
@@ -585,8 +604,10 @@ void parse_transport(const Table& t, const ImuConfig& imu, TransportConfig& out)
     t.allow_only({"type"}, " (type null)");
   }
   if (out.type == TransportType::can && !can_protocol)
-    t.fail_at("type", "protocol " + imu.protocol + " is a byte stream; it needs transport type pty, serial or null");
-  if ((out.type == TransportType::pty || out.type == TransportType::serial) && can_protocol)
+    t.fail_at("type", "protocol " + imu.protocol + " is a byte stream; it needs transport type pty, serial, udp, tcp_server or null");
+  if ((out.type == TransportType::pty || out.type == TransportType::serial || out.type == TransportType::udp ||
+       out.type == TransportType::tcp_server) &&
+      can_protocol)
     t.fail_at("type", "protocol " + imu.protocol + " sends CAN frames; it needs transport type can or null");
 }
 

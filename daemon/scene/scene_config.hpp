@@ -138,7 +138,7 @@ struct DaemonConfig {
 
 // ---- [[imu]] ----
 
-enum class TransportType { pty, serial, can, null };
+enum class TransportType { pty, serial, can, udp, tcp_server, null };
 
 struct PtyConfig {
   std::string link;            // absolute path of the published symlink
@@ -160,11 +160,20 @@ struct CanConfig {
   std::int64_t data_bitrate = 0;     // CAN FD data phase; 0: = bitrate
 };
 
+// type udp / tcp_server (drivers/net_transport.hpp).
+struct NetConfig {
+  std::string host;               // udp: where datagrams go; tcp_server: the address listened on
+  std::uint16_t port = 0;         // udp: remote port; tcp_server: listening port
+  std::uint16_t bind_port = 0;    // udp: the local port (0: the kernel's choice)
+  std::size_t queue_bytes = 32 * 1024;
+};
+
 struct TransportConfig {
   TransportType type = TransportType::null;
   PtyConfig pty;
   SerialConfig serial;
   CanConfig can;
+  NetConfig net;
 };
 
 struct SyncConfig {

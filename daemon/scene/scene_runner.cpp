@@ -12,6 +12,7 @@
 #include "core/time_arith.hpp"
 #include "daemon/device/device.hpp"
 #include "drivers/gpio_sync.hpp"
+#include "drivers/net_transport.hpp"
 #include "drivers/pty_transport.hpp"
 #include "drivers/serial_transport.hpp"
 #include "drivers/socketcan.hpp"
@@ -105,6 +106,14 @@ std::string pty_link_path(const ImuConfig& imu, const RunnerOptions& options) {
 }
 
 std::string reuse_key(const ImuConfig& imu, const RunnerOptions& options) {
+  const NetConfig& n = imu.transport.net;
+  // A network endpoint kept across a reload keeps its port (a new socket
+  // could not bind it while the old engine still holds it) and its client.
+  if (imu.transport.type == TransportType::udp)
+    return "udp " + n.host + ":" + std::to_string(n.port) + " bind " + std::to_string(n.bind_port) + " queue " +
+           std::to_string(n.queue_bytes);
+  if (imu.transport.type == TransportType::tcp_server)
+    return "tcp " + n.host + ":" + std::to_string(n.port) + " queue " + std::to_string(n.queue_bytes);
   if (imu.transport.type != TransportType::pty) return {};
   return "pty " + pty_link_path(imu, options) + " queue " + std::to_string(imu.transport.pty.queue_bytes) + " mode " +
          std::to_string(imu.transport.pty.mode);
@@ -216,6 +225,28 @@ BuiltEngine build_engine(const SceneConfig& scene, const RunnerOptions& options,
           std::error_code ec;
           std::filesystem::create_directories(std::filesystem::path(po.link_path).parent_path(), ec);
           transport = std::make_unique<drivers::PtyTransport>(po);
+          break;
+        }
+        case TransportType::udp:
+        case TransportType::tcp_server: {
+          if (reuse != nullptr) {
+            const auto kept = reuse->find(reuse_key(imu, options));
+            if (kept != reuse->end() && kept->second) {
+              transport = std::move(kept->second);
+              reuse->erase(kept);
+              transport_baseline = transport->counters();
+              break;
+            }
+          }
+          drivers::NetTransportOptions no;
+          no.kind = t.type == TransportType::udp ? drivers::NetTransportOptions::Kind::udp
+                                                 : drivers::NetTransportOptions::Kind::tcp_server;
+          no.host = t.net.host;
+          no.port = t.net.port;
+          no.bind_port = t.net.bind_port;
+          no.queue_bytes = t.net.queue_bytes;
+          no.log = options.log;
+          transport = std::make_unique<drivers::NetTransport>(no);
           break;
         }
         case TransportType::serial: {
