@@ -85,7 +85,7 @@ UNIQUE_ID = bytes(range(0x10, 0x20))
 J1939_COMPONENT = ("HILIM", "hil-j1939-imu", "SN-0027", "U1")
 
 RATE_HZ = 50
-DURATION_S = 7
+DURATION_S = 5.5  # the last NodeStatus checked is at 4.5 s; one more period of margin
 SATURATION_AFTER_S, SATURATION_S = 1.2, 0.2  # NodeStatus at 2 s: WARNING; at 3 s: OK again
 RESTART_AFTER_S = 3.5  # NodeStatus INITIALIZATION (uptime 0) at 3.5 s, OPERATIONAL at 4.5 s
 

@@ -46,9 +46,9 @@ for protocol in mavlink2 mip; do
   [ $rc -eq 0 ] || status=1
 done
 # PX4 start-up replay, driven by the host (uart_peer.py Px4Run).
-# 6 s of emission: the replay and the stream check take ~1 s of it on an idle
+# 4 s of emission: the replay and the stream check take ~1 s of it on an idle
 # host (the host logs how long); the rest is margin for a loaded one.
-readonly PX4_SECONDS=6 PX4_RATE_HZ=1000
+readonly PX4_SECONDS=4 PX4_RATE_HZ=1000
 if setserial /dev/ttyS1 baud_base 921600 && setserial -a /dev/ttyS1 >"$HIL_OUT/px4.setserial.txt" 2>&1; then
   marker "BEGIN:px4:mip-px4"
   grep '^1:' /proc/tty/driver/serial >"$HIL_OUT/px4.serial_counters.txt"
