@@ -56,6 +56,7 @@ import socket
 import struct
 import subprocess
 import sys
+import tempfile
 import time
 
 sys.path.insert(0, os.path.dirname(os.path.abspath(__file__)))
@@ -376,7 +377,10 @@ def run(imuemud, out):
     bus = Bus()
     peer = Peer(bus)
     t0 = time.monotonic()
-    daemon = subprocess.Popen([imuemud, "--scene", scene_path, "--control-socket", os.path.join(out, "candevice.sock"),
+    # Not in `out`: $HIL_OUT is a 9p share under the qemu backend, where a
+    # unix socket cannot be created.
+    sock_dir = tempfile.mkdtemp(prefix="hil_candevice.")
+    daemon = subprocess.Popen([imuemud, "--scene", scene_path, "--control-socket", os.path.join(sock_dir, "c.sock"),
                                "--late-ticks", "send", "--stats-json", stats_path],
                               stdout=subprocess.PIPE, stderr=subprocess.STDOUT, text=True)
     deadline = t0 + 150  # a hang guard only: the scene lasts DURATION_S of (emulated) time

@@ -142,7 +142,10 @@ def main():
     log = os.path.join(out, "faults.jsonl")
     if os.path.exists(log):
         os.remove(log)  # imuemud appends: a results directory used before holds an older run's
-    daemon = subprocess.run(["nice", "-n", "10", imuemud, "--scene", scene_path, "--control-socket", os.path.join(out, "c.sock"),
+    # The control socket in a guest-local directory: $HIL_OUT is a 9p share
+    # under the qemu backend, where a unix socket cannot be created (ENXIO).
+    sock_dir = tempfile.mkdtemp(prefix="hil_can_faults.")
+    daemon = subprocess.run(["nice", "-n", "10", imuemud, "--scene", scene_path, "--control-socket", os.path.join(sock_dir, "c.sock"),
                              "--fault-log", log, "--late-ticks", "send", "--stats-json", os.path.join(out, "stats.json")],
                             capture_output=True, text=True, timeout=200)
     if daemon.returncode != 0:
