@@ -33,9 +33,10 @@ test_packages=(
   # booting Debian's kernel (fetched by apt-get download) with a busybox
   # initramfs, the UART, vcan and the gpio_recorder module built against the
   # headers; the CAN and GPIO tools run inside both; systemd as PID 1 in the
-  # guest and systemd-analyze (a minbase system has no systemd), ps for its checks
+  # guest and systemd-analyze (a minbase system has no systemd), ps for its checks;
+  # setserial raises the guest UART's baud_base for the 921600-baud change
   user-mode-linux kmod iproute2 qemu-system-x86 busybox-static cpio xz-utils
-  linux-headers-amd64 can-utils gpiod python3-can systemd procps
+  linux-headers-amd64 can-utils gpiod python3-can systemd procps setserial
 )
 
 case "$what" in

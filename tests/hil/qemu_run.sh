@@ -30,6 +30,10 @@
 #                      switch failed or the guest did not power off in time.
 #   --share DIR        with --host-root: DIR is writable in the guest at the
 #                      same path, its writes land on the host (repeatable)
+#   --trace EVENTS     QEMU trace events (a -trace enable= pattern, e.g.
+#                      serial_update_parameters: the UART's baud rate as QEMU
+#                      computes it from the divisor the guest programs) into
+#                      RESULTS/qemu_trace.txt (QEMU's log trace backend)
 #
 # Inside the guest (busybox, PID 1 script, root; the initramfs itself is the
 # writable root file system): /proc, /sys, /dev, /sys/kernel/debug; lo and vcan0 (MTU 72, CAN FD) up;
@@ -61,7 +65,7 @@ seconds_since() { awk -v a="$1" -v b="$(now_ns)" 'BEGIN { printf "%.2f", (b - a)
 here=$(cd "$(dirname "${BASH_SOURCE[0]}")" && pwd)
 repo=$(cd "$here/../.." && pwd)
 includes=() fetches=() envs=() shares=()
-serial1="" results_dir="" timeout_s=240 mem=512M host_root_init=""
+serial1="" results_dir="" timeout_s=240 mem=512M host_root_init="" trace_events=""
 
 while (($#)); do
   case "$1" in
@@ -74,6 +78,7 @@ while (($#)); do
     --mem) mem=$2; shift 2 ;;
     --host-root) host_root_init=$2; shift 2 ;;
     --share) shares+=("$2"); shift 2 ;;
+    --trace) trace_events=$2; shift 2 ;;
     -h|--help) usage ;;
     --) shift; break ;;
     -*) echo "qemu_run: unknown option $1" >&2; usage ;;
@@ -351,6 +356,11 @@ kernel_image=$cache/kernel/vmlinux
 [[ -f $kernel_image ]] || kernel_image=$cache/kernel/vmlinuz
 if [[ -z $serial1 ]]; then serial1="file,path=$results_dir/ttyS1.out"; fi
 virtfs=()
+trace=()
+if [[ -n $trace_events ]]; then
+  rm -f "$results_dir/qemu_trace.txt"
+  trace=(-trace "enable=$trace_events" -D "$results_dir/qemu_trace.txt")
+fi
 if [[ -n $host_root_init ]]; then
   # multidevs=remap: the host's root spans several file systems (/dev/shm,
   # /tmp, ...); remapped inode numbers stay unique in the guest.
@@ -369,7 +379,7 @@ timeout --kill-after=5 "$timeout_s" qemu-system-x86_64 \
   -serial stdio \
   -chardev "$serial1,id=hil_serial1" -serial chardev:hil_serial1 \
   -chardev "file,id=hil_results,path=$work/results.tar" -serial chardev:hil_results \
-  "${virtfs[@]}" \
+  "${virtfs[@]}" "${trace[@]}" \
   -kernel "$kernel_image" -initrd "$work/initrd" \
   -append "console=ttyS0 panic=-1 oops=panic edd=off quiet mitigations=off" \
   </dev/null >"$results_dir/console.log" 2>&1 &

@@ -129,12 +129,247 @@ class Run:
         self.listen_rc, self.samples, self.summary = rc, samples, summary or {}
 
 
+# ---------------------------------------------------------------- PX4 replay
+# MIP packets written here from the 3DM-GX5 / 3DM-CV7 DCP manuals ("MIP
+# packet overview", "Command and data packets"): 0x75 0x65, descriptor set,
+# payload length, fields (length, descriptor, data), Fletcher-16 over header
+# and payload (two 8-bit running sums, sum1 sent first). A reply's first field
+# is the ACK/NACK (0x04, 0xF1, the echoed command descriptor, error code: 0
+# ACK, 3 invalid parameter).
+
+
+def mip_packet(descriptor_set, *fields):
+    body = bytes([0x75, 0x65, descriptor_set, sum(len(f) for f in fields)]) + b"".join(bytes(f) for f in fields)
+    sum1 = sum2 = 0
+    for byte in body:
+        sum1 = (sum1 + byte) & 0xFF
+        sum2 = (sum2 + sum1) & 0xFF
+    return body + bytes([sum1, sum2])
+
+
+def mip_ack(command, code=0):
+    return bytes([0x04, 0xF1, command, code])
+
+
+def mip_fields(packet):
+    """[(descriptor, data)] of a whole packet."""
+    out, at = [], 4
+    while at + 2 <= len(packet) - 2 and packet[at] >= 2:
+        out.append((packet[at + 1], bytes(packet[at + 2:at + packet[at]])))
+        at += packet[at]
+    return out
+
+
+PX4_IMU_RATE_HZ = 500  # PX4 module.yaml MS_IMU_RATE_HZ default
+# The 16-bit descriptors (set << 8 | field) PX4's initializeIns() looks up in
+# the Get Device Descriptors reply before it uses them.
+PX4_NEEDED_DESCRIPTORS = [0x0109, 0x0C0E, 0x0C0F, 0x0D01, 0x0C11, 0x0106, 0x8004, 0x8005]
+PX4_STREAM_PACKETS = 200  # 0x80 packets decoded after Resume before the replay ends
+
+
+class Px4Run:
+    """The host as PX4's microstrain driver (PX4-Autopilot 00c59fa5080c,
+    src/drivers/ins/microstrain/MicroStrain.cpp initializeIns(), module.yaml
+    defaults; the same sequence as tests/device/test_mip_device.cpp
+    Px4MicrostrainStartUpReplayGetsEveryAckItWaitsFor): each command is sent
+    when the previous one's reply arrived, and each reply must be the one the
+    driver waits for. After the Comm Port Speed ACK the driver reopens its
+    port at 921600; here the far end is QEMU's socket chardev, which carries
+    bytes at any rate, so "switching" is bookkeeping: every byte after the
+    ACK must still be part of a valid MIP packet, and the guest's side
+    (px4.speed.txt, the QEMU trace) shows the rate the 8250 was set to.
+    PX4's 250-ms reply timeout is not kept under TCG (REPLY_TIMEOUT_S)."""
+
+    REPLY_TIMEOUT_S = 15.0
+
+    def __init__(self, name, send, results):
+        self.name, self.protocol, self.send, self.results = name, "mip-px4", send, results
+        self.bytes = 0
+        self.wire = bytearray()
+        self.buffer = bytearray()
+        self.garbage = 0
+        self.steps = self._steps()
+        self.step = -1  # -1: waiting for the device's first packet
+        self.sent_at = None
+        self.replies = []  # (label, command bytes, reply bytes, verdict or None)
+        self.failures = []
+        self.base_rate = None
+        self.switched_at_byte = None  # wire offset after the Comm Port Speed ACK
+        self.data_packets = []  # (wire offset, step index when it arrived, field descriptors, accel g)
+        self.stream_after_resume = 0
+        self.done = False
+        self.first_sent = self.last_reply = None
+
+    def _steps(self):
+        idle = ("Set To Idle (0x01,0x02)", 0x01, [0x02, 0x02], self._exact(0x01, mip_ack(0x02)))
+        return [
+            # connectAtBaud(115200) -> forceIdle
+            idle,
+            # getSupportedDescriptors: both lists
+            ("Get Device Descriptors (0x01,0x04)", 0x01, [0x02, 0x04], self._descriptors),
+            ("Get Extended Descriptors (0x01,0x07)", 0x01, [0x02, 0x07], self._ack_then(0x01, 0x07, 0x86)),
+            # writeBaudRate(921600, port 1): Comm Port Speed, function 1 (write), port 1, u32 BE
+            ("Comm Port Speed 921600 (0x01,0x09)", 0x01, [0x08, 0x09, 0x01, 0x01, *921600 .to_bytes(4, "big")],
+             self._exact(0x01, mip_ack(0x09))),
+            # connectAtBaud(921600) -> forceIdle
+            ("at 921600: " + idle[0], *idle[1:]),
+            # configureImuMessageFormat: base rate of 0x80, then accel + gyro
+            ("Get Base Rate 0x80 (0x0C,0x0E)", 0x0C, [0x03, 0x0E, 0x80], self._base_rate(0x80)),
+            ("Message Format 0x80 accel+gyro (0x0C,0x0F)", 0x0C, None, self._exact(0x0C, mip_ack(0x0F))),
+            # configureFilterMessageFormat: base rate of 0x82, then no field
+            ("Get Base Rate 0x82 (0x0C,0x0E)", 0x0C, [0x03, 0x0E, 0x82], self._base_rate(0x82)),
+            ("Message Format 0x82, no field (0x0C,0x0F)", 0x0C, [0x05, 0x0F, 0x01, 0x82, 0x00],
+             self._exact(0x0C, mip_ack(0x0F))),
+            # configureGnssMessageFormat(0x91 / 0x92): NACK invalid parameter, which PX4 tolerates
+            ("Get Base Rate 0x91 (0x0C,0x0E)", 0x0C, [0x03, 0x0E, 0x91], self._exact(0x0C, mip_ack(0x0E, 0x03))),
+            ("Get Base Rate 0x92 (0x0C,0x0E)", 0x0C, [0x03, 0x0E, 0x92], self._exact(0x0C, mip_ack(0x0E, 0x03))),
+            ("Reset Filter (0x0D,0x01)", 0x0D, [0x02, 0x01], self._exact(0x0D, mip_ack(0x01))),
+            ("Datastream Control all on (0x0C,0x11)", 0x0C, [0x05, 0x11, 0x01, 0x00, 0x01],
+             self._exact(0x0C, mip_ack(0x11))),
+            ("Resume (0x01,0x06)", 0x01, [0x02, 0x06], self._exact(0x01, mip_ack(0x06))),
+            # Not PX4's: after the stream check, the device's own word on its rate.
+            ("(check) read Comm Port Speed port 1 (0x01,0x09)", 0x01, [0x04, 0x09, 0x02, 0x01],
+             self._exact(0x01, mip_ack(0x09), bytes([0x07, 0x89, 0x01, *921600 .to_bytes(4, "big")]))),
+        ]
+
+    # -- reply checks: return None when the reply is the one expected, else why not
+    @staticmethod
+    def _exact(descriptor_set, *fields):
+        want = mip_packet(descriptor_set, *fields)
+        return lambda reply: None if reply == want else f"expected {want.hex(' ')}"
+
+    @staticmethod
+    def _ack_then(descriptor_set, command, reply_field):
+        def check(reply):
+            fields = mip_fields(reply)
+            if reply[2] != descriptor_set or not fields or fields[0] != (0xF1, bytes([command, 0])):
+                return f"no ACK of {command:#04x}"
+            return None if any(d == reply_field for d, _ in fields[1:]) else f"no reply field {reply_field:#04x}"
+        return check
+
+    def _descriptors(self, reply):
+        why = self._ack_then(0x01, 0x04, 0x82)(reply)
+        if why:
+            return why
+        data = b"".join(d for f, d in mip_fields(reply) if f == 0x82)
+        listed = {int.from_bytes(data[i:i + 2], "big") for i in range(0, len(data) - 1, 2)}
+        missing = [f"{d:#06x}" for d in PX4_NEEDED_DESCRIPTORS if d not in listed]
+        return f"descriptors PX4 needs are not listed: {missing}" if missing else None
+
+    def _base_rate(self, data_set):
+        def check(reply):
+            fields = mip_fields(reply)
+            if reply[2] != 0x0C or len(fields) != 2 or fields[0] != (0xF1, bytes([0x0E, 0])) or \
+                    fields[1][0] != 0x8E or len(fields[1][1]) != 3 or fields[1][1][0] != data_set:
+                return "expected ACK and field 0x8E (set, u16 rate)"
+            rate = int.from_bytes(fields[1][1][1:3], "big")
+            if data_set == 0x80:
+                self.base_rate = rate
+            return None if rate > 0 else "base rate 0"
+        return check
+
+    def _command(self, index):
+        label, descriptor_set, field, _ = self.steps[index]
+        if field is None:  # Message Format 0x80: write, set 0x80, 2 descriptors at base_rate / MS_IMU_RATE_HZ
+            decimation = (self.base_rate or 0) // PX4_IMU_RATE_HZ
+            field = [0x0B, 0x0F, 0x01, 0x80, 0x02, 0x04, *decimation.to_bytes(2, "big"), 0x05,
+                     *decimation.to_bytes(2, "big")]
+        return mip_packet(descriptor_set, field)
+
+    def _send_step(self, index):
+        self.step = index
+        command = self._command(index)
+        self.replies.append([self.steps[index][0], command, None, None])
+        self.sent_at = time.monotonic()
+        self.first_sent = self.first_sent or self.sent_at
+        try:
+            self.send(command)
+        except OSError as e:  # QEMU gone: the guest's side ended (its output says why)
+            self.failures.append(f"{self.steps[index][0]}: cannot send: {e}")
+            self.done = True
+
+    # -- the byte stream
+    def write(self, data):
+        self.bytes += len(data)
+        self.wire += data
+        self.buffer += data
+        offset = len(self.wire) - len(self.buffer)
+        while len(self.buffer) >= 6:
+            if self.buffer[0] != 0x75 or self.buffer[1] != 0x65:
+                self.garbage += 1
+                del self.buffer[0]
+                offset += 1
+                continue
+            total = 4 + self.buffer[3] + 2
+            if len(self.buffer) < total:
+                break
+            packet = bytes(self.buffer[:total])
+            if mip_packet(packet[2], packet[4:-2]) != packet:
+                self.garbage += 1  # not a packet: resync one byte on
+                del self.buffer[0]
+                offset += 1
+                continue
+            del self.buffer[:total]
+            self.on_packet(packet, offset)
+            offset += total
+
+    def on_packet(self, packet, offset):
+        if packet[2] == 0x80:
+            fields = mip_fields(packet)
+            accel = next((struct.unpack(">3f", d) for f, d in fields if f == 0x04 and len(d) == 12), None)
+            self.data_packets.append((offset, self.step, [f for f, _ in fields], accel))
+            if self.step == -1:
+                self._send_step(0)  # the device is up: the driver starts
+            elif self.steps[self.step][0].startswith("Resume") and self.replies[-1][3] is None \
+                    and self.replies[-1][2] is not None:
+                self.stream_after_resume += 1
+                if self.stream_after_resume == PX4_STREAM_PACKETS:
+                    self._send_step(self.step + 1)
+            return
+        if self.step < 0 or self.replies[-1][2] is not None:
+            self.failures.append(f"an unasked packet {packet.hex(' ')}")
+            return
+        record = self.replies[-1]
+        record[2] = packet
+        self.last_reply = time.monotonic()
+        why = self.steps[self.step][3](packet)
+        record[3] = why
+        log(f"px4: {record[0]}: sent {record[1].hex(' ')} -> {packet.hex(' ')}"
+            f"{'' if why is None else '  FAILED: ' + why}")
+        if why is not None:
+            self.failures.append(f"{record[0]}: reply {packet.hex(' ')}: {why}")
+            self.done = True
+            return
+        if self.steps[self.step][0].startswith("Comm Port Speed"):
+            self.switched_at_byte = offset + len(packet)
+            log("px4: the driver switches its side to 921600 baud now (bookkeeping on the socket chardev)")
+        if self.steps[self.step][0].startswith("Resume"):
+            return  # the stream check sends the next one
+        if self.step + 1 < len(self.steps):
+            self._send_step(self.step + 1)
+        else:
+            self.done = True
+
+    def tick(self):
+        if self.done or self.sent_at is None or self.replies[-1][2] is not None:
+            return
+        if time.monotonic() - self.sent_at > self.REPLY_TIMEOUT_S:
+            self.failures.append(f"{self.replies[-1][0]}: no reply within {self.REPLY_TIMEOUT_S} s")
+            log(f"px4: FAILED: {self.failures[-1]}")
+            self.done = True
+
+    def finish(self):
+        with open(os.path.join(self.results, f"{self.name}.wire.bin"), "wb") as f:
+            f.write(self.wire)
+
+
 class Splitter:
     """Cuts the UART byte stream at the guest's markers."""
 
     def __init__(self, token, imuemu, results):
         self.prefix = b"HILSEP:" + token.encode() + b":"
         self.imuemu, self.results = imuemu, results
+        self.send = None  # writes to the guest's ttyS1 (set once connected)
         self.buffer = b""
         self.current = None
         self.runs = []
@@ -152,11 +387,13 @@ class Splitter:
         while True:
             at = self.buffer.find(self.prefix)
             if at < 0:
-                # Hold back what could be the start of a marker cut by the chunking.
-                keep = len(self.prefix) - 1
-                if len(self.buffer) > keep:
-                    self._data(self.buffer[:-keep])
-                    self.buffer = self.buffer[-keep:]
+                # Hold back only a tail that could be the start of a marker
+                # cut by the chunking: an interactive run (Px4Run) must see a
+                # reply's last bytes at once, not when more bytes follow.
+                keep = next((n for n in range(min(len(self.prefix) - 1, len(self.buffer)), 0, -1)
+                             if self.prefix.startswith(self.buffer[-n:])), 0)
+                self._data(self.buffer[:len(self.buffer) - keep])
+                self.buffer = self.buffer[len(self.buffer) - keep:]
                 return
             self._data(self.buffer[:at])
             end = self.buffer.find(b";", at)
@@ -170,12 +407,20 @@ class Splitter:
                 self.current = None
             if marker[0] == "BEGIN" and len(marker) == 3:
                 log(f"run {marker[1]}: {marker[2]} begins")
-                self.current = Run(marker[1], marker[2], self.imuemu, self.results)
+                if marker[2] == "mip-px4":
+                    self.current = Px4Run(marker[1], self.send, self.results)
+                else:
+                    self.current = Run(marker[1], marker[2], self.imuemu, self.results)
                 self.runs.append(self.current)
             elif marker == ["END"]:
                 self.ended = True
             else:
                 raise RuntimeError(f"unknown marker {marker}")
+
+    def tick(self):
+        """Lets an interactive run (a driver replay) send and time out."""
+        if self.current is not None and hasattr(self.current, "tick"):
+            self.current.tick()
 
     def close(self):
         self._data(self.buffer)
@@ -202,13 +447,13 @@ def connect(path, fixture, deadline):
     return None
 
 
-def boot_and_capture(guest, imuemu, results, token, guest_args=()):
+def boot_and_capture(guest, imuemu, results, token, guest_args=(), extra_includes=(), fixture_args=()):
     """Runs the guest script under qemu_run.sh; returns (fixture status, splitter)."""
     with tempfile.TemporaryDirectory(prefix="hil_uart.") as tmp:
         sock_path = os.path.join(tmp, "ttyS1.sock")
-        includes = [imuemu, guest]
+        includes = [imuemu, guest, *extra_includes]
         command = [os.path.join(HERE, "qemu_run.sh"), "--serial1", f"socket,path={sock_path},server=on,wait=on",
-                   "--results", results, "--timeout", "200"]
+                   "--results", results, "--timeout", "200", *fixture_args]
         for path in includes:
             command += ["--include", path]
         command += ["--", "sh", guest, imuemu, token, *map(str, guest_args)]
@@ -220,18 +465,31 @@ def boot_and_capture(guest, imuemu, results, token, guest_args=()):
             rc = fixture.wait()
             log(f"never connected to {sock_path} (fixture status {rc})")
             return FIXTURE_FAILURE, splitter
+        splitter.send = s.sendall
         try:
             with s:
-                s.settimeout(200)
+                # Short reads, so an interactive run (Px4Run) can time out.
+                s.settimeout(0.05)
+                last = time.monotonic()
                 while True:
                     try:
                         chunk = s.recv(65536)
-                    except socket.timeout:
-                        log("no bytes on ttyS1 for 200 s")
+                    except ConnectionResetError:
+                        # QEMU exited with bytes of ours it never read (a
+                        # command the guest did not take): the results say why.
+                        log("ttyS1: connection reset by QEMU (it exited with unread bytes from the host)")
                         break
+                    except socket.timeout:
+                        splitter.tick()
+                        if time.monotonic() - last > 200:
+                            log("no bytes on ttyS1 for 200 s")
+                            break
+                        continue
                     if not chunk:
                         break  # QEMU exited
+                    last = time.monotonic()
                     splitter.feed(chunk)
+                    splitter.tick()
             splitter.close()
             return fixture.wait(timeout=60), splitter
         finally:
@@ -430,15 +688,111 @@ def check_common(rc, splitter, expected_runs, c):
 UART_RATE_HZ = 200  # passed to tests/hil/uart_emit_guest.sh
 
 
+def check_px4_run(run, results, c):
+    """The PX4 replay (Px4Run) and what the guest saw of the baud change."""
+    tag = "px4 (PX4 microstrain start-up, mip)"
+    for failure in run.failures:
+        c.expect(False, f"{tag}: {failure}")
+    unanswered = [label for label, _, reply, _ in run.replies if reply is None]
+    c.expect(len(run.replies) == len(run.steps) and not unanswered,
+             f"{tag}: {len(run.replies)} of {len(run.steps)} commands sent, unanswered: {unanswered}"
+             f"{' (the device never streamed: no first packet)' if run.step == -1 else ''}")
+    c.expect(run.garbage == 0, f"{tag}: {run.garbage} bytes outside valid MIP packets")
+    c.expect(len(run.buffer) == 0, f"{tag}: {len(run.buffer)} bytes of a cut packet at the end")
+    c.expect(run.switched_at_byte is not None, f"{tag}: no Comm Port Speed ACK")
+    after = [p for p in run.data_packets if run.switched_at_byte is not None and p[0] >= run.switched_at_byte]
+    resume_step = next(i for i, step in enumerate(run.steps) if step[0].startswith("Resume"))
+    # Set to idle at 921600 .. Resume's ACK: the device is idle, it sends nothing.
+    idle_step = 4
+    idle_leak = [p for p in run.data_packets if idle_step < p[1] <= resume_step - 1 or
+                 (p[1] == resume_step and run.replies[resume_step][2] is None)]
+    c.expect(not idle_leak, f"{tag}: {len(idle_leak)} data packets while the device was idle")
+    streamed = [p for p in run.data_packets if p[1] >= resume_step and p not in idle_leak]
+    c.expect(len(streamed) >= PX4_STREAM_PACKETS, f"{tag}: {len(streamed)} 0x80 packets after Resume")
+    wrong = [p for p in streamed if p[2] != [0x04, 0x05]]
+    c.expect(not wrong, f"{tag}: {len(wrong)} packets after Resume with fields other than accel+gyro "
+             f"(0x04, 0x05): {wrong[:2]}")
+    bad = [p[3] for p in streamed if p[3] is None or not 0.985 < math.sqrt(sum(v * v for v in p[3])) < 1.01]
+    c.expect(not bad, f"{tag}: static scaled accelerometer not ~1 g: {bad[:3]}")
+    # The emulated device's own counters (emit --stats-json).
+    device = emit_device(emit_stats(results, run.name))
+    commands = device.get("commands") or {}
+    transport = device.get("transport") or {}
+    log(f"{tag}: emit: commands {json.dumps(commands)}; transport replies_sent {transport.get('replies_sent')}, "
+        f"frames {transport.get('frames')}, sent {transport.get('frames_sent')}, dropped_queue_full "
+        f"{transport.get('dropped_queue_full')}, input_bytes {transport.get('input_bytes')}")
+    c.expect(commands.get("baud") == 921600, f"{tag}: emit reports the device at {commands.get('baud')} baud")
+    c.expect(commands.get("received") == len(run.steps) and commands.get("nacked") == 2,
+             f"{tag}: emit counted {commands.get('received')} commands ({commands.get('nacked')} NACKed); "
+             f"the driver sent {len(run.steps)}, 2 to be NACKed (GNSS base rates)")
+    # The guest's 8250: the termios speed, which the driver writes back as
+    # the rate it programmed the divisor for (uart_get_baud_rate).
+    speeds = []
+    try:
+        with open(os.path.join(results, f"{run.name}.speed.txt")) as f:
+            for line in f:
+                parts = line.split()
+                if len(parts) >= 3 and parts[1] == "speed":
+                    speeds.append((float(parts[0]), int(parts[2])))
+    except (OSError, ValueError) as e:
+        c.expect(False, f"{tag}: the guest's speed log: {e}")
+    changes = [b for (_, a), (_, b) in zip(speeds, speeds[1:]) if a != b]
+    c.expect(bool(speeds) and speeds[0][1] == 115200 and speeds[-1][1] == 921600 and changes == [921600],
+             f"{tag}: /dev/ttyS1's speed in the guest went {[v for _, v in speeds[:1]] + changes}, expected "
+             f"115200 then 921600")
+    log(f"{tag}: guest stty -F /dev/ttyS1: {speeds[0] if speeds else None} ... {speeds[-1] if speeds else None} "
+        f"({len(speeds)} samples, {'first 921600 at %.1f s' % next((t for t, v in speeds if v == 921600), -1)})")
+    # QEMU's view (trace serial_update_parameters: 115200 / divisor, since
+    # QEMU's 16550A has a 1.8432 MHz clock): the guest's divisor 8 (115200 at
+    # baud_base 921600) shows as 14400, divisor 1 as 115200.
+    try:
+        with open(os.path.join(results, "qemu_trace.txt")) as f:
+            rates = [int(line.split("baudrate=")[1].split()[0]) for line in f if "serial_update_parameters" in line]
+        runs = []
+        for rate in rates:
+            if runs and runs[-1][0] == rate:
+                runs[-1][1] += 1
+            else:
+                runs.append([rate, 1])
+        log(f"{tag}: QEMU serial_update_parameters baud rates in order (all three UARTs; rate x calls): "
+            f"{', '.join(f'{r} x{n}' for r, n in runs)}")
+        c.expect(any(a == 14400 and b == 115200 for a, b in zip(rates, rates[1:])),
+                 f"{tag}: QEMU never saw ttyS1's divisor go from 8 to 1 (14400 -> 115200 at its clock)")
+    except (OSError, IndexError, ValueError) as e:
+        c.expect(False, f"{tag}: QEMU's trace: {e}")
+    # The guest's 8250 received exactly the driver's bytes (/proc/tty/driver/serial rx, before and after).
+    try:
+        with open(os.path.join(results, f"{run.name}.serial_counters.txt")) as f:
+            rx = [int(line.split(" rx:")[1].split()[0]) for line in f if " rx:" in line]
+        sent = sum(len(command) for _, command, _, _ in run.replies)
+        c.expect(len(rx) == 2 and rx[1] - rx[0] == sent,
+                 f"{tag}: the guest's 8250 counted {rx} received bytes, the driver sent {sent}")
+        log(f"{tag}: the guest's 8250 received {rx[1] - rx[0] if len(rx) == 2 else rx} bytes, the driver sent {sent}")
+    except (OSError, IndexError, ValueError) as e:
+        c.expect(False, f"{tag}: the guest's serial counters: {e}")
+    if run.first_sent is not None and run.last_reply is not None:
+        log(f"{tag}: the replay took {run.last_reply - run.first_sent:.2f} s from the first command to the last reply")
+    log(f"{tag}: {len(run.replies)} commands answered, {len(streamed)} 0x80 packets after Resume, "
+        f"{len(after)} data packets after the switch, {run.garbage} garbage bytes, {run.bytes} bytes in all")
+
+
 def test_uart(args, results):
     token = secrets.token_hex(8)
     guest = os.path.join(HERE, "uart_emit_guest.sh")
-    rc, splitter = boot_and_capture(guest, args.imuemu, results, token, (UART_RATE_HZ,))
+    setserial = shutil.which("setserial") or "/bin/setserial"
+    if not os.path.exists(setserial):
+        log("FIXTURE FAILURE: setserial not found: install the Debian package setserial (scripts/setup.sh)")
+        return FIXTURE_FAILURE
+    rc, splitter = boot_and_capture(guest, args.imuemu, results, token, (UART_RATE_HZ,), (setserial,),
+                                    ("--trace", "serial_update_parameters"))
     if rc == FIXTURE_FAILURE:
         return rc
     c = Checks()
-    check_common(rc, splitter, ["mavlink2", "mip"], c)
+    check_common(rc, splitter, ["mavlink2", "mip", "px4"], c)
     for run in splitter.runs:
+        if isinstance(run, Px4Run):
+            check_px4_run(run, results, c)
+            continue
         device = check_stream_run(run, results, UART_RATE_HZ, c)
         {"mavlink2": check_mavlink_wire, "mip": check_mip_wire}[run.protocol](run, device.get("emitted"), c)
     return 1 if c.failures else 0
