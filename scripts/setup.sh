@@ -36,6 +36,9 @@ test_packages=(
   # guest and systemd-analyze (a minbase system has no systemd), ps for its checks
   user-mode-linux kmod iproute2 qemu-system-x86 busybox-static cpio xz-utils
   linux-headers-amd64 can-utils gpiod python3-can systemd procps
+  # GNSS receiver acceptance (tests/cli/test_gnss_gpsd.cpp): Debian's gpsd reads
+  # imuemu's NMEA and UBX ptys
+  gpsd gpsd-clients
 )
 
 case "$what" in
