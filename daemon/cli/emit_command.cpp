@@ -243,6 +243,22 @@ int emit(const EmitArgs& a) {
       if (!member(drivers::stream_protocol_names(), a.protocol))
         throw std::invalid_argument("--protocol " + a.protocol + ": expected native, mavlink2, mip, nmea, ubx, dronecan or j1939");
       stream_encoder = drivers::make_stream_encoder(a.protocol, protocol_options.stream);
+      // A GNSS receiver's epochs are the device's grid from the first pose:
+      // on the top of each GPS second only when the first pose is on one.
+      if (drivers::is_gnss_protocol(a.protocol) && !eo.trajectory.empty()) {
+        const drivers::GnssReceiverConfig& g = protocol_options.stream.gnss;
+        const TimeNs first_ns = eo.trajectory.front().t_ns;
+        // UTC and GPS time differ by whole seconds: the fraction is the same.
+        const TimeNs gps_first_ns = g.time_base == drivers::GnssTimeBase::utc
+                                        ? first_ns
+                                        : saturating_add_ns(g.gps_time_at_t0_ns, first_ns);
+        const TimeNs after_second_ns = ((gps_first_ns % kNsPerSecond) + kNsPerSecond) % kNsPerSecond;
+        if (after_second_ns != 0)
+          std::cerr << "imuemu emit: warning: the trajectory starts " << static_cast<double>(after_second_ns) * 1e-6
+                    << " ms after a GPS second, so every epoch of the receiver falls that far after the top of the "
+                       "GPS second; start the trajectory on a whole second (or set "
+                    << "--" << drivers::protocol_option_table_name(a.protocol) << "-gps-time-at-t0-ns)\n";
+      }
       // A device that answers its driver (MIP): what the driver changed, on stderr.
       if (drivers::CommandResponder* r = stream_encoder->command_responder())
         r->set_log([](std::string_view line) { std::cerr << "imuemu emit: " << line << "\n"; });
