@@ -30,6 +30,7 @@
 #include <fstream>
 #include <map>
 #include <nlohmann/json.hpp>
+#include <set>
 #include <sstream>
 #include <string>
 #include <thread>
@@ -175,7 +176,9 @@ TEST(GnssGpsd, GpsdReportsTheTrajectoryFromImuemusNmeaAndUbx) {
       (dir / "ubx.log").string());
   ASSERT_GT(nmea, 0);
   ASSERT_GT(ubx, 0);
-  for (int i = 0; i < 500 && !(fs::exists(nmea_link) && fs::exists(ubx_link)); ++i) std::this_thread::sleep_for(10ms);
+  // A bound, not a timing: the links appear within milliseconds on an idle
+  // host; a loaded CI host (or a sanitizer build) may take seconds.
+  for (int i = 0; i < 3000 && !(fs::exists(nmea_link) && fs::exists(ubx_link)); ++i) std::this_thread::sleep_for(10ms);
   ASSERT_TRUE(fs::exists(nmea_link) && fs::exists(ubx_link)) << file_text(dir / "nmea.log") << file_text(dir / "ubx.log");
 
   const int port = free_tcp_port();
@@ -231,7 +234,8 @@ TEST(GnssGpsd, GpsdReportsTheTrajectoryFromImuemusNmeaAndUbx) {
       {ubx_link, {0.5e-7 + 0.5e-9, 0.0005 + 0.5e-4, 0.0005 + 0.5e-3, 5e-3 + 0.5e-4}},
   };
   const std::map<std::string, long long> epoch_ms = {{nmea_link, 1000}, {ubx_link, 200}};
-  std::map<std::string, int> fixes;
+  std::map<std::string, int> fixes;                 // TPVs checked (gpsd reports UBX twice an epoch)
+  std::map<std::string, std::set<long long>> epochs;  // distinct epochs among them
   std::map<std::string, std::string> first_tpv;
   std::istringstream lines(received);
   std::string line;
@@ -257,12 +261,16 @@ TEST(GnssGpsd, GpsdReportsTheTrajectoryFromImuemusNmeaAndUbx) {
     EXPECT_NEAR(j["speed"].get<double>(), x.speed_m_s, tol.speed_m_s);
     EXPECT_NEAR(j["track"].get<double>(), x.track_deg, tol.track_deg);
     if (fixes[device]++ == 0) first_tpv[device] = line;
+    epochs[device].insert(t_ms);
   }
-  // gpsd needs a sentence or two to lock on: at least half the epochs.
-  EXPECT_GE(fixes[nmea_link], static_cast<int>(kDurationS) / 2) << received.substr(0, 4000) << file_text(dir / "gpsd.log");
-  EXPECT_GE(fixes[ubx_link], static_cast<int>(kDurationS) * 5 / 2) << received.substr(0, 4000) << file_text(dir / "gpsd.log");
-  std::printf("gpsd TPV fixes: %d from NMEA, %d from UBX; first NMEA: %s\nfirst UBX: %s\n", fixes[nmea_link],
-              fixes[ubx_link], first_tpv[nmea_link].c_str(), first_tpv[ubx_link].c_str());
+  // gpsd needs a sentence or two to lock on, and the epochs sent before it
+  // opened the ptys are lost (emit starts on its own): of the 9 NMEA and 41
+  // UBX epochs, 7 and 33 reached it on an idle host; a third is asked for.
+  EXPECT_GE(epochs[nmea_link].size(), 3u) << received.substr(0, 4000) << file_text(dir / "gpsd.log");
+  EXPECT_GE(epochs[ubx_link].size(), 13u) << received.substr(0, 4000) << file_text(dir / "gpsd.log");
+  std::printf("gpsd TPV fixes: %d from NMEA (%zu epochs), %d from UBX (%zu epochs); first NMEA: %s\nfirst UBX: %s\n",
+              fixes[nmea_link], epochs[nmea_link].size(), fixes[ubx_link], epochs[ubx_link].size(),
+              first_tpv[nmea_link].c_str(), first_tpv[ubx_link].c_str());
   if (!HasFailure()) fs::remove_all(dir);
 }
 
