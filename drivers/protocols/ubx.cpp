@@ -54,7 +54,10 @@ GpsWeekTime week_time(const GnssFix& f) {
   const std::int64_t tow_ns = t % kNsPerWeek;
   std::int64_t ms = (tow_ns + 500'000) / 1'000'000;
   w.ftow_ns = static_cast<std::int32_t>(tow_ns - ms * 1'000'000);
-  if (ms >= 604'800'000) ms -= 604'800'000;  // rounds into the next week's 0 (iTOW only)
+  if (ms >= 604'800'000) {  // the last half ms of a week rounds to TOW 0 of the next
+    ms -= 604'800'000;
+    ++w.week;
+  }
   w.itow_ms = static_cast<std::uint32_t>(ms);
   return w;
 }

@@ -326,3 +326,26 @@ TEST(GnssReceiverEncoders, OneEpochPerSampleOnTheConfiguredTimeBase) {
     EXPECT_EQ(d->counters().checksum_errors + d->counters().resync_bytes, 0u) << name;
   }
 }
+
+// iTOW is the epoch's time of week rounded to the ms, fTOW the rest (u-blox:
+// TOW = iTOW * 1e-3 + fTOW * 1e-9 s, fTOW in +-500000 ns); an epoch in the
+// last half millisecond of a week is TOW 0 of the next week.
+TEST(UbxFrames, TimeOfWeekRoundsToTheMillisecondWithTheRestInFtow) {
+  GnssFix f = known_fix();
+  f.gps_time_ns = 2401LL * 604'800LL * kNs - 300'000;  // 0.3 ms before week 2401
+  std::vector<std::uint8_t> out;
+  ubx::append_nav_timegps(f, out);
+  std::vector<UbxFrame> frames = ubx_frames(out);
+  ASSERT_EQ(frames.size(), 1u);
+  EXPECT_EQ(u4(frames[0].payload, 0), 0u);                      // iTOW
+  EXPECT_EQ(i4(frames[0].payload, 4), -300'000);                // fTOW
+  EXPECT_EQ(u2(frames[0].payload, 8), 2401);                    // week
+  f.gps_time_ns = kWeek2400Ns + 1'234'567'891;  // TOW 1.234567891 s
+  out.clear();
+  ubx::append_nav_sol(f, out);
+  frames = ubx_frames(out);
+  ASSERT_EQ(frames.size(), 1u);
+  EXPECT_EQ(u4(frames[0].payload, 0), 1235u);
+  EXPECT_EQ(i4(frames[0].payload, 4), -432'109);
+  EXPECT_EQ(u2(frames[0].payload, 8), 2400);
+}
