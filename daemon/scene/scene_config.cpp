@@ -870,6 +870,12 @@ SceneConfig parse_document(const Context& ctx, const toml::table& root) {
   for (std::size_t i = 0; i < imus.size(); ++i) {
     const Table t(ctx, *imus[i].as_table(), "imu[" + std::to_string(i) + "]");
     scene.imus.push_back(parse_imu(t));
+    // A GNSS receiver (issue 28) reports geodetic positions: a flat scene's
+    // local NED frame has no geodetic anchor.
+    if (drivers::is_gnss_protocol(scene.imus.back().protocol) && scene.physics.physics != Physics::ecef)
+      t.fail_at("protocol", "protocol " + scene.imus.back().protocol +
+                                " is a GNSS receiver: it reports WGS84 positions, which a flat scene does not have; "
+                                "set scene.physics = \"ecef\"");
     // A window beyond a million samples is a unit mistake, and would make
     // the engine allocate gigabytes for its kernel.
     const double window_samples = std::round(scene.smoothing.window_s.value_or(scene.trajectory.knot_interval_s) *

@@ -123,7 +123,9 @@ std::map<std::string, OtherValue> companions_of(const ProtocolOption& o) {
 }
 
 std::string scene_with(const std::string& protocol, const std::string& table_body) {
-  return "[scene]\nname = \"t\"\nphysics = \"flat\"\n[trajectory]\nsource = \"sample:static\"\n"
+  // A GNSS receiver needs an ecef scene (geodetic positions).
+  return "[scene]\nname = \"t\"\nphysics = \"" + std::string(is_gnss_protocol(protocol) ? "ecef" : "flat") +
+         "\"\n[trajectory]\nsource = \"sample:static\"\n"
          "[[imu]]\nname = \"a\"\nrate_hz = " +
          std::to_string(is_gnss_protocol(protocol) ? kMaxGnssRateHz : kRateHz) + "\nprotocol = \"" + protocol + "\"\n[imu.transport]\ntype = \"null\"\n[imu." +
          protocol_option_table_name(protocol) + "]\n" + table_body;

@@ -249,6 +249,8 @@ TEST(SceneErrors, EachNamesFileLineKeyAndWhatIsAllowed) {
       {"rate out of range", {{10, "rate_hz = 200000"}}, "", 10, "imu[0].rate_hz", "expected an integer in 1..100000"},
       {"GNSS receiver rate", {{10, "rate_hz = 20"}, {11, "protocol = \"nmea\""}}, "", 10, "imu[0].rate_hz",
        "protocol nmea is a GNSS receiver: its navigation rate is 1..10 Hz, not 20"},
+      {"GNSS receiver in a flat scene", {{10, "rate_hz = 5"}, {11, "protocol = \"ubx\""}}, "", 11, "imu[0].protocol",
+       "reports WGS84 positions, which a flat scene does not have"},
       {"unknown protocol", {{11, "protocol = \"sirf\""}}, "", 11, "imu[0].protocol",
        "expected one of native, mavlink2, mip, nmea, ubx, dronecan or j1939"},
       {"unknown physics", {{3, "physics = \"ned\""}}, "", 3, "scene.physics", "expected one of flat or ecef"},
