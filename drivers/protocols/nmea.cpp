@@ -53,6 +53,15 @@ class Sentence {
 
 bool has_position(const GnssFix& f) { return f.fix_type != GnssFixType::none; }
 
+// Every number printed is bounded (and NaN printed as 0), so that a field
+// never outgrows the sentence's buffer and printf never needs more than
+// its stack (no allocation on the emission thread).
+double bounded(double v, double lo, double hi) {
+  if (std::isnan(v)) return 0.0;
+  return std::clamp(v, lo, hi);  // +-inf to the bound of its sign
+}
+
+
 // The epoch's UTC time rounded to the 10 ms the time fields carry (before
 // the split into date and time, so that a rounding up carries into the date).
 gps_time::UtcCalendar utc_of(const GnssFix& f) {
@@ -73,18 +82,21 @@ void add_time(Sentence& s, const GnssFix& f, const gps_time::UtcCalendar& c) {
 // instead of printing 60.000000).
 void add_angle(Sentence& s, double rad, int degree_digits, char positive, char negative) {
   const double deg = rad * kDegPerRad;
-  const long long micro_minutes = std::llround(std::fabs(deg) * 60.0 * 1e6);
+  const long long micro_minutes = std::llround(bounded(std::fabs(deg), 0.0, 999.0) * 60.0 * 1e6);
   const long long whole_deg = micro_minutes / 60'000'000;
   const long long rest = micro_minutes % 60'000'000;
   s.add(",%0*lld%02lld.%06lld,%c", degree_digits, whole_deg, rest / 1'000'000, rest % 1'000'000,
         deg < 0.0 ? negative : positive);
 }
 
-double ground_speed_m_s(const GnssFix& f) { return std::hypot(f.velocity_ned_m_s.x(), f.velocity_ned_m_s.y()); }
+double ground_speed_m_s(const GnssFix& f) {
+  return bounded(std::hypot(f.velocity_ned_m_s.x(), f.velocity_ned_m_s.y()), 0.0, 9999.0);
+}
 
 // Course over ground, true, in hundredths of a degree in [0, 36000).
 long long course_centideg(const GnssFix& f) {
   double deg = std::atan2(f.velocity_ned_m_s.y(), f.velocity_ned_m_s.x()) * kDegPerRad;
+  if (!std::isfinite(deg)) return 0;
   if (deg < 0.0) deg += 360.0;
   return std::llround(deg * 100.0) % 36000;
 }
@@ -116,9 +128,9 @@ void append_gga(const GnssFix& f, std::string_view talker, std::vector<std::uint
     // characters), and the MSL altitude from that rounded value, so that a
     // reader's MSL + separation is the ellipsoidal height to the 0.01 m of
     // the altitude field.
-    const double separation_m = std::round(std::clamp(f.geoid_separation_m, -999.9, 999.9) * 10.0) / 10.0;
-    s.add(",1,%02d,%.1f,%.2f,M,%.1f,M,,", std::clamp(f.satellites, 0, 99), std::clamp(f.hdop, 0.0, 99.9),
-          std::clamp(f.height_m - separation_m, -9999.99, 99999.99), separation_m);
+    const double separation_m = std::round(bounded(f.geoid_separation_m, -999.9, 999.9) * 10.0) / 10.0;
+    s.add(",1,%02d,%.1f,%.2f,M,%.1f,M,,", std::clamp(f.satellites, 0, 99), bounded(f.hdop, 0.0, 99.9),
+          bounded(f.height_m - separation_m, -9999.99, 99999.99), separation_m);
   } else {
     s.add(",,,,,0,00,99.9,,,,,,");
   }
@@ -177,7 +189,8 @@ void append_gsa(const GnssFix& f, std::string_view talker, std::vector<std::uint
     if (i <= used) s.add(",%02d", i);
     else s.add(",");
   }
-  if (has_position(f)) s.add(",%.2f,%.2f,%.2f,1", f.pdop, f.hdop, f.vdop);
+  if (has_position(f))
+    s.add(",%.2f,%.2f,%.2f,1", bounded(f.pdop, 0.0, 99.99), bounded(f.hdop, 0.0, 99.99), bounded(f.vdop, 0.0, 99.99));
   else s.add(",99.99,99.99,99.99,1");
   s.append_to(out);
 }
