@@ -56,6 +56,16 @@ struct ImuFrameInput {
   bool has_level_attitude = false;
   double pitch_rad = 0.0;
   double roll_rad = 0.0;
+  // The sensor's (a GNSS device: its antenna's) position and velocity at
+  // t_ns from the smoothed trajectory: WGS84 latitude, longitude, height
+  // above the ellipsoid and the velocity in local NED axes. Filled only for
+  // an encoder whose needs_navigation() is true, in an ecef scene (a flat
+  // scene has no geodetic position: left false).
+  bool has_navigation = false;
+  double latitude_rad = 0.0;
+  double longitude_rad = 0.0;
+  double height_m = 0.0;
+  Vec3 velocity_ned_m_s = Vec3::Zero();
 };
 
 // A classic CAN or CAN FD frame (SocketCAN's struct can_frame / canfd_frame
@@ -122,6 +132,9 @@ class StreamEncoder {
   // The frame's delta_theta / delta_velocity are coning/sculling-compensated
   // increments (true) or raw integrals (false, the default).
   virtual bool compensated_increments() const { return false; }
+  // The encoder reports a navigation fix (a GNSS receiver, issue 28): the
+  // producer fills ImuFrameInput's navigation fields only then.
+  virtual bool needs_navigation() const { return false; }
 
   // ---- link-fault hooks (issue 18; applied by drivers/link_fault.cpp,
   // effects per protocol in docs/faults.md). Defaults: a protocol without

@@ -37,6 +37,9 @@ test_packages=(
   # setserial raises the guest UART's baud_base for the 921600-baud change
   user-mode-linux kmod iproute2 qemu-system-x86 busybox-static cpio xz-utils
   linux-headers-amd64 can-utils gpiod python3-can systemd procps setserial
+  # GNSS receiver acceptance (tests/cli/test_gnss_gpsd.cpp): Debian's gpsd reads
+  # imuemu's NMEA and UBX ptys
+  gpsd gpsd-clients
 )
 
 case "$what" in

@@ -160,6 +160,20 @@ int emit(const EmitArgs& a) {
     return kUsageError;
   }
   const bool can = member(drivers::can_protocol_names(), a.protocol);
+  // A GNSS receiver (issue 28): its device rate is the navigation rate, and
+  // it needs geodetic positions (an ecef scene).
+  if (drivers::is_gnss_protocol(a.protocol)) {
+    if (a.rate_hz > drivers::kMaxGnssRateHz) {
+      std::cerr << "imuemu emit: --rate " << a.rate_hz << ": a GNSS receiver (--protocol " << a.protocol
+                << ") navigates at 1.." << drivers::kMaxGnssRateHz << " Hz (default 1)\n";
+      return kUsageError;
+    }
+    if (a.scene != "ecef") {
+      std::cerr << "imuemu emit: --protocol " << a.protocol
+                << " reports geodetic positions: it needs --scene ecef (a flat scene has no geodetic origin)\n";
+      return kUsageError;
+    }
+  }
   emission::DeviceOptions dev;
   emission::EngineOptions eo;
   std::unique_ptr<io::PoseSource> source;
@@ -228,8 +242,24 @@ int emit(const EmitArgs& a) {
       can_encoder = drivers::make_can_encoder(a.protocol, protocol_options.can);
     } else {
       if (!member(drivers::stream_protocol_names(), a.protocol))
-        throw std::invalid_argument("--protocol " + a.protocol + ": expected native, mavlink2, mip, dronecan or j1939");
+        throw std::invalid_argument("--protocol " + a.protocol + ": expected native, mavlink2, mip, nmea, ubx, dronecan or j1939");
       stream_encoder = drivers::make_stream_encoder(a.protocol, protocol_options.stream);
+      // A GNSS receiver's epochs are the device's grid from the first pose:
+      // on the top of each GPS second only when the first pose is on one.
+      if (drivers::is_gnss_protocol(a.protocol) && !eo.trajectory.empty()) {
+        const drivers::GnssReceiverConfig& g = protocol_options.stream.gnss;
+        const TimeNs first_ns = eo.trajectory.front().t_ns;
+        // UTC and GPS time differ by whole seconds: the fraction is the same.
+        const TimeNs gps_first_ns = g.time_base == drivers::GnssTimeBase::utc
+                                        ? first_ns
+                                        : saturating_add_ns(g.gps_time_at_t0_ns, first_ns);
+        const TimeNs after_second_ns = ((gps_first_ns % kNsPerSecond) + kNsPerSecond) % kNsPerSecond;
+        if (after_second_ns != 0)
+          std::cerr << "imuemu emit: warning: the trajectory starts " << static_cast<double>(after_second_ns) * 1e-6
+                    << " ms after a GPS second, so every epoch of the receiver falls that far after the top of the "
+                       "GPS second; start the trajectory on a whole second (or set "
+                    << "--" << drivers::protocol_option_table_name(a.protocol) << "-gps-time-at-t0-ns)\n";
+      }
       // A device that answers its driver (MIP): what the driver changed, on stderr.
       if (drivers::CommandResponder* r = stream_encoder->command_responder())
         r->set_log([](std::string_view line) { std::cerr << "imuemu emit: " << line << "\n"; });
@@ -369,7 +399,7 @@ void add_emit_command(CLI::App& app, int& exit_code) {
   c->add_option("--margin-s", a.margin_s, "--source: extra delay beyond the engine's look-ahead")->capture_default_str()->check(seconds_in(0.0, kMaxIntervalS));
   c->add_option("--scene", a.scene, "ecef or flat")->capture_default_str()->check(CLI::IsMember({"ecef", "flat"}));
   c->add_option("--gravity", a.gravity_m_s2, "flat scene gravity (m/s^2)")->capture_default_str()->check(finite_in(0.0, kMaxGravityM_s2));
-  c->add_option("--rate", a.rate_hz, "Output rate in Hz (integer)")->capture_default_str()->check(CLI::Range(1, 1000000));
+  c->add_option("--rate", a.rate_hz, "Output rate in Hz (integer); nmea and ubx: the navigation rate, 1..10, default 1")->capture_default_str()->check(CLI::Range(1, 1000000));
   c->add_option("--delta", a.delta, "Window half-length Delta (samples); default one median knot interval")->check(CLI::Range(std::int64_t{1}, limits::kMaxWindowSamples));
   c->add_option("--protocol", a.protocol, "Wire protocol")->capture_default_str()->check(CLI::IsMember(protocols));
   c->add_option("--device", a.device, "pty:LINKPATH | serial:PATH[,baud=N] | udp:HOST:PORT[,bind=PORT] | tcp-listen:[HOST:]PORT | can:IFACE")->required();
@@ -404,7 +434,10 @@ void add_emit_command(CLI::App& app, int& exit_code) {
                                                                       : "CHOICE";
     protocol_flags.emplace_back(flag, c->add_option(flag, (*texts)[flag], help)->type_name(type)->group("Protocol options"));
   }
-  c->callback([args, texts, protocol_flags, &exit_code] {
+  CLI::Option* rate_option = c->get_option("--rate");
+  c->callback([args, texts, protocol_flags, rate_option, &exit_code] {
+    // A GNSS receiver's default rate is 1 Hz (its navigation rate), not an IMU's.
+    if (rate_option->count() == 0 && drivers::is_gnss_protocol(args->protocol)) args->rate_hz = 1;
     for (const auto& [flag, option] : protocol_flags)
       if (option->count() > 0) args->protocol_options[flag] = texts->at(flag);
     exit_code = emit(*args);

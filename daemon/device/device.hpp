@@ -53,6 +53,9 @@ struct SampleNeeds {
   // Pitch and roll of the sensor axes relative to local level (Eq. 1.2) in
   // ImuFrameInput's level-attitude fields (J1939 SSI2).
   bool level_attitude = false;
+  // The sensor's geodetic position and NED velocity in ImuFrameInput's
+  // navigation fields (a GNSS receiver, issue 28).
+  bool navigation = false;
 };
 
 // What one emit() did on the wire.

@@ -91,6 +91,7 @@ class EncoderDevice : public Device {
     SampleNeeds n;
     n.increments = encoder_->compensated_increments() ? signal_chain::IncrementConvention::compensated
                                                       : signal_chain::IncrementConvention::raw;
+    if constexpr (requires(const Encoder& e) { e.needs_navigation(); }) n.navigation = encoder_->needs_navigation();
     return n;
   }
 

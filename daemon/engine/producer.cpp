@@ -44,6 +44,20 @@ void set_level_attitude(const Kinematics& k, Physics physics, drivers::ImuFrameI
   f.roll_rad = hpr.roll_rad;
 }
 
+// The sensor's (a GNSS device: its antenna's) WGS84 position and NED
+// velocity from the sample's kinematics in an ecef scene (Eq. 1.1 inverse,
+// v^n = R_l^e^T v^e with Eq. 1.5 at the sample's own position). A flat
+// scene's positions have no geodetic anchor: the fields stay unset.
+void set_navigation(const Kinematics& k, Physics physics, drivers::ImuFrameInput& f) {
+  if (physics != Physics::ecef) return;
+  const earth::Geodetic g = earth::geodetic_from_ecef(k.position_m);
+  f.has_navigation = true;
+  f.latitude_rad = g.latitude_rad;
+  f.longitude_rad = g.longitude_rad;
+  f.height_m = g.height_m;
+  f.velocity_ned_m_s = attitude::ned_to_ecef(g.latitude_rad, g.longitude_rad).transpose() * k.velocity_m_s;
+}
+
 }  // namespace
 
 std::optional<live::ExactSample> OnDemandSource::next_sample() {
@@ -138,6 +152,7 @@ void EmissionEngine::Impl::produce(DeviceState& d, bool time_gated) {
       f.delta_velocity_m_s = m.delta_velocity_m_s;
       if (!e.exact()) f.status |= drivers::kStatusExtrapolated;
       if (d.needs.level_attitude) set_level_attitude(e.kinematics, d.options.pipeline.scene.physics, f);
+      if (d.needs.navigation) set_navigation(e.kinematics, d.options.pipeline.scene.physics, f);
       d.previous.emplace(k, e.kinematics);
       slot.pulse_t_ns = f.t_ns;
       // Issue 18: the faults act on the signal chain's output (the sensor

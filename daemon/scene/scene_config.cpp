@@ -473,7 +473,7 @@ void parse_mounting(const Table& t, Mounting& out) {
   }
 }
 
-const std::vector<std::string> kProtocols = {"native", "mavlink2", "mip", "dronecan", "j1939"};
+const std::vector<std::string> kProtocols = {"native", "mavlink2", "mip", "nmea", "ubx", "dronecan", "j1939"};
 // The option table each protocol takes (named as the protocol is).
 std::string option_table_of(const std::string& protocol) { return drivers::protocol_option_table_name(protocol); }
 
@@ -747,8 +747,12 @@ ImuConfig parse_imu(const Table& t) {
     t.fail_at("name", "'" + imu.name + "' is not allowed; expected 1..64 characters from A-Z a-z 0-9 _ - .");
   t.require("rate_hz", "output rate in Hz, integer 1..100000");
   imu.rate_hz = *t.opt_int("rate_hz", 1, 100'000);
-  t.require("protocol", "one of native, mavlink2, mip, dronecan or j1939");
+  t.require("protocol", "one of native, mavlink2, mip, nmea, ubx, dronecan or j1939");
   imu.protocol = t.choice("protocol", "", kProtocols);
+  // A GNSS receiver (issue 28): rate_hz is its navigation rate.
+  if (drivers::is_gnss_protocol(imu.protocol) && imu.rate_hz > drivers::kMaxGnssRateHz)
+    t.fail_at("rate_hz", "protocol " + imu.protocol + " is a GNSS receiver: its navigation rate is 1.." +
+                             std::to_string(drivers::kMaxGnssRateHz) + " Hz, not " + std::to_string(imu.rate_hz));
   if (const auto m = t.subtable("mounting")) parse_mounting(*m, imu.mounting);
   parse_protocol_options(t, imu);
   if (const auto dt = t.subtable("device")) {
@@ -887,6 +891,12 @@ SceneConfig parse_document(const Context& ctx, const toml::table& root) {
   for (std::size_t i = 0; i < imus.size(); ++i) {
     const Table t(ctx, *imus[i].as_table(), "imu[" + std::to_string(i) + "]");
     scene.imus.push_back(parse_imu(t));
+    // A GNSS receiver (issue 28) reports geodetic positions: a flat scene's
+    // local NED frame has no geodetic anchor.
+    if (drivers::is_gnss_protocol(scene.imus.back().protocol) && scene.physics.physics != Physics::ecef)
+      t.fail_at("protocol", "protocol " + scene.imus.back().protocol +
+                                " is a GNSS receiver: it reports WGS84 positions, which a flat scene does not have; "
+                                "set scene.physics = \"ecef\"");
     // A window beyond a million samples is a unit mistake, and would make
     // the engine allocate gigabytes for its kernel.
     const double window_samples = std::round(scene.smoothing.window_s.value_or(scene.trajectory.knot_interval_s) *

@@ -81,4 +81,33 @@ std::optional<TimeNs> utc_from_gps_ns(std::int64_t gps_ns, std::optional<int> gp
   return utc_ns;
 }
 
+UtcCalendar calendar_from_posix_ns(TimeNs utc_posix_ns) {
+  // Floor division into days and the time of day, then the civil date of a
+  // day count (H. Hinnant, "chrono-Compatible Low-Level Date Algorithms",
+  // civil_from_days: eras of 400 years starting 0000-03-01).
+  constexpr std::int64_t kNsPerDay = 86'400LL * kNsPerSecond64;
+  std::int64_t days = utc_posix_ns / kNsPerDay;
+  std::int64_t of_day = utc_posix_ns % kNsPerDay;
+  if (of_day < 0) {
+    of_day += kNsPerDay;
+    --days;
+  }
+  UtcCalendar c;
+  c.nanosecond = of_day % kNsPerSecond64;
+  const std::int64_t seconds = of_day / kNsPerSecond64;
+  c.hour = static_cast<int>(seconds / 3600);
+  c.minute = static_cast<int>(seconds / 60 % 60);
+  c.second = static_cast<int>(seconds % 60);
+  const std::int64_t z = days + 719'468;
+  const std::int64_t era = (z >= 0 ? z : z - 146'096) / 146'097;
+  const std::int64_t doe = z - era * 146'097;                                  // [0, 146096]
+  const std::int64_t yoe = (doe - doe / 1460 + doe / 36'524 - doe / 146'096) / 365;  // [0, 399]
+  const std::int64_t doy = doe - (365 * yoe + yoe / 4 - yoe / 100);              // [0, 365]
+  const std::int64_t mp = (5 * doy + 2) / 153;                                  // [0, 11], March = 0
+  c.day = static_cast<int>(doy - (153 * mp + 2) / 5 + 1);
+  c.month = static_cast<int>(mp < 10 ? mp + 3 : mp - 9);
+  c.year = static_cast<int>(yoe + era * 400 + (c.month <= 2 ? 1 : 0));
+  return c;
+}
+
 }  // namespace imuemu::drivers::gps_time

@@ -37,4 +37,14 @@ std::optional<std::int64_t> gps_from_utc_ns(TimeNs utc_posix_ns, std::optional<i
 // it (00:00:00), which POSIX then repeats. Nothing on overflow.
 std::optional<TimeNs> utc_from_gps_ns(std::int64_t gps_ns, std::optional<int> gps_minus_utc_s = std::nullopt);
 
+// A POSIX UTC instant as a proleptic Gregorian date and time of day
+// (NMEA RMC/ZDA, UBX NAV-PVT); every day 86400 s (a leap second shows as
+// the next day's 00:00:00, as POSIX has it).
+struct UtcCalendar {
+  int year = 1970, month = 1, day = 1;  // month 1..12, day 1..31
+  int hour = 0, minute = 0, second = 0;
+  std::int64_t nanosecond = 0;          // 0..999'999'999
+};
+UtcCalendar calendar_from_posix_ns(TimeNs utc_posix_ns);
+
 }  // namespace imuemu::drivers::gps_time

@@ -118,6 +118,45 @@ std::vector<ProtocolOption> make_table() {
   t.push_back(boolean("mip", "overrange_status", true, "overrange status field (0x80, 0x18)",
                       [](ProtocolOptions& p, bool v) { p.stream.mip_overrange_status = v; }));
 
+  // ---- nmea and ubx: a GNSS receiver (drivers/gnss_fix.hpp, nmea.hpp,
+  // ubx.hpp). The rows both take, then each one's own.
+  for (const char* gnss : {"nmea", "ubx"}) {
+    const std::string p = gnss;
+    t.push_back(choice(p, "time_base", {"gps", "utc"},
+                       "what trajectory time is: gps = GPS time minus gps_time_at_t0_ns; utc = POSIX UTC, turned "
+                       "into GPS time with the leap-second table",
+                       [](ProtocolOptions& o, const std::string& v) {
+                         o.stream.gnss.time_base = v == "utc" ? GnssTimeBase::utc : GnssTimeBase::gps;
+                       }));
+    t.push_back(integer(p, "gps_time_at_t0_ns", 0, kInt62, "1451520000000000000",
+                        "time_base gps: GPS time (ns since 1980-01-06, no leap seconds) of trajectory time 0; the "
+                        "default is GPS week 2400 TOW 0 (2026-01-04), 0 for a trajectory stamped in GPS time",
+                        [](ProtocolOptions& o, std::int64_t v) { o.stream.gnss.gps_time_at_t0_ns = v; }));
+    // NMEA GGA carries two digits of satellites used; UBX numSV is a U1.
+    t.push_back(integer(p, "satellites", 0, p == "nmea" ? 99 : 255, "12", "satellites used in the solution",
+                        [](ProtocolOptions& o, std::int64_t v) { o.stream.gnss.satellites = static_cast<int>(v); }));
+    t.push_back(number(p, "pdop", 0.0, 99.0, true, "1.2", "position dilution of precision",
+                       [](ProtocolOptions& o, double v) { o.stream.gnss.pdop = v; }));
+    t.push_back(number(p, "hdop", 0.0, 99.0, true, "0.7", "horizontal dilution of precision",
+                       [](ProtocolOptions& o, double v) { o.stream.gnss.hdop = v; }));
+    t.push_back(number(p, "vdop", 0.0, 99.0, true, "1.0", "vertical dilution of precision",
+                       [](ProtocolOptions& o, double v) { o.stream.gnss.vdop = v; }));
+    t.push_back(number(p, "geoid_separation_m", -200.0, 200.0, false, "0.0",
+                       "geoid above the ellipsoid (no geoid model is carried): MSL height = ellipsoidal height - this",
+                       [](ProtocolOptions& o, double v) { o.stream.gnss.geoid_separation_m = v; }));
+  }
+  t.push_back(choice("nmea", "talker", {"GP", "GN"}, "talker id: GP (GPS) or GN (multi-constellation)",
+                     [](ProtocolOptions& o, const std::string& v) { o.stream.nmea_talker = v; }));
+  t.push_back(number("ubx", "horizontal_accuracy_m", 0.0, 1e4, false, "1.5", "hAcc (1 sigma, m)",
+                     [](ProtocolOptions& o, double v) { o.stream.gnss.horizontal_accuracy_m = v; }));
+  t.push_back(number("ubx", "vertical_accuracy_m", 0.0, 1e4, false, "2.5", "vAcc (1 sigma, m)",
+                     [](ProtocolOptions& o, double v) { o.stream.gnss.vertical_accuracy_m = v; }));
+  t.push_back(number("ubx", "speed_accuracy_m_s", 0.0, 1e3, false, "0.05", "sAcc (1 sigma, m/s)",
+                     [](ProtocolOptions& o, double v) { o.stream.gnss.speed_accuracy_m_s = v; }));
+  t.push_back(boolean("ubx", "legacy_nav", true,
+                      "NAV-POSLLH, NAV-STATUS, NAV-DOP, NAV-SOL, NAV-VELNED and NAV-TIMEGPS beside NAV-PVT",
+                      [](ProtocolOptions& o, bool v) { o.stream.ubx_legacy_nav = v; }));
+
   // ---- dronecan (dronecan.hpp)
   t.push_back(integer("dronecan", "node_id", 1, 127, "42", "source node id, unique per CAN interface",
                       [](ProtocolOptions& p, std::int64_t v) { p.can.dronecan.node_id = static_cast<std::uint8_t>(v); }));

@@ -7,6 +7,8 @@
 #include "drivers/protocols/mavlink2.hpp"
 #include "drivers/protocols/mip.hpp"
 #include "drivers/protocols/native.hpp"
+#include "drivers/protocols/nmea.hpp"
+#include "drivers/protocols/ubx.hpp"
 
 namespace imuemu::drivers {
 
@@ -36,6 +38,11 @@ void check_options(const std::string& protocol, const StreamEncoderOptions& o) {
                                     "' is longer than the 16 characters of its Get Device Information field");
     }
   }
+  if (is_gnss_protocol(protocol)) {
+    if (o.nmea_talker != "GP" && o.nmea_talker != "GN")
+      throw std::invalid_argument("stream protocol '" + protocol + "': talker '" + o.nmea_talker +
+                                  "' is not GP or GN");
+  }
   if (protocol == "mavlink2") {
     // MAVLink guide, packet format: 0 is the broadcast address, never a
     // valid source system or component.
@@ -55,7 +62,9 @@ void check_options(const std::string& protocol, const StreamEncoderOptions& o) {
 
 }  // namespace
 
-std::vector<std::string> stream_protocol_names() { return {"native", "mavlink2", "mip"}; }
+std::vector<std::string> stream_protocol_names() { return {"native", "mavlink2", "mip", "nmea", "ubx"}; }
+
+bool is_gnss_protocol(const std::string& protocol) { return protocol == "nmea" || protocol == "ubx"; }
 
 std::unique_ptr<StreamEncoder> make_stream_encoder(const std::string& protocol,
                                                    const StreamEncoderOptions& options) {
@@ -63,6 +72,8 @@ std::unique_ptr<StreamEncoder> make_stream_encoder(const std::string& protocol,
   if (protocol == "native") return std::make_unique<native::Encoder>(options.include_deltas);
   if (protocol == "mavlink2") return std::make_unique<mavlink2::Encoder>(options);
   if (protocol == "mip") return std::make_unique<mip::Encoder>(options);
+  if (protocol == "nmea") return std::make_unique<nmea::Encoder>(options);
+  if (protocol == "ubx") return std::make_unique<ubx::Encoder>(options);
   throw std::invalid_argument("unknown stream protocol '" + protocol + "' (expected one of: " + joined_names() +
                               ")");
 }
@@ -73,6 +84,8 @@ std::unique_ptr<StreamDecoder> make_stream_decoder(const std::string& protocol,
   if (protocol == "native") return std::make_unique<native::Decoder>();
   if (protocol == "mavlink2") return std::make_unique<mavlink2::Decoder>(options);
   if (protocol == "mip") return std::make_unique<mip::Decoder>(options);
+  if (protocol == "nmea") return std::make_unique<nmea::Decoder>();
+  if (protocol == "ubx") return std::make_unique<ubx::Decoder>();
   throw std::invalid_argument("unknown stream protocol '" + protocol + "' (expected one of: " + joined_names() +
                               ")");
 }

@@ -5,6 +5,11 @@
 //   "native"   imuemu native v1 (docs/native-protocol.md): f64, CRC-32C
 //   "mavlink2" MAVLink 2 HIL_SENSOR (#107) [+ HIGHRES_IMU (#105)] + HEARTBEAT
 //   "mip"      MicroStrain MIP, IMU data set 0x80
+//   "nmea"     a GNSS receiver: NMEA 0183 RMC, VTG, GGA, GSA, ZDA per epoch
+//   "ubx"      a GNSS receiver: u-blox UBX NAV-PVT (+ POSLLH, STATUS, DOP,
+//              SOL, VELNED, TIMEGPS) per epoch
+// The GNSS receivers send one navigation epoch per device sample: the
+// device's rate is the navigation rate, 1..10 Hz.
 #pragma once
 
 #include <memory>
@@ -12,6 +17,7 @@
 #include <string>
 #include <vector>
 
+#include "drivers/gnss_fix.hpp"
 #include "drivers/protocol.hpp"
 
 namespace imuemu::drivers {
@@ -77,6 +83,14 @@ struct StreamEncoderOptions {
   bool mip_overrange_status = true;
   MipDeviceConfig mip_device;
 
+  // nmea and ubx (issue 28, drivers/gnss_fix.hpp): the receiver's time base
+  // and the figures it reports.
+  GnssReceiverConfig gnss;
+  std::string nmea_talker = "GP";  // GP (GPS) or GN (multi-constellation)
+  // ubx: NAV-POSLLH, NAV-STATUS, NAV-DOP, NAV-SOL, NAV-VELNED, NAV-TIMEGPS
+  // beside NAV-PVT (what ArduPilot's UBX driver reads); false: NAV-PVT only.
+  bool ubx_legacy_nav = true;
+
   // The sample rate the encoder will run at, only to spread periodic traffic
   // (heartbeats) over samples in max_bytes_per_sample(); 0 = unknown (then
   // one whole heartbeat is charged to every sample, an upper bound).
@@ -85,6 +99,12 @@ struct StreamEncoderOptions {
 
 // The protocol names make_stream_encoder/make_stream_decoder accept.
 std::vector<std::string> stream_protocol_names();
+// The GNSS receiver personalities among them (nmea, ubx). Their device rate
+// is the navigation rate, 1..kMaxGnssRateHz: `imuemu emit` and the scene
+// parser refuse more (the encoders themselves send one epoch per sample at
+// whatever rate they are driven).
+bool is_gnss_protocol(const std::string& protocol);
+inline constexpr std::int64_t kMaxGnssRateHz = 10;
 
 // Throws std::invalid_argument naming the protocol or option that is wrong.
 std::unique_ptr<StreamEncoder> make_stream_encoder(const std::string& protocol,

@@ -533,7 +533,7 @@ TEST(Listen, ADeviceThatCannotBeOpenedIsAnErrorNamingIt) {
   } catch (const drv::TransportError& e) {
     EXPECT_NE(std::string(e.what()).find("imuemu_none9"), std::string::npos) << e.what();
   }
-  args.protocol = "nmea";
+  args.protocol = "sirf";  // not a protocol imuemu speaks
   EXPECT_THROW((void)imuemu::cli::listen(args, out, stop), std::invalid_argument);
 }
 

@@ -44,6 +44,8 @@
 #include "drivers/protocols/mavlink2.hpp"
 #include "drivers/protocols/mip.hpp"
 #include "drivers/protocols/native.hpp"
+#include "drivers/protocols/nmea.hpp"
+#include "drivers/protocols/ubx.hpp"
 #include "drivers/protocols/stream_protocols.hpp"
 
 // The replaced operator new / delete below pair malloc with free; GCC
@@ -413,6 +415,42 @@ TEST(LinkFaults, NoHeapAllocationOnTheEmissionPathAfterWarmUp) {
   { std::vector<int> grows(100); (void)grows; }
   g_count_allocations = false;
   EXPECT_EQ(g_allocations, 1u);
+}
+
+// The GNSS receivers (issue 28) on the same emission path: epochs with a
+// fix (the sentences formatted with snprintf into a stack buffer), values
+// beyond every field's range included, every link action; nothing
+// allocated once the output has grown.
+TEST(LinkFaults, GnssReceiversAllocateNothingOnTheEmissionPath) {
+  const auto gnss_sample = [](int k) {
+    ImuFrameInput s = sample_at(k);
+    s.has_navigation = true;
+    s.latitude_rad = k % 9 == 0 ? -1.5 : 0.7;
+    s.longitude_rad = k % 7 == 0 ? 3.1 : -2.0;
+    s.height_m = k % 5 == 0 ? 1e300 : 123.456;
+    s.velocity_ned_m_s = k % 3 == 0 ? Vec3(1e300, -1e300, 0.0) : Vec3(3.0, -4.0, 0.5);
+    return s;
+  };
+  const auto count = [&](StreamEncoder& encoder) {
+    Bytes out;
+    out.reserve(link_fault_reserve(encoder, 6));
+    for (int k = 0; k < kTicks; ++k) {
+      out.clear();
+      encode_with_link_faults(varied_actions(k), encoder, gnss_sample(k), out);
+    }
+    g_allocations = 0;
+    g_count_allocations = true;
+    for (int k = kTicks; k < 2 * kTicks; ++k) {
+      out.clear();
+      encode_with_link_faults(varied_actions(k), encoder, gnss_sample(k), out);
+    }
+    g_count_allocations = false;
+    return g_allocations;
+  };
+  nmea::Encoder nmea(StreamEncoderOptions{});
+  ubx::Encoder ubx(StreamEncoderOptions{});
+  EXPECT_EQ(count(nmea), 0u);
+  EXPECT_EQ(count(ubx), 0u);
 }
 
 // ============================================================== native

@@ -59,6 +59,12 @@ std::vector<std::uint8_t> wire_of(const std::string& protocol, const StreamEncod
     f.has_level_attitude = true;
     f.pitch_rad = 0.05;
     f.roll_rad = -0.02;
+    // A GNSS receiver's fix (nmea, ubx; the IMU protocols ignore it).
+    f.has_navigation = true;
+    f.latitude_rad = 0.8;
+    f.longitude_rad = 0.2;
+    f.height_m = 300.0;
+    f.velocity_ned_m_s = Vec3(3.0, 4.0, -0.5);
     if (s) {
       s->encode(f, wire);
       s->periodic(f.t_ns, wire);
@@ -117,9 +123,11 @@ std::map<std::string, OtherValue> companions_of(const ProtocolOption& o) {
 }
 
 std::string scene_with(const std::string& protocol, const std::string& table_body) {
-  return "[scene]\nname = \"t\"\nphysics = \"flat\"\n[trajectory]\nsource = \"sample:static\"\n"
+  // A GNSS receiver needs an ecef scene (geodetic positions).
+  return "[scene]\nname = \"t\"\nphysics = \"" + std::string(is_gnss_protocol(protocol) ? "ecef" : "flat") +
+         "\"\n[trajectory]\nsource = \"sample:static\"\n"
          "[[imu]]\nname = \"a\"\nrate_hz = " +
-         std::to_string(kRateHz) + "\nprotocol = \"" + protocol + "\"\n[imu.transport]\ntype = \"null\"\n[imu." +
+         std::to_string(is_gnss_protocol(protocol) ? kMaxGnssRateHz : kRateHz) + "\nprotocol = \"" + protocol + "\"\n[imu.transport]\ntype = \"null\"\n[imu." +
          protocol_option_table_name(protocol) + "]\n" + table_body;
 }
 

@@ -1,0 +1,86 @@
+// One GNSS navigation epoch, as a receiver personality (NMEA 0183, u-blox
+// UBX: drivers/protocols/nmea.hpp, ubx.hpp) puts it on the wire (issue 28).
+// Kept small and protocol-free so that it can be filled from the truth
+// trajectory (errors off: fix_from_frame below) and, later, from the GNSS
+// error model (position/velocity noise, outages, degraded fixes) without the
+// encoders knowing which.
+#pragma once
+
+#include <cstdint>
+#include <optional>
+
+#include "core/types.hpp"
+#include "drivers/protocol.hpp"
+
+namespace imuemu::drivers {
+
+enum class GnssFixType : std::uint8_t {
+  none,     // no fix: position and velocity not valid
+  fix_2d,   // 2D fix (height held)
+  fix_3d,   // 3D fix
+};
+
+struct GnssFix {
+  // The epoch: GPS time, ns since 1980-01-06T00:00:00 (IS-GPS-200, no leap
+  // seconds); UTC = GPS - gps_minus_utc_s (drivers/protocols/gps_time.hpp).
+  std::int64_t gps_time_ns = 0;
+  int gps_minus_utc_s = 18;
+  // false: the receiver does not know the time (the epoch is before the GPS
+  // epoch on the configured time base): time fields sent empty / flagged
+  // invalid, and no fix.
+  bool time_valid = true;
+  GnssFixType fix_type = GnssFixType::none;
+  // WGS84 geodetic position of the antenna; height above the ellipsoid.
+  double latitude_rad = 0.0;
+  double longitude_rad = 0.0;
+  double height_m = 0.0;
+  // Geoid separation N (geoid above the ellipsoid): height above mean sea
+  // level = height_m - N. No geoid model is carried: 0 unless configured,
+  // and then what GGA and NAV-PVT report as MSL height is the ellipsoidal one
+  // minus this constant.
+  double geoid_separation_m = 0.0;
+  Vec3 velocity_ned_m_s = Vec3::Zero();  // north, east, down
+  int satellites = 0;                    // used in the solution
+  double pdop = 0.0, hdop = 0.0, vdop = 0.0;
+  // 1-sigma accuracy estimates as u-blox reports them (hAcc, vAcc, sAcc, tAcc).
+  double horizontal_accuracy_m = 0.0;
+  double vertical_accuracy_m = 0.0;
+  double speed_accuracy_m_s = 0.0;
+  double time_accuracy_ns = 0.0;
+  // Time since the receiver started (ms, NAV-STATUS msss) and its time to
+  // first fix (ttff).
+  std::uint32_t since_start_ms = 0;
+  std::uint32_t time_to_first_fix_ms = 0;
+};
+
+// How trajectory time becomes GPS time for a GNSS receiver, and the figures
+// an error-free receiver reports (scene keys [imu.nmea] / [imu.ubx]).
+enum class GnssTimeBase : std::uint8_t {
+  gps,  // GPS time = gps_time_at_t0_ns + t_ns
+  utc,  // t_ns is POSIX UTC; GPS time with the leap-second table
+};
+
+struct GnssReceiverConfig {
+  GnssTimeBase time_base = GnssTimeBase::gps;
+  // Default: GPS week 2400, TOW 0 (2026-01-04T00:00:00 GPS time), a whole
+  // GPS second, so that a trajectory starting at a whole second has its
+  // epochs on the top of the GPS second. 0: trajectory time is GPS time.
+  std::int64_t gps_time_at_t0_ns = 2400LL * 604'800LL * 1'000'000'000LL;
+  // GPS - UTC (s); empty: the leap-second table at the epoch.
+  std::optional<int> gps_minus_utc_s;
+  int satellites = 12;
+  double pdop = 1.2, hdop = 0.7, vdop = 1.0;
+  double horizontal_accuracy_m = 1.5, vertical_accuracy_m = 2.5, speed_accuracy_m_s = 0.05,
+         time_accuracy_ns = 20.0;
+  double geoid_separation_m = 0.0;
+};
+
+// The epoch of one device sample (the GNSS device's grid is its epochs):
+// the sample's navigation fields (ImuFrameInput::has_navigation) with the
+// receiver's configured figures, at the sample's time on the GPS scale. No
+// navigation fields (a flat scene has no geodetic position): fix_type none.
+// A time that does not map to GPS time (before the GPS epoch): time_valid
+// false and no fix.
+GnssFix fix_from_frame(const ImuFrameInput& frame, const GnssReceiverConfig& config);
+
+}  // namespace imuemu::drivers
