@@ -7,6 +7,8 @@ cd "$(dirname "$0")/.."
 export ASAN_OPTIONS=detect_leaks=1:abort_on_error=1
 export UBSAN_OPTIONS=print_stacktrace=1:halt_on_error=1
 status=0
+failed=()  # what failed, for the verdict line
+fail() { status=1; failed+=("$1"); }
 # Where CI's time goes (issue 25): each stage prints its wall time and the
 # CPU the whole machine spent meanwhile (from /proc/stat, all processes: the
 # ASan build beside the Release tests counts in both), and a table at the end.
@@ -35,6 +37,20 @@ stage_summary() {
   done
   printf '  %-58s %5d s\n' "total (setup included)" "$((SECONDS - run_start))"
 }
+# The last line says it all: what passed, or what failed and where to look
+# (ctest's own log: build/<flavour>/Testing/Temporary/LastTest.log).
+verdict() {
+  verdict_said=1
+  if ((status == 0)); then
+    echo "=== VERDICT: PASSED: release tests, loopback runs, asan tests, fuzz ($((SECONDS - run_start)) s)"
+  else
+    local IFS=';'
+    echo "=== VERDICT: FAILED: ${failed[*]} (ctest logs: build/release|asan/Testing/Temporary/LastTest.log)"
+  fi
+}
+# A stage that stops the script (set -e: setup, the release build) still
+# gets its verdict line.
+trap 'rc=$?; ((rc == 0)) || [[ -n ${verdict_said:-} ]] || echo "=== VERDICT: FAILED: ${stage_name:-?} (exit $rc; its output above)"' EXIT
 stage "setup"
 bash scripts/setup.sh
 # The hardware-in-the-loop fixtures (label hil: user-mode Linux and QEMU,
@@ -58,24 +74,26 @@ echo "=== asan: build starts (beside the release tests, nice 19; compiler output
 IMUEMU_BUILD_QUIET=1 nice -n 19 bash scripts/build.sh asan &
 asan_build=$!
 stage "release: test (all but loopback) + asan build beside"
-ctest --test-dir build/release --output-on-failure -j "$(nproc)" -LE loopback || status=1
+ctest --test-dir build/release --output-on-failure -j "$(nproc)" -LE loopback || fail "release tests"
 echo "release tests ended $((SECONDS - stage_start)) s into the stage; waiting for the asan build"
 asan_built=1
-wait "$asan_build" || { asan_built=0; status=1; }
+wait "$asan_build" || { asan_built=0; fail "asan build (build/asan/build.log)"; }
 stage "release: loopback runs (all at once, idle machine)"
-ctest --test-dir build/release --output-on-failure -L loopback -j 10 || status=1
+ctest --test-dir build/release --output-on-failure -L loopback -j 10 || fail "loopback runs"
 if ((asan_built)); then
   stage "asan: test"
-  ctest --test-dir build/asan --output-on-failure -j "$(nproc)" -LE "hil|loopback|heavy|memory" || status=1
+  ctest --test-dir build/asan --output-on-failure -j "$(nproc)" -LE "hil|loopback|heavy|memory" || fail "asan tests"
 else
   echo "=== asan: build failed (above); its tests and the fuzz targets did not run"
   stage_summary
+  verdict
   exit 1
 fi
 # The libFuzzer targets, bounded in time (FUZZ_SECONDS per target, two at a
 # time): 30 s each, as issue 25 asks (11 targets: 188 s on 2 cores); longer
 # campaigns: scripts/fuzz.sh 600.
 stage "fuzz (${FUZZ_SECONDS:-30} s per target, two at a time)"
-bash scripts/fuzz.sh "${FUZZ_SECONDS:-30}" || status=1
+bash scripts/fuzz.sh "${FUZZ_SECONDS:-30}" || fail "fuzz"
 stage_summary
+verdict
 exit $status

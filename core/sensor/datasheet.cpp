@@ -222,7 +222,7 @@ const std::vector<Preset>& presets() {
       {"adis16470", "industrial MEMS: Analog Devices ADIS16470, +-2000 deg/s, +-40 g",
        "Analog Devices ADIS16470 datasheet (Rev. C), Table 1: gyro in-run bias stability 8 deg/h, rate noise density "
        "0.008 deg/s/sqrt(Hz) rms, +-2000 deg/s; accel in-run bias stability 13 ug, velocity random walk 0.037 m/s/sqrt(h), +-40 g "
-       "(UNVERIFIED: as issue 15 quotes them; no copy of the datasheet was found to check against)",
+       "(UNVERIFIED: quoted second-hand; no copy of the datasheet was found to check against)",
        {{T::gyro, "noise_density_dps_rt_hz", {0.008}},
         {T::gyro, "bias_instability_deg_h", {8.0}},
         {T::gyro, "range_dps", {2000.0}},

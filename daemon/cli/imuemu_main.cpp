@@ -14,7 +14,10 @@
 
 int main(int argc, char** argv) {
   using namespace imuemu::cli;
-  CLI::App app{"imuemu: turns a sparse pose trajectory into ideal IMU samples (see README.md)"};
+  CLI::App app{
+      "imuemu: turns a pose trajectory into what a real IMU would give - ideal or with its sensor errors, "
+      "filters, vibration and faults - as files, or live on a device's wire (imuemu COMMAND --help)"};
+  app.set_version_flag("--version", std::string("imuemu ") + IMUEMU_VERSION_TEXT);
   app.require_subcommand(1);
 
   GenerateArgs gen;

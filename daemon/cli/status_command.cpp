@@ -149,7 +149,7 @@ void print_status_summary(const nlohmann::json& status, std::ostream& out) {
       out << "      histogram (poses up to each bound): " << buckets_text(*b) << "\n";
     const nlohmann::json faults = d.value("faults", nlohmann::json::object());
     if (count_of(faults, "started") + count_of(faults, "injected") + count_of(faults, "active") > 0)
-      out << "    faults (issue 18): " << count_of(faults, "active") << " acting now, " << count_of(faults, "started")
+      out << "    faults: " << count_of(faults, "active") << " acting now, " << count_of(faults, "started")
           << " started and " << count_of(faults, "ended") << " ended (the fault log's events), "
           << count_of(faults, "injected") << " injected and " << count_of(faults, "cleared")
           << " cleared over the control socket, " << count_of(faults, "silenced")

@@ -133,7 +133,8 @@ int check_config(const std::string& path, bool json, const sc::RunnerOptions& ru
 }  // namespace
 
 int main(int argc, char** argv) {
-  CLI::App app{"imuemud: the imuemu IMU emulator service (docs/daemon.md)"};
+  CLI::App app{"imuemud: the imuemu IMU emulator service (man imuemud, or docs/daemon.md in the source)"};
+  app.set_version_flag("--version", std::string("imuemud ") + IMUEMU_VERSION_TEXT);
   std::string scene_path, check_path, socket_override, pty_link_dir, stats_json, log_level = "info";
   std::optional<double> run_seconds;
   bool json = false;

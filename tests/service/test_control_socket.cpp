@@ -569,7 +569,7 @@ TEST(StatusSummary, FaultCountersAreInTheJsonAndExplained) {
   const json j = imuemu::emission::to_json(s)["devices"][0]["faults"];
   EXPECT_EQ(j, (json{{"active", 1}, {"started", 7}, {"ended", 6}, {"injected", 3}, {"cleared", 2}, {"dropped_events", 5},
                      {"silenced", 40}}));
-  EXPECT_NE(summary_of(s).find("faults (issue 18): 1 acting now, 7 started and 6 ended (the fault log's events), 3 "
+  EXPECT_NE(summary_of(s).find("faults: 1 acting now, 7 started and 6 ended (the fault log's events), 3 "
                                "injected and 2 cleared over the control socket, 40 ticks silenced (device off), 5 "
                                "events lost (queue full)"),
             std::string::npos)
