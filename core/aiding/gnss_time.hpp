@@ -22,6 +22,7 @@
 // from the table, and a leap second inside a run shows as 23:59:60.
 #pragma once
 
+#include <array>
 #include <cstdint>
 #include <optional>
 
@@ -31,6 +32,31 @@
 namespace imuemu::aiding {
 
 inline constexpr std::int64_t kGpsEpochPosixSeconds = 315'964'800;  // 1980-01-06T00:00:00Z
+
+// The one leap-second table of the project (drivers/protocols/gps_time.hpp
+// reads it too). IERS Bulletin C: the UTC days (00:00:00Z, POSIX seconds) from which
+// GPS - UTC took each new value, after a leap second at the end of the day
+// before: GPS - UTC = index + 1 from that day on.
+inline constexpr std::array<std::int64_t, 18> kLeapSecondStartsPosix = {
+    362'793'600,    // 1981-07-01: 1 s
+    394'329'600,    // 1982-07-01: 2
+    425'865'600,    // 1983-07-01: 3
+    489'024'000,    // 1985-07-01: 4
+    567'993'600,    // 1988-01-01: 5
+    631'152'000,    // 1990-01-01: 6
+    662'688'000,    // 1991-01-01: 7
+    709'948'800,    // 1992-07-01: 8
+    741'484'800,    // 1993-07-01: 9
+    773'020'800,    // 1994-07-01: 10
+    820'454'400,    // 1996-01-01: 11
+    867'715'200,    // 1997-07-01: 12
+    915'148'800,    // 1999-01-01: 13
+    1'136'073'600,  // 2006-01-01: 14
+    1'230'768'000,  // 2009-01-01: 15
+    1'341'100'800,  // 2012-07-01: 16
+    1'435'708'800,  // 2015-07-01: 17
+    1'483'228'800,  // 2017-01-01: 18
+};
 inline constexpr std::int64_t kSecondsPerWeek = 604'800;
 inline constexpr TimeNs kNsPerWeek = kSecondsPerWeek * kNsPerSecond;
 

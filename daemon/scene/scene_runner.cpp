@@ -204,19 +204,21 @@ BuiltEngine build_engine(const SceneConfig& scene, const RunnerOptions& options,
         }
       }
       const TransportConfig& t = imu.transport;
+      // The same pty or network endpoint as the previous scene's (a reload):
+      // kept open, so its reader or client sees no hang-up (and a port stays
+      // bound); the engine counts from here.
+      const auto take_kept_transport = [&]() {
+        if (reuse == nullptr) return false;
+        const auto kept = reuse->find(reuse_key(imu, options));
+        if (kept == reuse->end() || !kept->second) return false;
+        transport = std::move(kept->second);
+        reuse->erase(kept);
+        transport_baseline = transport->counters();
+        return true;
+      };
       switch (t.type) {
         case TransportType::pty: {
-          if (reuse != nullptr) {
-            // The same pty as the previous scene's (a reload): kept open, so
-            // its reader sees no hang-up; the engine counts from here.
-            const auto kept = reuse->find(reuse_key(imu, options));
-            if (kept != reuse->end() && kept->second) {
-              transport = std::move(kept->second);
-              reuse->erase(kept);
-              transport_baseline = transport->counters();
-              break;
-            }
-          }
+          if (take_kept_transport()) break;
           drivers::PtyTransportOptions po;
           po.link_path = pty_link_path(imu, options);
           po.queue_bytes = t.pty.queue_bytes;
@@ -229,15 +231,7 @@ BuiltEngine build_engine(const SceneConfig& scene, const RunnerOptions& options,
         }
         case TransportType::udp:
         case TransportType::tcp_server: {
-          if (reuse != nullptr) {
-            const auto kept = reuse->find(reuse_key(imu, options));
-            if (kept != reuse->end() && kept->second) {
-              transport = std::move(kept->second);
-              reuse->erase(kept);
-              transport_baseline = transport->counters();
-              break;
-            }
-          }
+          if (take_kept_transport()) break;
           drivers::NetTransportOptions no;
           no.kind = t.type == TransportType::udp ? drivers::NetTransportOptions::Kind::udp
                                                  : drivers::NetTransportOptions::Kind::tcp_server;

@@ -16,11 +16,13 @@
 #include <cstdint>
 #include <optional>
 
+#include "core/aiding/calendar.hpp"
+#include "core/aiding/gnss_time.hpp"
 #include "core/types.hpp"
 
 namespace imuemu::drivers::gps_time {
 
-inline constexpr std::int64_t kGpsEpochPosixSeconds = 315'964'800;  // 1980-01-06T00:00:00Z
+using aiding::kGpsEpochPosixSeconds;  // 1980-01-06T00:00:00Z
 
 // GPS - UTC (s) at a UTC instant (POSIX ns): the table's value for the last
 // leap second at or before it (0 before 1981-07-01).
@@ -40,11 +42,8 @@ std::optional<TimeNs> utc_from_gps_ns(std::int64_t gps_ns, std::optional<int> gp
 // A POSIX UTC instant as a proleptic Gregorian date and time of day
 // (NMEA RMC/ZDA, UBX NAV-PVT); every day 86400 s (a leap second shows as
 // the next day's 00:00:00, as POSIX has it).
-struct UtcCalendar {
-  int year = 1970, month = 1, day = 1;  // month 1..12, day 1..31
-  int hour = 0, minute = 0, second = 0;
-  std::int64_t nanosecond = 0;          // 0..999'999'999
-};
-UtcCalendar calendar_from_posix_ns(TimeNs utc_posix_ns);
+// (core/aiding/calendar.hpp: the one implementation.)
+using aiding::UtcCalendar;
+inline UtcCalendar calendar_from_posix_ns(TimeNs utc_posix_ns) { return aiding::calendar_from_posix_ns(utc_posix_ns); }
 
 }  // namespace imuemu::drivers::gps_time
