@@ -11,6 +11,7 @@
 #include "daemon/cli/bench_timing_command.hpp"
 #include "daemon/cli/status_command.hpp"
 #include "daemon/cli/fault_command.hpp"
+#include "daemon/cli/send_command.hpp"
 
 int main(int argc, char** argv) {
   using namespace imuemu::cli;
@@ -124,6 +125,7 @@ int main(int argc, char** argv) {
   add_status_command(app, exit_code);
   add_fault_command(app, exit_code);
   add_allan_command(app, exit_code);
+  add_send_command(app, exit_code);
 
   try {
     app.parse(argc, argv);
