@@ -192,8 +192,8 @@ struct Column {
 // Streaming parse of one file: header, then rows into the kept axes.
 class Reader {
  public:
-  Reader(std::string path, std::array<bool, 6> keep, double rate_hz)
-      : path_(std::move(path)), keep_(keep), rate_hz_(rate_hz) {}
+  Reader(std::string path, std::array<bool, 6> keep, double rate_hz, bool longest_run)
+      : path_(std::move(path)), keep_(keep), rate_hz_(rate_hz), longest_run_(longest_run) {}
 
   AllanInput read() {
     const int fd = ::open(path_.c_str(), O_RDONLY | O_CLOEXEC);
@@ -306,6 +306,9 @@ class Reader {
   }
 
   void row() {
+    const TimeNs previous_t_ns = last_t_ns_;
+    const std::size_t previous_line = last_row_line_;
+    gap_in_row_ = false;
     if (fields_.size() != columns_.size())
       fail(path_, line_, "", 0, std::to_string(columns_.size()) + " fields",
            "expected " + std::to_string(columns_.size()) + " comma-separated fields as named by the header (line " +
@@ -334,7 +337,43 @@ class Reader {
         }
       }
     }
+    if (rows_ == 0) {
+      run_ = Run{0, first_t_ns_, line_, 0, 0, 0};
+    } else if (gap_in_row_) {
+      close_run(previous_t_ns, previous_line);
+      run_ = Run{rows_, last_t_ns_, line_, 0, 0, 0};
+    }
+    last_row_line_ = line_;
     ++rows_;
+  }
+
+  // The samples of one unbroken run: rows [start_row, start_row + rows).
+  struct Run {
+    std::uint64_t start_row = 0;
+    TimeNs first_t_ns = 0;
+    std::size_t first_line = 0;
+    TimeNs last_t_ns = 0;
+    std::size_t last_line = 0;
+    std::uint64_t rows = 0;
+  };
+
+  void close_run(TimeNs last_t_ns, std::size_t last_line) {
+    run_.last_t_ns = last_t_ns;
+    run_.last_line = last_line;
+    run_.rows = rows_ - run_.start_row;
+    if (run_.rows > best_.rows) best_ = run_;
+  }
+
+  // A gap at this row: refused (what is missing, where, and the remedies), or
+  // with --gaps longest the end of a run.
+  void gap(std::size_t column, std::string_view name, const std::string& expected, const std::string& detail) {
+    ++gaps_;
+    gap_in_row_ = true;
+    if (longest_run_) return;
+    fail(path_, line_, std::string(name), column, expected,
+         detail + "; Allan variance needs an unbroken, uniformly sampled series. `imuemu allan --gaps longest` "
+                  "analyses the longest unbroken run; a capture of imuemu emit or imuemud misses samples where the "
+                  "emitter dropped a late tick (--late-ticks drop, the default): capture with --late-ticks send");
   }
 
   void time(std::string_view f, std::size_t i) {
@@ -357,12 +396,11 @@ class Reader {
              "time " + std::to_string(t.value) + " ns is not after the previous row's " + std::to_string(last_t_ns_) +
                  " ns (line " + std::to_string(last_time_line_) + ")");
       if (nominal_step_ns_ <= 0) nominal_step_ns_ = rate_hz_ > 0.0 ? static_cast<TimeNs>(std::llround(1e9 / rate_hz_)) : step;
-      if (step * 2 < nominal_step_ns_ || step * 2 > 3 * nominal_step_ns_)
-        fail(path_, line_, std::string(columns_[i].name), i + 1, "a uniformly sampled series",
-             "time step " + std::to_string(step) + " ns from line " + std::to_string(last_time_line_) +
-                 " is off the nominal " + std::to_string(nominal_step_ns_) +
-                 " ns by more than half: Allan variance needs an unbroken, uniformly sampled series (a gap or "
-                 "a rate change here)");
+      if ((step * 2 < nominal_step_ns_ || step * 2 > 3 * nominal_step_ns_) && !gap_in_row_)
+        gap(i + 1, columns_[i].name, "a uniformly sampled series",
+            "time step " + std::to_string(step) + " ns from line " + std::to_string(last_time_line_) +
+                " is off the nominal " + std::to_string(nominal_step_ns_) +
+                " ns by more than half (a gap or a rate change here)");
     }
     last_t_ns_ = t.value;
     last_time_line_ = line_;
@@ -374,11 +412,16 @@ class Reader {
     if (s.status != io::NumberStatus::ok || s.value < 0)
       fail(path_, line_, "sequence", i + 1, "a non-negative integer sequence number",
            "expected a non-negative integer, got '" + io::detail::printable(f) + "'");
-    if (has_sequence_ && s.value != last_sequence_ + 1)
+    if (has_sequence_ && s.value <= last_sequence_)
       fail(path_, line_, "sequence", i + 1, "the previous row's sequence + 1",
            "sequence " + std::to_string(s.value) + " after " + std::to_string(last_sequence_) + " (line " +
                std::to_string(last_sequence_line_) +
-               "): samples are missing or repeated; Allan variance needs an unbroken series");
+               "): samples are repeated or out of order; Allan variance needs an unbroken series");
+    if (has_sequence_ && s.value > last_sequence_ + 1 && !gap_in_row_)
+      gap(i + 1, "sequence", "the previous row's sequence + 1",
+          "sequence " + std::to_string(s.value) + " after " + std::to_string(last_sequence_) + " (line " +
+              std::to_string(last_sequence_line_) + "): " + std::to_string(s.value - last_sequence_ - 1) +
+              (s.value - last_sequence_ == 2 ? " sample" : " samples") + " missing");
     has_sequence_ = true;
     last_sequence_ = s.value;
     last_sequence_line_ = line_;
@@ -390,17 +433,32 @@ class Reader {
     if (rows_ == 0) fail(path_, 0, "", 0, "samples", "no samples after the header (line " + std::to_string(header_line_) + ")");
     AllanInput in;
     in.format = format_;
-    in.rows = rows_;
+    in.file_rows = rows_;
+    in.gaps = gaps_;
+    close_run(last_t_ns_, last_row_line_);
+    // The run analysed: the whole file without gaps, else the longest.
+    const Run use = best_;
+    in.rows = use.rows;
+    in.first_line = use.first_line;
+    in.last_line = use.last_line;
+    if (use.rows != rows_)
+      for (auto& v : values_)
+        if (!v.empty()) {
+          v.erase(v.begin() + static_cast<std::ptrdiff_t>(use.start_row + use.rows), v.end());
+          v.erase(v.begin(), v.begin() + static_cast<std::ptrdiff_t>(use.start_row));
+        }
     if (rate_hz_ > 0.0) {
       in.tau0_s = 1.0 / rate_hz_;
     } else if (timeless_) {
       throw std::invalid_argument(path_ + ": the capture has no sample times (the protocol carries none): give --rate HZ");
-    } else if (rows_ < 2) {
-      fail(path_, 0, "", 0, "at least two samples", "one sample has no interval");
+    } else if (use.rows < 2) {
+      fail(path_, 0, "", 0, "at least two samples",
+           gaps_ > 0 ? "the longest unbroken run (line " + std::to_string(use.first_line) + ") has one sample"
+                     : std::string("one sample has no interval"));
     } else {
-      // Mean interval over the whole record: exact for a uniform grid, and
-      // the right tau0 for a clock with a small constant rate error.
-      in.tau0_s = seconds_between(first_t_ns_, last_t_ns_) / static_cast<double>(rows_ - 1);
+      // Mean interval over the whole record (run): exact for a uniform grid,
+      // and the right tau0 for a clock with a small constant rate error.
+      in.tau0_s = seconds_between(use.first_t_ns, use.last_t_ns) / static_cast<double>(use.rows - 1);
     }
     for (int a = 0; a < 6; ++a) {
       const auto au = static_cast<std::size_t>(a);
@@ -431,6 +489,11 @@ class Reader {
   bool has_sequence_ = false;
   std::int64_t last_sequence_ = 0;
   std::size_t last_sequence_line_ = 0;
+  bool longest_run_ = false;
+  bool gap_in_row_ = false;
+  std::uint64_t gaps_ = 0;
+  std::size_t last_row_line_ = 0;
+  Run run_, best_;
 };
 
 std::array<bool, allan::kTermCount> parse_terms(const std::string& list) {
@@ -561,14 +624,14 @@ void run_plot(const std::string& script, const std::string& json_text, const std
 
 }  // namespace
 
-AllanInput read_allan_input(const std::string& path, const std::string& axes, double rate_hz) {
+AllanInput read_allan_input(const std::string& path, const std::string& axes, double rate_hz, bool longest_run) {
   std::array<bool, 6> keep{};
   if (axes == "all" || axes == "gyro") keep[0] = keep[1] = keep[2] = true;
   if (axes == "all" || axes == "accel") keep[3] = keep[4] = keep[5] = true;
   if (axes != "all" && axes != "gyro" && axes != "accel")
     throw std::invalid_argument("--axes must be all, gyro or accel, not '" + axes + "'");
   if (rate_hz < 0.0 || !std::isfinite(rate_hz)) throw std::invalid_argument("--rate must be a positive rate in Hz");
-  return Reader(path, keep, rate_hz).read();
+  return Reader(path, keep, rate_hz, longest_run).read();
 }
 
 nlohmann::json allan_json(const AllanInput& in, const std::vector<allan::Analysis>& analyses, const AllanArgs& args) {
@@ -576,6 +639,11 @@ nlohmann::json allan_json(const AllanInput& in, const std::vector<allan::Analysi
   j["file"] = args.path;
   j["format"] = in.format;
   j["samples"] = in.rows;
+  if (in.gaps > 0) {
+    // --gaps longest: which part of the file was analysed.
+    j["gaps"] = {{"count", in.gaps}, {"file_samples", in.file_rows}, {"first_line", in.first_line},
+                 {"last_line", in.last_line}};
+  }
   j["tau0_s"] = in.tau0_s;
   j["duration_s"] = static_cast<double>(in.rows) * in.tau0_s;
   j["confidence"] = args.confidence;
@@ -692,7 +760,13 @@ int run_allan(const AllanArgs& args, std::ostream& out, std::ostream& err) {
     return kUsageError;
   }
   try {
-    in = read_allan_input(args.path, args.axes, args.rate_hz);
+    if (args.gaps != "refuse" && args.gaps != "longest")
+      throw std::invalid_argument("--gaps must be refuse or longest, not '" + args.gaps + "'");
+    in = read_allan_input(args.path, args.axes, args.rate_hz, args.gaps == "longest");
+    if (in.gaps > 0)
+      err << "imuemu allan: " << args.path << ": " << in.gaps << (in.gaps == 1 ? " gap" : " gaps")
+          << " (missing samples); analysing the longest unbroken run, lines " << in.first_line << ".." << in.last_line
+          << " (" << in.rows << " of " << in.file_rows << " samples)\n";
   } catch (const io::CsvFormatError& e) {
     err << "imuemu allan: " << e.what() << "\n";
     return kBadInput;
@@ -758,6 +832,11 @@ void add_allan_command(CLI::App& app, int& exit_code) {
                 "Fit terms: comma list of q (quantization), n (ARW/VRW), b (bias instability), k (rate random walk), "
                 "r (rate ramp)")
       ->capture_default_str();
+  c->add_option("--gaps", a->gaps,
+                "A series with gaps (a sequence number jump, or a time step off the nominal by more than half): "
+                "refuse (exit 3 naming the line) or longest (analyse the longest unbroken run, named on stderr and "
+                "in the JSON's \"gaps\"). Repeated or backward samples are always refused")
+      ->capture_default_str()->check(CLI::IsMember({"refuse", "longest"}));
   c->callback([a, &exit_code] { exit_code = run_allan(*a, std::cout, std::cerr); });
 }
 

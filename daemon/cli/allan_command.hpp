@@ -40,6 +40,10 @@ struct AllanArgs {
   double confidence = 0.90;
   double fit_min_tau_s = 0.0, fit_max_tau_s = 0.0;  // <= 0: no bound
   std::string terms = "q,n,b,k,r";                  // the fit's terms
+  // A series with gaps (missing samples: a sequence jump, or a time step off
+  // the nominal by more than half): "refuse" (exit 3 naming the first gap) or
+  // "longest" (analyse the longest unbroken run, said on stderr and in the JSON).
+  std::string gaps = "refuse";
 };
 
 // One axis' samples as read from the file.
@@ -52,8 +56,13 @@ struct AllanSeries {
 struct AllanInput {
   std::string format;  // "imu" or "listen"
   double tau0_s = 0.0;
-  std::uint64_t rows = 0;
+  std::uint64_t rows = 0;  // samples analysed (the longest run's with --gaps longest)
   std::vector<AllanSeries> series;
+  // --gaps longest: the gaps found, the file's data rows, and the run analysed
+  // (1-based file lines of its first and last sample). gaps == 0: the whole file.
+  std::uint64_t gaps = 0;
+  std::uint64_t file_rows = 0;
+  std::size_t first_line = 0, last_line = 0;
 };
 
 // The reader's number parser for the plain decimal syntax of every CSV
@@ -69,7 +78,9 @@ bool parse_plain_decimal(std::string_view text, double& out) noexcept;
 
 // Reads the file (throws io::CsvFormatError naming file:line:column, or
 // std::invalid_argument for options).
-AllanInput read_allan_input(const std::string& path, const std::string& axes, double rate_hz);
+// longest_run: a gap ends a run instead of refusing the file, and the
+// longest run (the first of equal ones) is returned.
+AllanInput read_allan_input(const std::string& path, const std::string& axes, double rate_hz, bool longest_run = false);
 
 nlohmann::json allan_json(const AllanInput& input, const std::vector<allan::Analysis>& analyses,
                           const AllanArgs& args);

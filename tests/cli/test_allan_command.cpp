@@ -300,3 +300,84 @@ TEST(AllanFastParser, WithinOneUlpOfFromCharsAndDeclinesTheRest) {
                           " 1", "1 ", "1e99999", "1e-300"})
     EXPECT_FALSE(cli::parse_plain_decimal(bad, v)) << bad;
 }
+
+// A capture with dropped ticks (what `imuemu listen --out` writes when the
+// emitter drops late ticks: the sequence and the time jump together) and an
+// IMU CSV with a time gap. As `imuemu allan --help` says (--gaps): refused by
+// default naming the line, with the remedies; with --gaps longest the longest
+// unbroken run is analysed, exactly as a file holding only that run would be,
+// and named on stderr and in the JSON. Repeated samples are refused either way.
+TEST_F(AllanCommand, DroppedTicksAndTimeGaps) {
+  const std::vector<imuemu::ImuSample> s = white_samples(60'000, 1e-3, 1e-3, 6);
+  const auto dropped = [](std::size_t k) { return k == 10'000 || k == 25'000 || k == 25'001 || k == 40'000; };
+  std::string capture = listen_header(), last_run = listen_header();
+  for (std::size_t k = 0; k < s.size(); ++k) {
+    if (dropped(k)) continue;
+    const std::string row = listen_row(std::to_string(k), std::to_string(s[k].t_ns), s[k]);
+    capture += row;
+    if (k > 40'000) last_run += row;
+  }
+  write_text(path("dropped.csv"), capture);
+  write_text(path("last_run.csv"), last_run);
+  cli::AllanArgs args;
+  args.path = path("dropped.csv");
+  args.json = true;
+  args.axes = "gyro";
+  // Refused: the first gap is sample 10000; sample 10001 is file line 10002
+  // (header on line 1, sample k < 10000 on line k + 2).
+  EXPECT_EQ(run(args), cli::kBadInput);
+  EXPECT_NE(err_.str().find("dropped.csv:10002: column 'sequence' (1): sequence 10001 after 9999 (line 10001): 1 sample missing"),
+            std::string::npos) << err_.str();
+  EXPECT_NE(err_.str().find("--gaps longest"), std::string::npos) << err_.str();
+  EXPECT_NE(err_.str().find("--late-ticks send"), std::string::npos) << err_.str();
+  EXPECT_EQ(out_.str(), "");
+
+  // --gaps longest: runs of 10000, 14999, 14998 and 19999 samples; the last
+  // (samples 40001..59999, file lines 39999..59997) is analysed.
+  args.gaps = "longest";
+  ASSERT_EQ(run(args), cli::kOk) << err_.str();
+  const nlohmann::json j = nlohmann::json::parse(out_.str());
+  EXPECT_EQ(j["samples"], 19'999);
+  EXPECT_EQ(j["gaps"]["count"], 3);
+  EXPECT_EQ(j["gaps"]["file_samples"], 59'996);
+  EXPECT_EQ(j["gaps"]["first_line"], 39'999);
+  EXPECT_EQ(j["gaps"]["last_line"], 59'997);
+  EXPECT_NEAR(j["tau0_s"].get<double>(), kTau0, 1e-15);
+  EXPECT_NE(err_.str().find("3 gaps (missing samples); analysing the longest unbroken run, lines 39999..59997 (19999 of 59996 samples)"),
+            std::string::npos) << err_.str();
+  args.path = path("last_run.csv");
+  ASSERT_EQ(run(args), cli::kOk) << err_.str();
+  const nlohmann::json alone = nlohmann::json::parse(out_.str());
+  EXPECT_FALSE(alone.contains("gaps"));
+  for (std::size_t a = 0; a < 3; ++a) {
+    EXPECT_EQ(j["axes"][a]["tau_s"], alone["axes"][a]["tau_s"]) << a;
+    EXPECT_EQ(j["axes"][a]["adev"], alone["axes"][a]["adev"]) << a;
+  }
+
+  // An IMU CSV (no counter) whose clock jumps 1 s after sample 29999: refused
+  // naming the step, or the longer side (30000 samples, lines 32002..) analysed.
+  std::vector<imuemu::ImuSample> jumped = s;
+  for (std::size_t k = 30'000; k < jumped.size(); ++k) jumped[k].t_ns += 1'000'000'000;
+  imuemu::io::write_imu_csv(path("jump.csv"), jumped);
+  args.path = path("jump.csv");
+  args.gaps = "refuse";
+  EXPECT_EQ(run(args), cli::kBadInput);
+  EXPECT_NE(err_.str().find("jump.csv:30002: column 'time_ns' (1): time step 1005000000 ns from line 30001 is off the nominal 5000000 ns"),
+            std::string::npos) << err_.str();
+  args.gaps = "longest";
+  ASSERT_EQ(run(args), cli::kOk) << err_.str();
+  const nlohmann::json jumped_json = nlohmann::json::parse(out_.str());
+  EXPECT_EQ(jumped_json["samples"], 30'000);
+  EXPECT_EQ(jumped_json["gaps"]["count"], 1);
+  EXPECT_EQ(jumped_json["gaps"]["first_line"], 2);  // the first of the two equal runs
+  EXPECT_EQ(jumped_json["gaps"]["last_line"], 30'001);
+  EXPECT_NEAR(jumped_json["tau0_s"].get<double>(), kTau0, 1e-15);
+
+  // A repeated sample is no gap: refused with --gaps longest too.
+  std::string repeated = listen_header();
+  for (std::size_t k = 0; k < 100; ++k) repeated += listen_row(std::to_string(k == 50 ? 49 : k), std::to_string(s[k].t_ns), s[k]);
+  write_text(path("repeated.csv"), repeated);
+  args.path = path("repeated.csv");
+  EXPECT_EQ(run(args), cli::kBadInput);
+  EXPECT_NE(err_.str().find("repeated.csv:52: column 'sequence' (1): sequence 49 after 49"), std::string::npos) << err_.str();
+}
