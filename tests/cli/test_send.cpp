@@ -15,7 +15,9 @@
 //    `imuemu generate` on the same file with the scene's method (ecef,
 //    delta = window_s * rate = 20, gap split at 1 s) bit for bit in gyro and
 //    accel: the native protocol carries binary64, and the live path and the
-//    batch path are one computation (core/stream.hpp).
+//    batch path are one computation (core/stream.hpp);
+//  - TCP end to end: `imuemu stream --source tcp:` fed by `imuemu send`, its
+//    exact samples equal to generate's the same way.
 #include <gtest/gtest.h>
 
 #include <arpa/inet.h>
@@ -389,6 +391,61 @@ TEST_F(Send, DrivesTheLiveUdpSceneLikeGenerate) {
   // Most of the 3 s are exact samples: with 0.5 s of margin a pose is late
   // only if the sender stalls for half a second.
   EXPECT_GE(compared, 800u) << exact << " exact samples of " << rows;
+}
+
+}  // namespace
+
+namespace {
+
+// IMU CSV rows keyed by time: "time_ns,gx,gy,gz,ax,ay,az[,status]" (generate's
+// and stream's layout); with a status column only rows whose status is `keep`.
+std::map<std::int64_t, std::array<double, 6>> read_imu_rows(const std::string& path, const std::string& keep = "") {
+  std::map<std::int64_t, std::array<double, 6>> rows;
+  std::ifstream in(path);
+  std::string line;
+  while (std::getline(in, line)) {
+    if (line.empty() || line[0] == '#' || line.rfind("time", 0) == 0) continue;
+    std::vector<std::string> f;
+    std::stringstream ss(line);
+    for (std::string field; std::getline(ss, field, ',');) f.push_back(field);
+    if (f.size() < 7 || (f.size() == 8 && !keep.empty() && f[7] != keep)) continue;
+    std::array<double, 6> v{};
+    for (std::size_t k = 0; k < 6; ++k) v[k] = std::stod(f[k + 1]);
+    rows[std::stoll(f[0])] = v;
+  }
+  return rows;
+}
+
+// TCP end to end: `imuemu stream --source tcp:` fed by `imuemu send --to tcp:`
+// (started first: it retries the connection until the stream listens); every
+// sample stream marks exact equals generate's on the same file with the same
+// method (Delta 8 = one 0.02 s knot interval at 400 Hz, gap split at 1 s).
+TEST_F(Send, TcpDrivesImuemuStreamLikeGenerate) {
+  const std::string f = flight(2.0, 0.02);
+  const int port = free_port(SOCK_STREAM);
+  const pid_t sender = imuemu::test::spawn_logged(
+      IMUEMU_CLI_PATH, {"send", "--in", f, "--to", "tcp:127.0.0.1:" + std::to_string(port), "--connect-timeout-s", "20"},
+      path("send.log"));
+  ASSERT_GT(sender, 0);
+  const SendRun streamed = run_imuemu("stream --source tcp:127.0.0.1:" + std::to_string(port) +
+                                      " --knot-interval-s 0.02 --delta 8 --margin-s 0.5 --max-gap-s 1 --duration-s 1.5 --out " +
+                                      path("stream.csv"));
+  int status = 0;
+  ASSERT_EQ(::waitpid(sender, &status, 0), sender);
+  EXPECT_TRUE(WIFEXITED(status) && WEXITSTATUS(status) == 0) << std::ifstream(path("send.log")).rdbuf();
+  ASSERT_EQ(streamed.exit_code, 0) << streamed.output;
+  const SendRun gen = run_imuemu("generate --in " + f + " --out " + path("reference.csv") +
+                                 " --rate 400 --scene ecef --delta 8 --gap-policy split --max-gap-s 1 --quiet");
+  ASSERT_EQ(gen.exit_code, 0) << gen.output;
+  const auto reference = read_imu_rows(path("reference.csv"));
+  const auto exact = read_imu_rows(path("stream.csv"), "exact");
+  std::cout << "tcp via imuemu send: " << exact.size() << " exact samples from imuemu stream compared\n";
+  EXPECT_GE(exact.size(), 400u);  // of the 601 in 1.5 s
+  for (const auto& [t, v] : exact) {
+    const auto it = reference.find(t);
+    ASSERT_NE(it, reference.end()) << "sample time " << t << " is not on generate's 400 Hz grid";
+    for (std::size_t k = 0; k < 6; ++k) EXPECT_EQ(v[k], it->second[k]) << "t_ns " << t << " column " << k;
+  }
 }
 
 }  // namespace
