@@ -7,7 +7,7 @@
 //    bound only: a loaded host can only make it later);
 //  - refusals: a bad file line (file, line, column named, nothing sent, exit
 //    3), a TCP port nobody listens on (exit 5 after --connect-timeout-s),
-//    usage errors (exit 2);
+//    usage errors (exit 2); a UDP port nobody listens on is said, not fatal;
 //  - end to end: imuemud on config/live-udp.toml (its UDP port and pty link
 //    moved to free ones, margin_s 0.5 instead of 0.05 so a loaded host does
 //    not make poses late), `imuemu send` of a 50 Hz flight, `imuemu listen`
@@ -288,6 +288,15 @@ TEST_F(Send, Refusals) {
   EXPECT_EQ(r.exit_code, 5) << r.output;
   EXPECT_NE(r.output.find("tcp:127.0.0.1:" + std::to_string(port) + ": cannot connect within --connect-timeout-s: Connection refused"),
             std::string::npos) << r.output;
+
+  // A UDP port nobody listens on is no error (the receiver may start later):
+  // the datagrams the kernel refused (ICMP port unreachable, reported on the
+  // next send) are counted and said, the exit is 0.
+  const int udp_port = free_port(SOCK_DGRAM);
+  r = run_imuemu("send --sample static --duration-s 1 --sample-period-s 0.1 --speed 10 --to udp:127.0.0.1:" + std::to_string(udp_port));
+  EXPECT_EQ(r.exit_code, 0) << r.output;
+  EXPECT_NE(r.output.find("nothing listens there yet (port unreachable); still sending"), std::string::npos) << r.output;
+  EXPECT_NE(r.output.find("refused (port unreachable)"), std::string::npos) << r.output;
 
   // Usage: a destination that is neither udp: nor tcp:, no input, two inputs, v2 over tcp.
   for (const std::string& args : {std::string("send --sample static --to serial:/dev/ttyS0"),
