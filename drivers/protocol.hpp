@@ -66,6 +66,11 @@ struct ImuFrameInput {
   double longitude_rad = 0.0;
   double height_m = 0.0;
   Vec3 velocity_ned_m_s = Vec3::Zero();
+  // The sensor axes' attitude relative to local NED at t_ns, R_s^n (a
+  // vector in sensor axes to NED), with the navigation fields: what a
+  // magnetometer in those axes turns the Earth's field by (MAVLink
+  // HIL_SENSOR x/y/zmag).
+  Mat3 sensor_to_ned = Mat3::Identity();
 };
 
 // A classic CAN or CAN FD frame (SocketCAN's struct can_frame / canfd_frame

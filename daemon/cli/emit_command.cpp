@@ -235,7 +235,9 @@ int emit(const EmitArgs& a) {
   std::unique_ptr<drivers::CanEncoder> can_encoder;
   std::unique_ptr<drivers::StreamEncoder> stream_encoder;
   try {
-    const drivers::ProtocolOptions protocol_options = protocol_options_of(a);
+    drivers::ProtocolOptions protocol_options = protocol_options_of(a);
+    // MAVLink's barometer / magnetometer random terms: the sensor model's seed.
+    if (dev.sensor_model) protocol_options.stream.aiding_seed = dev.sensor_model->seed;
     if (can) {
       if (a.device.rfind("can:", 0) != 0)
         throw std::invalid_argument("--device " + a.device + ": protocol " + a.protocol + " needs can:IFACE");

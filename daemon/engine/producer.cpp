@@ -44,9 +44,10 @@ void set_level_attitude(const Kinematics& k, Physics physics, drivers::ImuFrameI
   f.roll_rad = hpr.roll_rad;
 }
 
-// The sensor's (a GNSS device: its antenna's) WGS84 position and NED
-// velocity from the sample's kinematics in an ecef scene (Eq. 1.1 inverse,
-// v^n = R_l^e^T v^e with Eq. 1.5 at the sample's own position). A flat
+// The sensor's (a GNSS device: its antenna's) WGS84 position, NED velocity
+// and attitude relative to NED from the sample's kinematics in an ecef scene
+// (Eq. 1.1 inverse, v^n = R_l^e^T v^e and R_s^n = R_l^e^T R_s^e with Eq. 1.5
+// at the sample's own position). A flat
 // scene's positions have no geodetic anchor: the fields stay unset.
 void set_navigation(const Kinematics& k, Physics physics, drivers::ImuFrameInput& f) {
   if (physics != Physics::ecef) return;
@@ -55,7 +56,9 @@ void set_navigation(const Kinematics& k, Physics physics, drivers::ImuFrameInput
   f.latitude_rad = g.latitude_rad;
   f.longitude_rad = g.longitude_rad;
   f.height_m = g.height_m;
-  f.velocity_ned_m_s = attitude::ned_to_ecef(g.latitude_rad, g.longitude_rad).transpose() * k.velocity_m_s;
+  const Mat3 R_n_e = attitude::ned_to_ecef(g.latitude_rad, g.longitude_rad);
+  f.velocity_ned_m_s = R_n_e.transpose() * k.velocity_m_s;
+  f.sensor_to_ned = R_n_e.transpose() * k.attitude;  // R_s^n = (R_n^e)^T R_s^e
 }
 
 }  // namespace

@@ -801,6 +801,10 @@ ImuConfig parse_imu(const Table& t) {
                        std::string(ex.what()) + at_rate);
     }
   }
+  // The MAVLink barometer and magnetometer models' random terms, keyed as
+  // the IMU's: the error model's seed and the device's name.
+  imu.stream_options.aiding_seed = imu.error_model.spec.seed;
+  imu.stream_options.aiding_device = imu.name;
   // Faults (daemon/scene/fault_config.cpp), seeded from the error model's seed.
   DeviceFaults faults = parse_device_faults(t.table(), t.ctx().file, t.path(), imu.name, imu.rate_hz, imu.error_model.spec.seed);
   imu.faults = std::move(faults.faults);

@@ -1,5 +1,5 @@
-// MAVLink 2 encoder/decoder for HIL_SENSOR (#107), HIGHRES_IMU (#105) and
-// HEARTBEAT (#0).
+// MAVLink 2 encoder/decoder for HIL_SENSOR (#107), HIGHRES_IMU (#105),
+// HIL_GPS (#113) and HEARTBEAT (#0).
 //
 // Sources (read, nothing copied):
 //  [G] MAVLink developer guide, "Packet Serialization"
@@ -7,7 +7,7 @@
 //      fields, field reordering by type size with extensions last, CRC_EXTRA,
 //      empty-byte payload truncation, CRC-16/MCRF4XX over everything but the
 //      magic byte plus CRC_EXTRA.
-//  [X] message_definitions/v1.0/common.xml: HIL_SENSOR, HIGHRES_IMU,
+//  [X] message_definitions/v1.0/common.xml: HIL_SENSOR, HIGHRES_IMU, HIL_GPS,
 //      HIL_SENSOR_UPDATED_FLAGS, MAV_COMPONENT; minimal.xml: HEARTBEAT,
 //      MAV_TYPE, MAV_AUTOPILOT, MAV_STATE.
 //  [H] MAVLink heartbeat microservice (mavlink.io/en/services/heartbeat.html):
@@ -26,8 +26,12 @@
 #include <boost/crc.hpp>
 #include <cmath>
 #include <limits>
+#include <numbers>
 #include <optional>
 
+#include "core/aiding/atmosphere.hpp"
+#include "core/aiding/sample_index.hpp"
+#include "core/aiding/wmm.hpp"
 #include "core/time_arith.hpp"
 #include "drivers/protocols/mavlink_device.hpp"
 #include "drivers/protocols/wire_bytes.hpp"
@@ -58,6 +62,9 @@ constexpr TimeNs kHeartbeatPeriodNs = kNsPerSecond;  // [H]
 constexpr std::size_t kOffTimeUsec = 0;
 constexpr std::size_t kOffAcc = 8;     // xacc, yacc, zacc
 constexpr std::size_t kOffGyro = 20;   // xgyro, ygyro, zgyro
+constexpr std::size_t kOffMag = 32;    // xmag, ymag, zmag (gauss)
+constexpr std::size_t kOffAbsPressure = 44;   // hPa
+constexpr std::size_t kOffPressureAlt = 52;   // m
 constexpr std::size_t kOffTemperature = 56;
 constexpr std::size_t kOffFieldsUpdated = 60;
 constexpr std::size_t kOffHilSensorId = 64;   // after u32 fields_updated
@@ -97,10 +104,17 @@ Vec3 get_vec3_f32(const std::uint8_t* at) {
   return {wire::get_le<float>(at), wire::get_le<float>(at + 4), wire::get_le<float>(at + 8)};
 }
 
-// The IMU payload shared by HIL_SENSOR and HIGHRES_IMU up to fields_updated;
-// returns fields_updated.
-std::uint32_t fill_imu_payload(std::uint8_t* p, const ImuFrameInput& sample,
-                               const StreamEncoderOptions& options) {
+constexpr double kGaussPerMicrotesla = 0.01;  // 1 G = 1e-4 T = 100 uT
+constexpr double kHpaPerPa = 0.01;
+constexpr double kKelvinAtZeroCelsius = 273.15;
+// A Julian year (365.25 d), the unit of WMM's decimal year.
+constexpr double kSecondsPerYear = 365.25 * 86400.0;
+
+// The IMU payload shared by HIL_SENSOR and HIGHRES_IMU up to fields_updated
+// (the two share the field order and the fields_updated bits [X]), with the
+// sample's barometer and magnetometer readings; returns fields_updated.
+std::uint32_t fill_imu_payload(std::uint8_t* p, const ImuFrameInput& sample, const StreamEncoderOptions& options,
+                               const Encoder::AidingReading& aiding) {
   wire::put_le<std::uint64_t>(p + kOffTimeUsec, time_usec_from_ns(sample.t_ns));
   std::uint32_t updated = put_vec3_f32(p + kOffAcc, frd_to_mavlink_body(sample.accel_m_s2), 0);
   updated |= put_vec3_f32(p + kOffGyro, frd_to_mavlink_body(sample.gyro_rad_s), 3);
@@ -108,9 +122,21 @@ std::uint32_t fill_imu_payload(std::uint8_t* p, const ImuFrameInput& sample,
   // accel/gyro only for the fields_updated bits that are set.
   if ((sample.status & kStatusFault) != 0) updated &= ~kUpdatedAccelGyro;
   // The sensor model's temperature when the sample has one, else the
-  // configured constant (protocol option temperature_degC), else none.
-  const std::optional<double> temperature_c =
+  // configured constant (protocol option temperature_degC), else the
+  // barometer's (PX4 takes the baro group with its temperature bit), else
+  // none.
+  std::optional<double> temperature_c =
       sample.has_temperature ? std::optional<double>(sample.temperature_c) : options.mavlink_temperature_degC;
+  if (!temperature_c && aiding.has_pressure) temperature_c = aiding.temperature_k - kKelvinAtZeroCelsius;
+  if (aiding.has_field) updated |= put_vec3_f32(p + kOffMag, aiding.field_ut * kGaussPerMicrotesla, 6);
+  if (aiding.has_pressure) {
+    wire::put_le<float>(p + kOffAbsPressure, static_cast<float>(aiding.pressure_pa * kHpaPerPa));
+    updated |= kUpdatedAbsPressure;
+  }
+  if (aiding.has_pressure_altitude) {
+    wire::put_le<float>(p + kOffPressureAlt, static_cast<float>(aiding.pressure_altitude_m));
+    updated |= kUpdatedPressureAlt;
+  }
   if (temperature_c) {
     const wire::WireValue w = wire::to_wire_float<float>(*temperature_c);
     wire::put_le<float>(p + kOffTemperature, static_cast<float>(w.value));
@@ -154,10 +180,37 @@ void Encoder::append_packet(const MessageSpec& message, std::span<const std::uin
 
 Encoder::Encoder(const StreamEncoderOptions& options) : options_(options) {
   if (options_.mavlink_answers_commands) device_ = std::make_unique<Device>(options_);
+  // The models run at the device's rate, one step per sample (encode()
+  // measures every sample, sent or not: no catching up on the emission
+  // thread). Their constructors validate the specs (SettingError).
+  if (options_.mavlink_baro) {
+    aiding::BarometerSpec spec;
+    spec.noise_rms_pa = options_.mavlink_baro_noise_rms_pa;
+    spec.bias_pa = options_.mavlink_baro_bias_pa;
+    spec.seed = options_.aiding_seed;
+    barometer_.emplace(spec, options_.nominal_sample_rate_hz, options_.aiding_device);
+  }
+  if (options_.mavlink_mag) {
+    aiding::MagnetometerSpec spec;
+    spec.noise_rms_ut = Vec3::Constant(options_.mavlink_mag_noise_rms_ut);
+    spec.seed = options_.aiding_seed;
+    magnetometer_.emplace(spec, options_.nominal_sample_rate_hz, options_.aiding_device);
+  }
+  pressure_min_pa_ = aiding::isa_at_geopotential(aiding::kIsaMaxGeopotential_m).pressure_pa;
+  pressure_max_pa_ = aiding::isa_at_geopotential(aiding::kIsaMinGeopotential_m).pressure_pa;
 }
 
 Encoder::Encoder(const Encoder& other)
-    : options_(other.options_), sequence_(other.sequence_), next_heartbeat_ns_(other.next_heartbeat_ns_) {
+    : options_(other.options_),
+      sequence_(other.sequence_),
+      next_heartbeat_ns_(other.next_heartbeat_ns_),
+      barometer_(other.barometer_),
+      magnetometer_(other.magnetometer_),
+      reading_counter_(other.reading_counter_),
+      reading_(other.reading_),
+      next_gps_ns_(other.next_gps_ns_),
+      pressure_min_pa_(other.pressure_min_pa_),
+      pressure_max_pa_(other.pressure_max_pa_) {
   if (options_.mavlink_answers_commands) device_ = std::make_unique<Device>(options_);
 }
 
@@ -168,8 +221,69 @@ Encoder& Encoder::operator=(const Encoder& other) {
     sequence_ = fresh.sequence_;
     next_heartbeat_ns_ = fresh.next_heartbeat_ns_;
     device_ = std::move(fresh.device_);
+    barometer_ = std::move(fresh.barometer_);
+    magnetometer_ = std::move(fresh.magnetometer_);
+    reading_counter_ = fresh.reading_counter_;
+    reading_ = fresh.reading_;
+    next_gps_ns_ = fresh.next_gps_ns_;
+    pressure_min_pa_ = fresh.pressure_min_pa_;
+    pressure_max_pa_ = fresh.pressure_max_pa_;
   }
   return *this;
+}
+
+const Encoder::AidingReading& Encoder::aiding_reading(const ImuFrameInput& sample) {
+  const std::uint64_t k = sample.sample_counter;
+  if (reading_counter_ && *reading_counter_ == k) return reading_;  // a second message of the same sample
+  reading_ = AidingReading{};
+  reading_counter_ = k;
+  if (!sample.has_navigation) return reading_;  // a flat scene: no position, no reading
+  // Every input is checked against the models' stated domains first, so
+  // none of them throws here (the emission thread); a sample outside them
+  // is sent without that group (its fields_updated bits clear).
+  const auto index_ok = [k](std::uint64_t next) { return k >= next && k - next <= aiding::kMaxSkippedSamples; };
+  if (barometer_ && index_ok(barometer_->next_index())) {
+    // Geometric height above the geoid Z = h - N, geopotential
+    // H = r0 Z / (r0 + Z) (US 1976 Eq. 18; atmosphere.hpp), inside the
+    // model's range with a metre to spare.
+    const double z_m = sample.height_m - options_.mavlink_geoid_undulation_m;
+    const double h_m = aiding::kIsaEarthRadius_m * z_m / (aiding::kIsaEarthRadius_m + z_m);
+    if (std::isfinite(h_m) && h_m > aiding::kIsaMinGeopotential_m + 1.0 && h_m < aiding::kIsaMaxGeopotential_m - 1.0) {
+      const aiding::IsaState isa =
+          aiding::isa_at_ellipsoidal_height(sample.height_m, options_.mavlink_geoid_undulation_m);
+      const aiding::BarometerSample b = barometer_->measure(k, isa.pressure_pa, isa.temperature_k);
+      if (std::isfinite(b.pressure_pa) && std::isfinite(b.temperature_k)) {
+        reading_.has_pressure = true;
+        reading_.pressure_pa = b.pressure_pa;
+        reading_.temperature_k = b.temperature_k;
+        // What an altimeter set to 1013.25 hPa reads, within the
+        // atmosphere's pressures.
+        if (b.pressure_pa > pressure_min_pa_ && b.pressure_pa < pressure_max_pa_) {
+          reading_.has_pressure_altitude = true;
+          reading_.pressure_altitude_m = aiding::pressure_altitude_m(b.pressure_pa);
+        }
+      }
+    }
+  }
+  if (magnetometer_ && index_ok(magnetometer_->next_index())) {
+    const double year = options_.mavlink_date_at_t0_year + static_cast<double>(sample.t_ns) * 1e-9 / kSecondsPerYear;
+    const double epoch = aiding::wmm2025_epoch_year();
+    const double lat = sample.latitude_rad;
+    if (std::isfinite(year) && year >= epoch && year <= epoch + aiding::kWmmValidYears && std::isfinite(lat) &&
+        std::abs(lat) <= 0.5 * std::numbers::pi && std::isfinite(sample.longitude_rad) &&
+        sample.height_m >= aiding::kWmmMinHeight_m && sample.height_m <= aiding::kWmmMaxHeight_m &&
+        sample.sensor_to_ned.allFinite()) {
+      const aiding::MagneticElements field =
+          aiding::wmm2025({sample.latitude_rad, sample.longitude_rad, sample.height_m}, year);
+      // b^s = (R_s^n)^T b^n (magnetometer.hpp; the sensor axes are the
+      // sample's, so the model's own mounting is the identity).
+      const aiding::MagnetometerSample m =
+          magnetometer_->measure(k, aiding::body_field_ut(sample.sensor_to_ned, field.ned_nt));
+      reading_.has_field = m.field_ut.allFinite();
+      reading_.field_ut = m.field_ut;
+    }
+  }
+  return reading_;
 }
 
 Encoder::~Encoder() = default;
@@ -177,16 +291,17 @@ Encoder::~Encoder() = default;
 CommandResponder* Encoder::command_responder() { return device_.get(); }
 
 void Encoder::append_imu(const ImuFrameInput& sample, std::vector<std::uint8_t>& out) {
+  const AidingReading& aiding = aiding_reading(sample);
   if (options_.mavlink_hil_sensor) {
     std::array<std::uint8_t, kHilSensor.payload_bytes> p{};
-    const std::uint32_t updated = fill_imu_payload(p.data(), sample, options_);
+    const std::uint32_t updated = fill_imu_payload(p.data(), sample, options_, aiding);
     wire::put_le<std::uint32_t>(p.data() + kOffFieldsUpdated, updated);
     p[kOffHilSensorId] = options_.mavlink_sensor_id;
     append_packet(kHilSensor, p, out);
   }
   if (options_.mavlink_highres_imu) {
     std::array<std::uint8_t, kHighresImu.payload_bytes> p{};
-    const std::uint32_t updated = fill_imu_payload(p.data(), sample, options_);
+    const std::uint32_t updated = fill_imu_payload(p.data(), sample, options_, aiding);
     wire::put_le<std::uint16_t>(p.data() + kOffFieldsUpdated, static_cast<std::uint16_t>(updated));
     p[kOffHighresId] = options_.mavlink_sensor_id;
     append_packet(kHighresImu, p, out);
@@ -194,8 +309,12 @@ void Encoder::append_imu(const ImuFrameInput& sample, std::vector<std::uint8_t>&
 }
 
 void Encoder::encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out) {
+  // Every sample steps the barometer and magnetometer models, whether or
+  // not an IMU message goes out with it (the driver's decimation).
+  if (barometer_ || magnetometer_) (void)aiding_reading(sample);
   if (!device_) {
     append_imu(sample, out);
+    append_hil_gps(sample, out);
     return;
   }
   // The driver's SET_MESSAGE_INTERVAL, on the sample grid: the IMU
@@ -205,6 +324,7 @@ void Encoder::encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out
   device_->note_period(sample.period_ns);
   const std::uint32_t decimation = device_->decimation();
   if (decimation != 0 && sample.sample_counter % decimation == 0) append_imu(sample, out);
+  append_hil_gps(sample, out);
   // Replies the io thread decided, after the sample's own packets: whole
   // packets, numbered by the component's one seq (mavlink_device.hpp).
   ReplyItem item;
@@ -237,6 +357,78 @@ void Encoder::append_reply(const ReplyItem& item, const ImuFrameInput& sample, s
   append_packet(kCommandAck, a, out);
   if (item.kind == ReplyItem::Kind::heartbeat) append_heartbeat(kMavStateActive, out);
   else if (item.kind == ReplyItem::Kind::imu_message) append_imu(sample, out);
+}
+
+namespace {
+
+// Instant n of the grid of `rate_hz` per second on trajectory time,
+// n * 1 s / rate without overflow (n / rate whole seconds plus the rest).
+TimeNs gps_grid_ns(std::int64_t n, std::int64_t rate_hz) {
+  const std::int64_t q = n / rate_hz, r = n % rate_hz;
+  return saturating_add_ns(saturating_mul_ns(q, kNsPerSecond), r * kNsPerSecond / rate_hz);
+}
+
+// The grid instant after t (floor(t * rate / 1 s) + 1), for any t.
+std::int64_t gps_grid_index_after(TimeNs t_ns, std::int64_t rate_hz) {
+  std::int64_t s = t_ns / kNsPerSecond, ns = t_ns % kNsPerSecond;
+  if (ns < 0) {
+    --s;
+    ns += kNsPerSecond;
+  }
+  return s * rate_hz + ns * rate_hz / kNsPerSecond + 1;
+}
+
+template <typename T>
+T rounded_clamped(double v, double lo, double hi) {
+  return static_cast<T>(std::llround(std::clamp(v, lo, hi)));
+}
+
+}  // namespace
+
+void Encoder::append_hil_gps(const ImuFrameInput& sample, std::vector<std::uint8_t>& out) {
+  const std::int64_t rate = options_.mavlink_hil_gps_rate_hz;
+  if (rate <= 0 || !sample.has_navigation) return;
+  const TimeNs t = sample.t_ns;
+  // Due at the first sample at or after each grid instant; a timeline that
+  // went back by more than a period starts over from its sample.
+  const TimeNs period_ns = kNsPerSecond / rate;
+  if (next_gps_ns_ && t < *next_gps_ns_ && t >= saturating_sub_ns(*next_gps_ns_, 2 * period_ns)) return;
+  next_gps_ns_ = gps_grid_ns(gps_grid_index_after(t, rate), rate);
+
+  const double lat_deg = sample.latitude_rad * 180.0 / std::numbers::pi;
+  const double lon_deg = std::remainder(sample.longitude_rad * 180.0 / std::numbers::pi, 360.0);
+  const double msl_m = sample.height_m - options_.mavlink_geoid_undulation_m;
+  const Vec3& v = sample.velocity_ned_m_s;
+  if (!std::isfinite(lat_deg) || !std::isfinite(lon_deg) || !std::isfinite(msl_m) || !v.allFinite()) return;
+  // [X] HIL_GPS wire order ([G] sorted by type size): time_usec u64, lat
+  // i32 degE7, lon i32 degE7, alt i32 mm (MSL, up), eph u16, epv u16 (DOP
+  // x 100), vel u16 cm/s (ground speed), vn, ve, vd i16 cm/s (NED), cog u16
+  // cdeg (0..35999, UINT16_MAX unknown), fix_type u8 (3: 3D), satellites_visible
+  // u8; extensions id u8, yaw u16 (0: not available).
+  std::array<std::uint8_t, kHilGps.payload_bytes> p{};
+  wire::put_le<std::uint64_t>(p.data(), time_usec_from_ns(t));
+  wire::put_le<std::int32_t>(p.data() + 8, rounded_clamped<std::int32_t>(lat_deg * 1e7, -9e8, 9e8));
+  wire::put_le<std::int32_t>(p.data() + 12, rounded_clamped<std::int32_t>(lon_deg * 1e7, -1.8e9, 1.8e9));
+  wire::put_le<std::int32_t>(p.data() + 16, rounded_clamped<std::int32_t>(msl_m * 1e3, -2147483647.0, 2147483647.0));
+  wire::put_le<std::uint16_t>(p.data() + 20, rounded_clamped<std::uint16_t>(options_.mavlink_gps_hdop * 100.0, 0.0, 65534.0));
+  wire::put_le<std::uint16_t>(p.data() + 22, rounded_clamped<std::uint16_t>(options_.mavlink_gps_vdop * 100.0, 0.0, 65534.0));
+  const double ground_m_s = std::hypot(v.x(), v.y());
+  wire::put_le<std::uint16_t>(p.data() + 24, rounded_clamped<std::uint16_t>(ground_m_s * 100.0, 0.0, 65534.0));
+  for (int i = 0; i < 3; ++i)
+    wire::put_le<std::int16_t>(p.data() + 26 + 2 * i, rounded_clamped<std::int16_t>(v[i] * 100.0, -32767.0, 32767.0));
+  // Course over ground: the direction of the horizontal velocity, unknown
+  // when that rounds to 0 cm/s.
+  std::uint16_t cog = 65535;
+  if (ground_m_s >= 0.005) {
+    double cdeg = std::atan2(v.y(), v.x()) * 18000.0 / std::numbers::pi;
+    if (cdeg < 0.0) cdeg += 36000.0;
+    cog = static_cast<std::uint16_t>(std::llround(cdeg) % 36000);
+  }
+  wire::put_le<std::uint16_t>(p.data() + 32, cog);
+  p[34] = 3;  // 3D fix
+  p[35] = static_cast<std::uint8_t>(options_.mavlink_gps_satellites);
+  p[36] = options_.mavlink_sensor_id;
+  append_packet(kHilGps, p, out);
 }
 
 void Encoder::periodic(TimeNs now_ns, std::vector<std::uint8_t>& out) {
@@ -298,6 +490,15 @@ std::size_t Encoder::max_bytes_per_sample() const {
   std::size_t bytes = 0;
   if (options_.mavlink_hil_sensor) bytes += kOverhead + kHilSensor.payload_bytes;
   if (options_.mavlink_highres_imu) bytes += kOverhead + kHighresImu.payload_bytes;
+  if (options_.mavlink_hil_gps_rate_hz > 0) {
+    // HIL_GPS at its rate spread over the samples (one per sample when
+    // the sample rate is at or below it, or unknown).
+    const std::size_t gps = kOverhead + kHilGps.payload_bytes;
+    const double per_sample = static_cast<double>(options_.mavlink_hil_gps_rate_hz) / options_.nominal_sample_rate_hz;
+    bytes += options_.nominal_sample_rate_hz > 0.0 && per_sample < 1.0
+                 ? static_cast<std::size_t>(std::ceil(static_cast<double>(gps) * per_sample))
+                 : gps;
+  }
   if (options_.mavlink_heartbeat) {
     const std::size_t heartbeat = kOverhead + kHeartbeat.payload_bytes;
     // One heartbeat per second spread over the samples of that second; at
@@ -323,7 +524,7 @@ void Decoder::feed(std::span<const std::uint8_t> bytes, const SampleCallback& on
     if ((incompat & ~kIncompatSigned) != 0) return wire::CandidateResult{Candidate::kMalformed};
     const std::uint32_t msgid = std::uint32_t{c[7]} | std::uint32_t{c[8]} << 8 | std::uint32_t{c[9]} << 16;
     const MessageSpec* spec = nullptr;
-    for (const MessageSpec* m : {&kHeartbeat, &kHighresImu, &kHilSensor}) {
+    for (const MessageSpec* m : {&kHeartbeat, &kHighresImu, &kHilSensor, &kHilGps}) {
       if (m->id == msgid) spec = m;
     }
     // Without its CRC_EXTRA a message cannot be checked: not accepted.

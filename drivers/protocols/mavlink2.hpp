@@ -1,5 +1,5 @@
 // MAVLink 2 over a byte stream: HIL_SENSOR (#107), optionally HIGHRES_IMU
-// (#105), and HEARTBEAT (#0) at 1 Hz. Written from the MAVLink developer guide
+// (#105) and HIL_GPS (#113), and HEARTBEAT (#0) at 1 Hz. Written from the MAVLink developer guide
 // ("Packet Serialization") and common.xml/minimal.xml; no generated headers.
 #pragma once
 
@@ -10,6 +10,8 @@
 #include <optional>
 #include <span>
 
+#include "core/aiding/barometer.hpp"
+#include "core/aiding/magnetometer.hpp"
 #include "drivers/protocol.hpp"
 #include "drivers/protocols/stream_protocols.hpp"
 
@@ -32,12 +34,20 @@ struct MessageSpec {
 inline constexpr MessageSpec kHeartbeat{0, 50, 9};
 inline constexpr MessageSpec kHighresImu{105, 93, 63};
 inline constexpr MessageSpec kHilSensor{107, 108, 65};
+inline constexpr MessageSpec kHilGps{113, 124, 39};
 
 // fields_updated bits (common.xml HIL_SENSOR_UPDATED_FLAGS and
 // HIGHRES_IMU_UPDATED_FLAGS share the layout): xacc..zgyro = bits 0..5,
 // temperature = bit 12.
 inline constexpr std::uint32_t kUpdatedAccelGyro = 0x3F;
 inline constexpr std::uint32_t kUpdatedTemperature = 1u << 12;
+// xmag, ymag, zmag = bits 6..8; abs_pressure 9, diff_pressure 10,
+// pressure_alt 11. PX4 takes a group only with all its bits: mag 0x1C0,
+// baro 0x1A00 (abs_pressure, pressure_alt, temperature); accel + gyro + mag
+// + baro = 7167 (0x1BFF), diff_pressure (airspeed) not sent.
+inline constexpr std::uint32_t kUpdatedMag = 0x1C0;
+inline constexpr std::uint32_t kUpdatedAbsPressure = 1u << 9;
+inline constexpr std::uint32_t kUpdatedPressureAlt = 1u << 11;
 
 // CRC-16/MCRF4XX ("X.25"; poly 0x1021 reflected, init 0xFFFF, no xorout) via
 // Boost.CRC. Check value of "123456789" is 0x6F91.
@@ -81,11 +91,39 @@ class Encoder final : public StreamEncoder {
                      std::vector<std::uint8_t>& out);
   void append_imu(const ImuFrameInput& sample, std::vector<std::uint8_t>& out);
   void append_reply(const ReplyItem& item, const ImuFrameInput& sample, std::vector<std::uint8_t>& out);
+  void append_hil_gps(const ImuFrameInput& sample, std::vector<std::uint8_t>& out);
+
+ public:
+  // The barometer and magnetometer readings of one sample (measured once per
+  // sample whichever messages carry them).
+  struct AidingReading {
+    bool has_pressure = false;
+    double pressure_pa = 0.0;
+    double temperature_k = 0.0;
+    bool has_pressure_altitude = false;  // within the atmosphere's range
+    double pressure_altitude_m = 0.0;
+    bool has_field = false;
+    Vec3 field_ut = Vec3::Zero();  // sensor axes
+  };
+  bool needs_navigation() const override {
+    return options_.mavlink_baro || options_.mavlink_mag || options_.mavlink_hil_gps_rate_hz > 0;
+  }
+
+ private:
+  const AidingReading& aiding_reading(const ImuFrameInput& sample);
 
   StreamEncoderOptions options_;
   std::unique_ptr<Device> device_;
   std::uint8_t sequence_ = 0;  // one counter for every packet this component sends
   std::optional<TimeNs> next_heartbeat_ns_;
+  std::optional<aiding::Barometer> barometer_;
+  std::optional<aiding::Magnetometer> magnetometer_;
+  std::optional<std::uint64_t> reading_counter_;  // the sample `reading_` is of
+  AidingReading reading_;
+  std::optional<TimeNs> next_gps_ns_;
+  // The ISA pressures at the top and the bottom of the model's range
+  // (pressure_altitude_m's domain).
+  double pressure_min_pa_ = 0.0, pressure_max_pa_ = 0.0;
 };
 
 class Decoder final : public StreamDecoder {

@@ -95,6 +95,40 @@ std::vector<ProtocolOption> make_table() {
   t.push_back(number("mavlink2", "temperature_degC", -273.15, 1000.0, false, "not sent",
                      "`temperature` field (degC, fields_updated bit 12)",
                      [](ProtocolOptions& p, double v) { p.stream.mavlink_temperature_degC = v; }));
+  // Issue 28: the barometer and magnetometer groups and HIL_GPS (an ecef
+  // scene; mavlink2.hpp, docs/mavlink-device.md).
+  t.push_back(boolean("mavlink2", "baro", false,
+                      "abs_pressure (hPa) and pressure_alt (m) from the ISA atmosphere at the trajectory's height, "
+                      "fields_updated bits 9, 11 and 12 (temperature)",
+                      [](ProtocolOptions& p, bool v) { p.stream.mavlink_baro = v; }));
+  t.push_back(boolean("mavlink2", "mag", false,
+                      "x/y/zmag (gauss, sensor axes): the WMM2025 field at the position and date, fields_updated bits 6..8",
+                      [](ProtocolOptions& p, bool v) { p.stream.mavlink_mag = v; }));
+  t.push_back(integer("mavlink2", "hil_gps_rate_hz", 0, 50, "0",
+                      "HIL_GPS (#113) per second, on the trajectory-time grid (0: not sent); at most the device's rate",
+                      [](ProtocolOptions& p, std::int64_t v) { p.stream.mavlink_hil_gps_rate_hz = v; }));
+  t.push_back(number("mavlink2", "date_at_t0_year", 2025.0, 2030.0, false, "2026.0",
+                     "decimal year of trajectory time 0: the date of the magnetic field (WMM2025 is valid 2025..2030)",
+                     [](ProtocolOptions& p, double v) { p.stream.mavlink_date_at_t0_year = v; }));
+  t.push_back(number("mavlink2", "geoid_undulation_m", -200.0, 200.0, false, "0.0",
+                     "geoid above the ellipsoid (no geoid model is carried): mean sea level for the atmosphere and "
+                     "HIL_GPS alt is the ellipsoidal height minus this",
+                     [](ProtocolOptions& p, double v) { p.stream.mavlink_geoid_undulation_m = v; }));
+  t.push_back(number("mavlink2", "baro_noise_rms_pa", 0.0, 1000.0, false, "0.0",
+                     "barometer white noise per sample (Pa RMS; MS5611 at OSR 4096: 1.2)",
+                     [](ProtocolOptions& p, double v) { p.stream.mavlink_baro_noise_rms_pa = v; }));
+  t.push_back(number("mavlink2", "baro_bias_pa", -10000.0, 10000.0, false, "0.0",
+                     "barometer fixed offset (Pa; datasheets' absolute accuracy, BMP280 +-100)",
+                     [](ProtocolOptions& p, double v) { p.stream.mavlink_baro_bias_pa = v; }));
+  t.push_back(number("mavlink2", "mag_noise_rms_ut", 0.0, 1000.0, false, "0.0",
+                     "magnetometer white noise per sample and axis (uT RMS; LIS3MDL at +-4 G: 0.32)",
+                     [](ProtocolOptions& p, double v) { p.stream.mavlink_mag_noise_rms_ut = v; }));
+  t.push_back(integer("mavlink2", "gps_satellites", 0, 254, "12", "HIL_GPS satellites_visible (255 means unknown)",
+                      [](ProtocolOptions& p, std::int64_t v) { p.stream.mavlink_gps_satellites = static_cast<int>(v); }));
+  t.push_back(number("mavlink2", "gps_hdop", 0.0, 99.0, true, "0.7", "HIL_GPS eph: horizontal dilution of precision (sent x 100)",
+                     [](ProtocolOptions& p, double v) { p.stream.mavlink_gps_hdop = v; }));
+  t.push_back(number("mavlink2", "gps_vdop", 0.0, 99.0, true, "1.0", "HIL_GPS epv: vertical dilution of precision (sent x 100)",
+                     [](ProtocolOptions& p, double v) { p.stream.mavlink_gps_vdop = v; }));
 
   // ---- mip (mip.hpp)
   t.push_back(boolean("mip", "include_deltas", true, "delta-theta / delta-velocity fields (0x80, 0x07 / 0x08)",
@@ -300,6 +334,9 @@ std::optional<OptionProblem> finish_protocol_options(const std::string& protocol
   if (protocol == "mavlink2" && !options.stream.mavlink_hil_sensor && !options.stream.mavlink_highres_imu)
     return OptionProblem{has("hil_sensor") ? "hil_sensor" : "highres_imu",
                          "with hil_sensor and highres_imu both false no sample is sent; enable at least one"};
+  if (protocol == "mavlink2" && options.stream.nominal_sample_rate_hz > 0.0 &&
+      static_cast<double>(options.stream.mavlink_hil_gps_rate_hz) > options.stream.nominal_sample_rate_hz)
+    return OptionProblem{"hil_gps_rate_hz", "is above the device's rate_hz: HIL_GPS goes out with a sample"};
   if (protocol == "mip") {
     StreamEncoderOptions& s = options.stream;
     // gps_time_at_t0_ns states a GPS time base by itself.

@@ -53,6 +53,15 @@ void check_options(const std::string& protocol, const StreamEncoderOptions& o) {
       throw std::invalid_argument(
           "stream protocol 'mavlink2': component id must be 1..255 (0 is MAV_COMP_ID_ALL)");
     }
+    // The barometer and magnetometer models step once per sample at the
+    // device's rate.
+    if ((o.mavlink_baro || o.mavlink_mag) && !(o.nominal_sample_rate_hz > 0.0)) {
+      throw std::invalid_argument(
+          "stream protocol 'mavlink2': baro and mag need the device's rate (nominal_sample_rate_hz > 0)");
+    }
+    if (o.mavlink_hil_gps_rate_hz < 0 || o.mavlink_hil_gps_rate_hz > 50) {
+      throw std::invalid_argument("stream protocol 'mavlink2': hil_gps_rate_hz must be 0..50");
+    }
     if (!o.mavlink_hil_sensor && !o.mavlink_highres_imu) {
       throw std::invalid_argument(
           "stream protocol 'mavlink2': enable HIL_SENSOR or HIGHRES_IMU (or both); neither sends no samples");

@@ -60,6 +60,41 @@ struct StreamEncoderOptions {
   // HIL_SENSOR/HIGHRES_IMU `temperature` (degC, fields_updated bit 12) when
   // set; otherwise not sent (bit clear, field zero).
   std::optional<double> mavlink_temperature_degC;
+  // Issue 28: the barometer and magnetometer groups of HIL_SENSOR (and
+  // HIGHRES_IMU) and HIL_GPS, from the sample's navigation fields (an ecef
+  // scene; docs/mavlink-device.md). All off by default: the bytes of a
+  // scene that does not ask are those of before.
+  //  baro: abs_pressure (hPa) and pressure_alt (m) from the ISA atmosphere
+  //    (core/aiding/atmosphere.hpp) at the height above the geoid, through
+  //    the barometer model (core/aiding/barometer.hpp) with the errors
+  //    below; fields_updated bits 9 and 11, and 12 (temperature: the IMU
+  //    model's or the configured one, else the barometer's).
+  //  mag: x/y/zmag (gauss, sensor axes) = the WMM2025 field at the position
+  //    and date (core/aiding/wmm.hpp) through the magnetometer model; bits 6..8.
+  bool mavlink_baro = false;
+  bool mavlink_mag = false;
+  // HIL_GPS (#113) at this rate on the trajectory-time grid (multiples of
+  // 1/rate); 0: not sent.
+  std::int64_t mavlink_hil_gps_rate_hz = 0;
+  // The decimal year of trajectory time 0 (WMM2025's validity, 2025.0 ..
+  // 2030.0): the date the field is evaluated at is this + t / 365.25 d.
+  double mavlink_date_at_t0_year = 2026.0;
+  // Geoid undulation N (geoid above the ellipsoid; no geoid model is
+  // carried): the atmosphere's and HIL_GPS alt's mean sea level is h - N.
+  double mavlink_geoid_undulation_m = 0.0;
+  // Barometer errors (core/aiding/barometer.hpp terms); magnetometer noise
+  // per axis. 0: truth.
+  double mavlink_baro_noise_rms_pa = 0.0;
+  double mavlink_baro_bias_pa = 0.0;
+  double mavlink_mag_noise_rms_ut = 0.0;
+  // HIL_GPS satellites_visible and eph / epv (the DOPs, sent x 100).
+  int mavlink_gps_satellites = 12;
+  double mavlink_gps_hdop = 0.7;
+  double mavlink_gps_vdop = 1.0;
+  // The random terms' streams, keyed as the IMU's (scene: the error model's
+  // seed and the device's name).
+  std::uint64_t aiding_seed = 0;
+  std::string aiding_device = "imu";
 
   // mip. What trajectory time is, which decides the GPS timestamp field
   // (0x80,0x12): tow and week of a GPS time with the valid flags set

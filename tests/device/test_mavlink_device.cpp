@@ -30,6 +30,7 @@
 
 #include <algorithm>
 #include <atomic>
+#include <cmath>
 #include <cstdio>
 #include <chrono>
 #include <thread>
@@ -96,6 +97,14 @@ const std::uint8_t kExtraHilSensor = crc_extra_of(
                    {"float", "xgyro"}, {"float", "ygyro"}, {"float", "zgyro"}, {"float", "xmag"},
                    {"float", "ymag"}, {"float", "zmag"}, {"float", "abs_pressure"}, {"float", "diff_pressure"},
                    {"float", "pressure_alt"}, {"float", "temperature"}, {"uint32_t", "fields_updated"}});
+// HIL_GPS (#113): time_usec u64, lat, lon, alt i32, eph, epv, vel u16, vn,
+// ve, vd i16, cog u16, fix_type, satellites_visible u8 (extensions id u8,
+// yaw u16 outside CRC_EXTRA).
+const std::uint8_t kExtraHilGps = crc_extra_of(
+    "HIL_GPS", {{"uint64_t", "time_usec"}, {"int32_t", "lat"}, {"int32_t", "lon"}, {"int32_t", "alt"},
+                {"uint16_t", "eph"}, {"uint16_t", "epv"}, {"uint16_t", "vel"}, {"int16_t", "vn"},
+                {"int16_t", "ve"}, {"int16_t", "vd"}, {"uint16_t", "cog"}, {"uint8_t", "fix_type"},
+                {"uint8_t", "satellites_visible"}});
 const std::uint8_t kExtraCommandLong = crc_extra_of(
     "COMMAND_LONG", {{"float", "param1"}, {"float", "param2"}, {"float", "param3"}, {"float", "param4"},
                      {"float", "param5"}, {"float", "param6"}, {"float", "param7"}, {"uint16_t", "command"},
@@ -202,6 +211,7 @@ std::vector<Frame> decode_all(const Bytes& out) {
     switch (msgid) {
       case 0: extra = kExtraHeartbeat; full = 9; break;
       case 107: extra = kExtraHilSensor; full = 65; break;
+      case 113: extra = kExtraHilGps; full = 39; break;
       case 77: extra = kExtraCommandAck; full = 10; break;
       case 22: extra = kExtraParamValue; full = 25; break;
       default: ADD_FAILURE() << "unexpected message " << msgid; return frames;
@@ -278,6 +288,10 @@ TEST(MavlinkDevice, CrcExtraFromDefinitionsMatchesTheDevicesTable) {
   EXPECT_EQ(x25(std::span<const std::uint8_t>(reinterpret_cast<const std::uint8_t*>(check.data()), check.size())), 0x6F91);
   EXPECT_EQ(kExtraHeartbeat, mavlink2::kHeartbeat.crc_extra);
   EXPECT_EQ(kExtraHilSensor, mavlink2::kHilSensor.crc_extra);
+  // common.xml's generated headers state 108 and 124 (MAVLINK_MSG_ID_*_CRC).
+  EXPECT_EQ(kExtraHilSensor, 108);
+  EXPECT_EQ(kExtraHilGps, 124);
+  EXPECT_EQ(kExtraHilGps, mavlink2::kHilGps.crc_extra);
   EXPECT_EQ(kExtraCommandLong, mavlink2::kCommandLong.crc_extra);
   EXPECT_EQ(kExtraCommandAck, mavlink2::kCommandAck.crc_extra);
   EXPECT_EQ(kExtraCommandInt, mavlink2::kCommandInt.crc_extra);
@@ -767,4 +781,295 @@ TEST(MavlinkDevice, DISABLED_MeasureReplyLatencyOnAPty) {
   std::sort(ms.begin(), ms.end());
   std::printf("reply latency over %zu requests at a 200 Hz stream: p50 %.2f ms, p99 %.2f ms, max %.2f ms\n", ms.size(),
               ms[ms.size() / 2], ms[ms.size() * 99 / 100], ms.back());
+}
+
+// ---------------------------------------------------------------------------
+// Issue 28: HIL_SENSOR's barometer and magnetometer groups and HIL_GPS, from
+// the sample's navigation fields, decoded by this file's decoder and held
+// against truths computed here independently of core/aiding:
+//  - pressure: the U.S. Standard Atmosphere 1976 (NOAA-S/T 76-1562)
+//    troposphere, Eq. 33a, P = P0 (1 - L H / T0)^(g0 M0 / (R* L)), with its
+//    constants (P0 101325 Pa, T0 288.15 K, L 0.0065 K/m, g0 9.80665,
+//    M0 0.0289644 kg/mol, R* 8.31432 J/(mol K)) and the geopotential
+//    altitude H = r0 Z / (r0 + Z), r0 = 6356766 m (Eq. 18);
+//  - the field: the WMM2025 test values NOAA NCEI / BGS publish with the
+//    model (WMM2025testvalues.pdf; the same rows as tests/core/
+//    test_aiding_wmm.cpp), X, Y, Z printed to 0.1 nT;
+//  - HIL_GPS: a constant-velocity trajectory written here on the WGS84
+//    ellipsoid (meridian and prime-vertical radii).
+namespace {
+
+std::int32_t get_i32(const Bytes& p, std::size_t at) {
+  std::int32_t v;
+  std::memcpy(&v, p.data() + at, 4);
+  return v;
+}
+std::int16_t get_i16(const Bytes& p, std::size_t at) {
+  return static_cast<std::int16_t>(get_u16(p, at));
+}
+std::uint32_t get_u32(const Bytes& p, std::size_t at) {
+  return static_cast<std::uint32_t>(p[at] | p[at + 1] << 8 | p[at + 2] << 16) | static_cast<std::uint32_t>(p[at + 3]) << 24;
+}
+std::uint64_t get_u64(const Bytes& p, std::size_t at) {
+  std::uint64_t v;
+  std::memcpy(&v, p.data() + at, 8);
+  return v;
+}
+
+constexpr double kPiHere = 3.14159265358979323846;
+constexpr double kRadPerDegHere = kPiHere / 180.0;
+
+// US 1976 troposphere at geometric height Z above mean sea level.
+double us1976_geopotential_m(double z_m) { return 6356766.0 * z_m / (6356766.0 + z_m); }
+double us1976_pressure_pa(double z_m) {
+  const double h = us1976_geopotential_m(z_m);
+  return 101325.0 * std::pow(1.0 - 0.0065 * h / 288.15, 9.80665 * 0.0289644 / (8.31432 * 0.0065));
+}
+double us1976_temperature_k(double z_m) { return 288.15 - 0.0065 * us1976_geopotential_m(z_m); }
+
+// HIL_SENSOR payload offsets ([G] wire order of common.xml's fields).
+constexpr std::size_t kHsMag = 32, kHsAbsPressure = 44, kHsDiffPressure = 48, kHsPressureAlt = 52,
+                      kHsTemperature = 56, kHsFieldsUpdated = 60;
+
+StreamEncoderOptions aiding_options() {
+  StreamEncoderOptions o;
+  o.nominal_sample_rate_hz = 100.0;
+  o.mavlink_baro = true;
+  o.mavlink_mag = true;
+  return o;
+}
+
+ImuFrameInput navigation_sample(std::uint64_t k, double lat_deg, double lon_deg, double h_m) {
+  ImuFrameInput s;
+  s.sample_counter = k;
+  s.period_ns = 10'000'000;
+  s.t_ns = static_cast<TimeNs>(k) * s.period_ns;
+  s.accel_m_s2 = Vec3(0.0, 0.0, -9.81);
+  s.has_navigation = true;
+  s.latitude_rad = lat_deg * kRadPerDegHere;
+  s.longitude_rad = lon_deg * kRadPerDegHere;
+  s.height_m = h_m;
+  return s;
+}
+
+// The one HIL_SENSOR of one encoded sample.
+Frame hil_sensor_of(mavlink2::Encoder& enc, const ImuFrameInput& s) {
+  Bytes out;
+  enc.encode(s, out);
+  const std::vector<Frame> hs = of_id(decode_all(out), 107);
+  EXPECT_EQ(hs.size(), 1u);
+  return hs.empty() ? Frame{0, 0, 0, 107, Bytes(65, 0)} : hs.front();
+}
+
+struct WmmTestValue {
+  double year, lat_deg, lon_deg, x_nt, y_nt, z_nt;
+};
+// Rows of the WMM2025 test values at height 0 (ellipsoid).
+constexpr WmmTestValue kWmmAtSeaLevel[] = {
+    {2025.0, 80.0, 0.0, 6521.6, 145.9, 54791.5},
+    {2025.0, 0.0, 120.0, 39677.8, -109.6, -10580.2},
+    {2025.0, -80.0, 240.0, 6117.5, 15751.9, -52022.5},
+    {2027.5, 80.0, 0.0, 6500.8, 294.5, 54869.4},
+    {2027.5, 0.0, 120.0, 39701.6, -167.4, -10381.8},
+    {2027.5, -80.0, 240.0, 6200.7, 15730.3, -51783.7},
+};
+// Printed to 0.1 nT: half a digit (0.05 nT = 5e-7 G), plus the float's
+// rounding (an ulp of 0.55 G is 6e-8 G).
+constexpr double kGaussTolerance = 0.05e-5 + 1e-7;
+
+}  // namespace
+
+TEST(MavlinkAiding, HilSensorCarries7167WithIsaPressureAndTheWmmTestValues) {
+  for (const WmmTestValue& v : kWmmAtSeaLevel) {
+    SCOPED_TRACE(std::to_string(v.year) + " " + std::to_string(v.lat_deg) + " " + std::to_string(v.lon_deg));
+    StreamEncoderOptions o = aiding_options();
+    o.mavlink_date_at_t0_year = v.year;
+    mavlink2::Encoder enc(o);
+    const Frame f = hil_sensor_of(enc, navigation_sample(0, v.lat_deg, v.lon_deg, 0.0));
+    EXPECT_EQ(get_u32(f.payload, kHsFieldsUpdated), 7167u);
+    // Sensor axes = NED (level, north): x/y/zmag = X, Y, Z in gauss (1 G = 1e5 nT).
+    EXPECT_NEAR(get_f32(f.payload, kHsMag), v.x_nt * 1e-5, kGaussTolerance);
+    EXPECT_NEAR(get_f32(f.payload, kHsMag + 4), v.y_nt * 1e-5, kGaussTolerance);
+    EXPECT_NEAR(get_f32(f.payload, kHsMag + 8), v.z_nt * 1e-5, kGaussTolerance);
+    // At the ellipsoid with N = 0: the standard sea-level pressure, 1013.25 hPa, and 15 degC.
+    EXPECT_FLOAT_EQ(get_f32(f.payload, kHsAbsPressure), 1013.25f);
+    EXPECT_EQ(get_f32(f.payload, kHsDiffPressure), 0.0f);
+    EXPECT_NEAR(get_f32(f.payload, kHsPressureAlt), 0.0, 1e-3);
+    EXPECT_FLOAT_EQ(get_f32(f.payload, kHsTemperature), 15.0f);
+  }
+}
+
+TEST(MavlinkAiding, TheFieldTurnsWithTheSensorAndThePressureFollowsTheHeight) {
+  StreamEncoderOptions o = aiding_options();
+  o.mavlink_date_at_t0_year = 2025.0;
+  o.mavlink_geoid_undulation_m = 30.0;  // MSL 30 m above the ellipsoid
+  mavlink2::Encoder enc(o);
+  // Sensor x east, y south, z down (a yaw of +90 deg): R_s^n columns are the
+  // sensor axes in NED, so the sensor reads (Y, -X, Z).
+  ImuFrameInput s = navigation_sample(0, 0.0, 120.0, 0.0);
+  s.sensor_to_ned << 0.0, -1.0, 0.0,  //
+      1.0, 0.0, 0.0,                  //
+      0.0, 0.0, 1.0;
+  Frame f = hil_sensor_of(enc, s);
+  EXPECT_EQ(get_u32(f.payload, kHsFieldsUpdated), 7167u);
+  EXPECT_NEAR(get_f32(f.payload, kHsMag), -109.6e-5, kGaussTolerance);
+  EXPECT_NEAR(get_f32(f.payload, kHsMag + 4), -39677.8e-5, kGaussTolerance);
+  EXPECT_NEAR(get_f32(f.payload, kHsMag + 8), -10580.2e-5, kGaussTolerance);
+  // Below MSL by 30 m at the ellipsoid.
+  EXPECT_NEAR(get_f32(f.payload, kHsAbsPressure), us1976_pressure_pa(-30.0) / 100.0, 1e-4);
+
+  // Up the troposphere, samples 1.. at their heights (the same encoder).
+  std::uint64_t k = 1;
+  for (const double h_m : {250.0, 1500.0, 4321.0, 10000.0}) {
+    SCOPED_TRACE(h_m);
+    f = hil_sensor_of(enc, navigation_sample(k++, 0.0, 120.0, h_m));
+    const double z_m = h_m - 30.0;
+    const float hpa = get_f32(f.payload, kHsAbsPressure);
+    EXPECT_NEAR(hpa, us1976_pressure_pa(z_m) / 100.0, 1e-6 * us1976_pressure_pa(z_m) / 100.0);
+    EXPECT_NEAR(get_f32(f.payload, kHsPressureAlt), us1976_geopotential_m(z_m), 0.01);
+    EXPECT_NEAR(get_f32(f.payload, kHsTemperature), us1976_temperature_k(z_m) - 273.15, 1e-4);
+    EXPECT_EQ(get_u32(f.payload, kHsFieldsUpdated), 7167u);
+  }
+}
+
+TEST(MavlinkAiding, OutsideTheModelsOrWithoutAPositionTheGroupsAreNotSent) {
+  StreamEncoderOptions o = aiding_options();
+  o.mavlink_date_at_t0_year = 2030.0;  // WMM2025 ends at 2030.0: sample 1 is after it
+  mavlink2::Encoder enc(o);
+  EXPECT_EQ(get_u32(hil_sensor_of(enc, navigation_sample(0, 10.0, 20.0, 100.0)).payload, kHsFieldsUpdated), 7167u);
+  const Frame late = hil_sensor_of(enc, navigation_sample(1, 10.0, 20.0, 100.0));
+  EXPECT_EQ(get_u32(late.payload, kHsFieldsUpdated), 0x3Fu | 0x200u | 0x800u | 0x1000u);  // no mag
+  EXPECT_EQ(get_f32(late.payload, kHsMag), 0.0f);
+  // 90 km: above the atmosphere's 84.852 km geopotential; the temperature is gone with it.
+  const Frame high = hil_sensor_of(enc, navigation_sample(2, 10.0, 20.0, 90'000.0));
+  EXPECT_EQ(get_u32(high.payload, kHsFieldsUpdated), 0x3Fu);
+  // A flat scene's sample (no navigation fields): accel and gyro only.
+  ImuFrameInput flat = navigation_sample(3, 10.0, 20.0, 100.0);
+  flat.has_navigation = false;
+  EXPECT_EQ(get_u32(hil_sensor_of(enc, flat).payload, kHsFieldsUpdated), 0x3Fu);
+}
+
+TEST(MavlinkAiding, WithTheGroupsOffTheBytesDoNotDependOnTheNavigationFields) {
+  StreamEncoderOptions o;
+  o.nominal_sample_rate_hz = 100.0;
+  mavlink2::Encoder with_nav(o), without(o);
+  Bytes a, b;
+  for (std::uint64_t k = 0; k < 300; ++k) {
+    ImuFrameInput s = navigation_sample(k, 47.0, 8.0, 500.0);
+    with_nav.encode(s, a);
+    with_nav.periodic(s.t_ns, a);
+    s.has_navigation = false;
+    without.encode(s, b);
+    without.periodic(s.t_ns, b);
+  }
+  EXPECT_EQ(a, b);
+  for (const Frame& f : of_id(decode_all(a), 107)) ASSERT_EQ(get_u32(f.payload, kHsFieldsUpdated), 0x3Fu);
+  EXPECT_TRUE(of_id(decode_all(a), 113).empty());
+}
+
+TEST(MavlinkAiding, HilGpsDecodesToTheTrajectoryAtItsRate) {
+  // WGS84 (NIMA TR8350.2): a = 6378137 m, f = 1/298.257223563.
+  const double a = 6378137.0, f = 1.0 / 298.257223563, e2 = f * (2.0 - f);
+  const double lat0 = 47.3977419 * kRadPerDegHere, lon0 = 8.5455938 * kRadPerDegHere, h0 = 488.0;
+  const Vec3 v_ned(12.34, -5.67, 0.89);
+  const double geoid = 47.5;
+  auto trajectory = [&](double t_s, double& lat, double& lon, double& h) {
+    const double s2 = std::sin(lat0) * std::sin(lat0);
+    const double m = a * (1.0 - e2) / std::pow(1.0 - e2 * s2, 1.5), n = a / std::sqrt(1.0 - e2 * s2);
+    lat = lat0 + v_ned.x() * t_s / (m + h0);
+    lon = lon0 + v_ned.y() * t_s / ((n + h0) * std::cos(lat0));
+    h = h0 - v_ned.z() * t_s;
+  };
+
+  StreamEncoderOptions o;
+  o.nominal_sample_rate_hz = 100.0;
+  o.mavlink_hil_gps_rate_hz = 5;
+  o.mavlink_geoid_undulation_m = geoid;
+  o.mavlink_sensor_id = 2;
+  mavlink2::Encoder enc(o);
+  Bytes out;
+  for (std::uint64_t k = 0; k < 200; ++k) {  // 2 s at 100 Hz
+    ImuFrameInput s;
+    s.sample_counter = k;
+    s.period_ns = 10'000'000;
+    s.t_ns = 1'000'000'000 + static_cast<TimeNs>(k) * s.period_ns;  // from t = 1 s
+    s.has_navigation = true;
+    trajectory(static_cast<double>(s.t_ns) * 1e-9, s.latitude_rad, s.longitude_rad, s.height_m);
+    s.velocity_ned_m_s = v_ned;
+    enc.encode(s, out);
+    enc.periodic(s.t_ns, out);
+  }
+  const std::vector<Frame> frames = decode_all(out);
+  expect_consecutive_seq(frames);
+  const std::vector<Frame> gps = of_id(frames, 113);
+  ASSERT_EQ(gps.size(), 10u);  // t = 1.0, 1.2, ..., 2.8 s
+  for (std::size_t i = 0; i < gps.size(); ++i) {
+    SCOPED_TRACE(i);
+    const Bytes& p = gps[i].payload;
+    const std::uint64_t time_usec = get_u64(p, 0);
+    EXPECT_EQ(time_usec, 1'000'000u + 200'000u * i);
+    double lat, lon, h;
+    trajectory(static_cast<double>(time_usec) * 1e-6, lat, lon, h);
+    // degE7: within half a unit (+ the double's rounding).
+    EXPECT_NEAR(get_i32(p, 8), lat / kRadPerDegHere * 1e7, 0.5 + 1e-6);
+    EXPECT_NEAR(get_i32(p, 12), lon / kRadPerDegHere * 1e7, 0.5 + 1e-6);
+    EXPECT_NEAR(get_i32(p, 16), (h - geoid) * 1e3, 0.5 + 1e-6);  // mm above MSL
+    EXPECT_EQ(get_u16(p, 20), 70);   // eph: HDOP 0.7 x 100
+    EXPECT_EQ(get_u16(p, 22), 100);  // epv: VDOP 1.0 x 100
+    EXPECT_EQ(get_u16(p, 24), std::lround(std::hypot(12.34, -5.67) * 100.0));  // 1358 cm/s
+    EXPECT_EQ(get_i16(p, 26), 1234);
+    EXPECT_EQ(get_i16(p, 28), -567);
+    EXPECT_EQ(get_i16(p, 30), 89);
+    // Course: atan2(ve, vn) = -24.68 deg -> 335.32 deg.
+    EXPECT_NEAR(get_u16(p, 32), (std::atan2(-5.67, 12.34) / kRadPerDegHere + 360.0) * 100.0, 0.5 + 1e-9);
+    EXPECT_EQ(p[34], 3);   // 3D fix
+    EXPECT_EQ(p[35], 12);  // satellites
+    EXPECT_EQ(p[36], 2);   // id
+    EXPECT_EQ(get_u16(p, 37), 0);  // yaw: not available
+  }
+  // imuemu listen's decoder takes every frame (HIL_GPS's CRC_EXTRA known)
+  // and a sample per HIL_SENSOR.
+  mavlink2::Decoder dec(o);
+  dec.feed(out, nullptr);
+  EXPECT_EQ(dec.counters().frames, frames.size());
+  EXPECT_EQ(dec.counters().samples, 200u);
+  EXPECT_EQ(dec.counters().other_errors + dec.counters().checksum_errors + dec.counters().resync_bytes, 0u);
+}
+
+TEST(MavlinkAiding, BarometerAndMagnetometerNoiseIsSeededAndHasItsStatedSigma) {
+  StreamEncoderOptions o = aiding_options();
+  o.mavlink_baro_noise_rms_pa = 1.2;
+  o.mavlink_mag_noise_rms_ut = 0.5;
+  o.aiding_seed = 7;
+  auto run = [&](const StreamEncoderOptions& opts) {
+    mavlink2::Encoder enc(opts);
+    Bytes out;
+    for (std::uint64_t k = 0; k < 4000; ++k) enc.encode(navigation_sample(k, 0.0, 120.0, 0.0), out);
+    return out;
+  };
+  const Bytes first = run(o);
+  EXPECT_EQ(first, run(o));  // the same seed, the same bits
+  StreamEncoderOptions other = o;
+  other.aiding_seed = 8;
+  EXPECT_NE(first, run(other));
+  double sum = 0.0, sum2 = 0.0, msum = 0.0, msum2 = 0.0;
+  const std::vector<Frame> hs = of_id(decode_all(first), 107);
+  ASSERT_EQ(hs.size(), 4000u);
+  for (const Frame& f : hs) {
+    const double e_pa = get_f32(f.payload, kHsAbsPressure) * 100.0 - 101325.0;
+    sum += e_pa;
+    sum2 += e_pa * e_pa;
+    const double e_ut = get_f32(f.payload, kHsMag) * 100.0;  // xmag in uT: the field plus the noise
+    msum += e_ut;
+    msum2 += e_ut * e_ut;
+  }
+  const double n = static_cast<double>(hs.size());
+  const double mean = sum / n, sigma = std::sqrt(sum2 / n - mean * mean);
+  // 4000 samples: the mean's sigma 1.2/63 = 0.019 Pa; the sample sigma's
+  // relative sigma 1/sqrt(2n) = 1.1 %. 5-sigma bounds (float: 1013 hPa has
+  // an ulp of 6e-5 hPa = 0.006 Pa).
+  EXPECT_NEAR(mean, 0.0, 5.0 * 0.019 + 0.01);
+  EXPECT_NEAR(sigma, 1.2, 5.0 * 0.011 * 1.2);
+  const double mmean = msum / n, msigma = std::sqrt(msum2 / n - mmean * mmean);
+  EXPECT_NEAR(msigma, 0.5, 5.0 * 0.011 * 0.5);
 }

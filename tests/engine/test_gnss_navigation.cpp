@@ -8,7 +8,10 @@
 // (NIMA TR8350.2), independent of the producer's conversion.
 #include <gtest/gtest.h>
 
+#include <algorithm>
+#include <array>
 #include <chrono>
+#include <cstring>
 #include <cmath>
 #include <memory>
 #include <mutex>
@@ -17,6 +20,7 @@
 #include "core/earth.hpp"
 #include "daemon/device/device.hpp"
 #include "daemon/engine/emission.hpp"
+#include "drivers/protocols/mavlink2.hpp"
 #include "drivers/protocols/stream_protocols.hpp"
 #include "tests/support/recording_transport.hpp"
 
@@ -112,7 +116,86 @@ TEST(GnssNavigation, EcefSamplesCarryTheTrajectorysGeodeticPositionAndNedVelocit
     EXPECT_NEAR(f.velocity_ned_m_s.x(), v_n, 1e-5);
     EXPECT_NEAR(f.velocity_ned_m_s.y(), v_e, 1e-5);
     EXPECT_NEAR(f.velocity_ned_m_s.z(), -kClimbMS, 1e-5);
+    // The knots' attitude is R_s^e = I: R_s^n = (R_n^e)^T, whose rows are
+    // the local north, east and down unit vectors in ECEF axes.
+    const double phi = f.latitude_rad, lam = f.longitude_rad;
+    Mat3 ned_rows;
+    ned_rows << -std::sin(phi) * std::cos(lam), -std::sin(phi) * std::sin(lam), std::cos(phi),  //
+        -std::sin(lam), std::cos(lam), 0.0,                                                      //
+        -std::cos(phi) * std::cos(lam), -std::cos(phi) * std::sin(lam), -std::sin(phi);
+    EXPECT_LT((f.sensor_to_ned - ned_rows).cwiseAbs().maxCoeff(), 1e-9);
   }
+}
+
+// Issue 28 through the engine: a MAVLink device with HIL_GPS at 5 Hz and the
+// barometer and magnetometer groups on, at 10 Hz on the same knots. What
+// reaches its transport: HIL_GPS lat / lon / alt equal to the knots' motion
+// within the wire's resolution, and HIL_SENSOR fields_updated 7167.
+TEST(GnssNavigation, MavlinkHilGpsAndTheSensorGroupsThroughTheEngine) {
+  drivers::StreamEncoderOptions o;
+  o.nominal_sample_rate_hz = 10.0;
+  o.mavlink_hil_gps_rate_hz = 5;
+  o.mavlink_baro = true;
+  o.mavlink_mag = true;
+  auto transport = std::make_unique<test_support::RecordingTransport>();
+  const test_support::RecordingTransport* recorded = transport.get();
+  DeviceOptions d;
+  d.name = "px4";
+  d.rate_hz = 10;
+  d.pipeline.scene.physics = Physics::ecef;
+  d.pipeline.rate_hz = 10;
+  d.pipeline.kernel.delta = 1;
+  d.device = device::make_stream_device(drivers::make_stream_encoder("mavlink2", o), std::move(transport));
+  EXPECT_TRUE(d.device->needs().navigation);
+  std::vector<DeviceOptions> devices;
+  devices.push_back(std::move(d));
+  EngineOptions eo;
+  eo.trajectory = linear_geodetic_knots(3.0);
+  eo.drop_late_ticks = false;
+  eo.max_ticks_per_device = 20;
+  eo.ring_capacity = 64;
+  EmissionEngine engine(std::move(eo), std::move(devices));
+  engine.start();
+  EXPECT_TRUE(engine.wait(30s));
+  engine.stop();
+  const std::vector<std::uint8_t> bytes = recorded->bytes();
+
+  // Frames by the MAVLink 2 layout (magic 0xFD, len, ..., msgid at 7..9,
+  // payload from 10, 2 CRC bytes); the CRCs by the listen decoder.
+  drivers::mavlink2::Decoder decoder(o);
+  decoder.feed(bytes, nullptr);
+  EXPECT_EQ(decoder.counters().checksum_errors + decoder.counters().other_errors + decoder.counters().resync_bytes, 0u);
+  int gps = 0, sensor = 0;
+  for (std::size_t at = 0; at + 12 <= bytes.size();) {
+    ASSERT_EQ(bytes[at], 0xFD);
+    const std::size_t len = bytes[at + 1];
+    const std::uint32_t id = bytes[at + 7] | bytes[at + 8] << 8 | bytes[at + 9] << 16;
+    std::array<std::uint8_t, 255> p{};
+    std::copy_n(bytes.begin() + static_cast<std::ptrdiff_t>(at + 10), len, p.begin());
+    auto i32 = [&p](std::size_t k) {
+      std::int32_t v;
+      std::memcpy(&v, p.data() + k, 4);
+      return v;
+    };
+    if (id == 113) {
+      std::uint64_t time_usec;
+      std::memcpy(&time_usec, p.data(), 8);
+      EXPECT_EQ(time_usec % 200'000, 0u);  // the 5 Hz grid
+      const double t = static_cast<double>(time_usec) * 1e-6;
+      EXPECT_NEAR(i32(8), (kLat0Deg + kLatRateDegS * t) * 1e7, 0.5 + 1e-3);
+      EXPECT_NEAR(i32(12), (kLon0Deg + kLonRateDegS * t) * 1e7, 0.5 + 1e-3);
+      EXPECT_NEAR(i32(16), (kH0M + kClimbMS * t) * 1e3, 0.5 + 0.01);
+      ++gps;
+    } else if (id == 107) {
+      std::uint32_t updated;
+      std::memcpy(&updated, p.data() + 60, 4);
+      EXPECT_EQ(updated, 7167u);
+      ++sensor;
+    }
+    at += 12 + len;
+  }
+  EXPECT_EQ(sensor, 20);
+  EXPECT_EQ(gps, 10);
 }
 
 TEST(GnssNavigation, FlatSceneHasNoGeodeticPositionAndImuProtocolsDoNotAskForOne) {

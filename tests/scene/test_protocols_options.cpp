@@ -118,6 +118,12 @@ OtherValue other_value(const ProtocolOption& o) {
 // Options a row needs beside it to be valid on its own (cross-key rules).
 std::map<std::string, OtherValue> companions_of(const ProtocolOption& o) {
   if (o.protocol == "mavlink2" && o.key == "hil_sensor") return {{"highres_imu", {"true", "true"}}};
+  // The barometer's, magnetometer's and HIL_GPS's figures act only with them on.
+  if (o.protocol == "mavlink2" && (o.key == "baro_noise_rms_pa" || o.key == "baro_bias_pa" || o.key == "geoid_undulation_m"))
+    return {{"baro", {"true", "true"}}};
+  if (o.protocol == "mavlink2" && (o.key == "mag_noise_rms_ut" || o.key == "date_at_t0_year"))
+    return {{"mag", {"true", "true"}}};
+  if (o.protocol == "mavlink2" && o.key.rfind("gps_", 0) == 0) return {{"hil_gps_rate_hz", {"5", "5"}}};
   if (o.protocol == "mip" && o.key == "gps_minus_utc_s") return {{"time_base", {"utc", "\"utc\""}}};
   return {};
 }
@@ -194,6 +200,10 @@ TEST(ProtocolOptionTable, SceneFileAndCommandLineGiveTheSameWire) {
     const scene::SceneConfig s = scene::parse_scene_text(scene_with(o.protocol, body), "options.toml", ".");
     ASSERT_EQ(s.imus.size(), 1u);
 
+    // Not protocol options: the random terms' key (the device's name and
+    // its error model's seed) comes from the scene's [[imu]].
+    cli.stream.aiding_device = s.imus[0].stream_options.aiding_device;
+    cli.stream.aiding_seed = s.imus[0].stream_options.aiding_seed;
     const std::vector<std::uint8_t> from_cli = wire_of(o.protocol, cli);
     EXPECT_EQ(wire_of(o.protocol, s.imus[0].stream_options, s.imus[0].can_options), from_cli);
     EXPECT_NE(from_cli, wire_of(o.protocol, default_protocol_options(kRateHz))) << "the option has no effect";
