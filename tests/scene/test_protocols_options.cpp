@@ -119,6 +119,10 @@ OtherValue other_value(const ProtocolOption& o) {
 std::map<std::string, OtherValue> companions_of(const ProtocolOption& o) {
   if (o.protocol == "mavlink2" && o.key == "hil_sensor") return {{"highres_imu", {"true", "true"}}};
   if (o.protocol == "mip" && o.key == "gps_minus_utc_s") return {{"time_base", {"utc", "\"utc\""}}};
+  // A GNSS receiver's error correlation time and seed act on an error term.
+  if (is_gnss_protocol(o.protocol) && (o.key == "horizontal_gm_tau_s" || o.key == "seed"))
+    return {{"horizontal_gm_sigma_m", {"2", "2.0"}}};
+  if (is_gnss_protocol(o.protocol) && o.key == "vertical_gm_tau_s") return {{"vertical_gm_sigma_m", {"2", "2.0"}}};
   return {};
 }
 
@@ -194,6 +198,10 @@ TEST(ProtocolOptionTable, SceneFileAndCommandLineGiveTheSameWire) {
     const scene::SceneConfig s = scene::parse_scene_text(scene_with(o.protocol, body), "options.toml", ".");
     ASSERT_EQ(s.imus.size(), 1u);
 
+    // What the scene adds beside the table: a GNSS receiver's rate (its
+    // error model's step) and name (its error streams' key).
+    cli.stream.nominal_sample_rate_hz = s.imus[0].stream_options.nominal_sample_rate_hz;
+    cli.stream.gnss.device_name = s.imus[0].stream_options.gnss.device_name;
     const std::vector<std::uint8_t> from_cli = wire_of(o.protocol, cli);
     EXPECT_EQ(wire_of(o.protocol, s.imus[0].stream_options, s.imus[0].can_options), from_cli);
     EXPECT_NE(from_cli, wire_of(o.protocol, default_protocol_options(kRateHz))) << "the option has no effect";
