@@ -169,9 +169,11 @@ std::vector<ProtocolOption> make_table() {
     t.push_back(number(p, "horizontal_velocity_m_s", 0.0, aiding::kGnssMaxVelocitySigma_m_s, false, "0",
                        "velocity white noise, north and east each (m/s, 1 sigma per fix)",
                        [](ProtocolOptions& o, double v) { o.stream.gnss.errors.horizontal_velocity_m_s = v; }));
-    t.push_back(number(p, "vertical_velocity_m_s", 0.0, aiding::kGnssMaxVelocitySigma_m_s, false, "0",
-                       "vertical velocity white noise (m/s, 1 sigma per fix)",
-                       [](ProtocolOptions& o, double v) { o.stream.gnss.errors.vertical_velocity_m_s = v; }));
+    // NMEA's sentences (GGA, RMC, VTG) carry no vertical velocity.
+    if (p == "ubx")
+      t.push_back(number(p, "vertical_velocity_m_s", 0.0, aiding::kGnssMaxVelocitySigma_m_s, false, "0",
+                         "vertical velocity white noise (m/s, 1 sigma per fix)",
+                         [](ProtocolOptions& o, double v) { o.stream.gnss.errors.vertical_velocity_m_s = v; }));
     t.push_back(integer(p, "seed", 0, std::numeric_limits<std::int64_t>::max(), "0",
                         "seed of the error terms (streams keyed by seed and device name, as the IMU's noise)",
                         [](ProtocolOptions& o, std::int64_t v) { o.stream.gnss.errors.seed = static_cast<std::uint64_t>(v); }));

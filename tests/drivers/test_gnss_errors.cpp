@@ -162,6 +162,7 @@ StreamEncoderOptions ge_options(std::uint64_t seed, const char* protocol = "ubx"
       {"seed", static_cast<std::int64_t>(seed)}};
   std::set<std::string> given;
   for (const auto& [key, value] : keys) {
+    if (std::string(protocol) == "nmea" && std::string(key) == "vertical_velocity_m_s") continue;  // not on NMEA's wire
     bool found = false;
     for (const imuemu::drivers::ProtocolOption* row : imuemu::drivers::protocol_options_of(protocol)) {
       if (row->key != key) continue;
