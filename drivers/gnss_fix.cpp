@@ -1,6 +1,12 @@
 // The error-free GNSS epoch of one device sample; see gnss_fix.hpp.
 #include "drivers/gnss_fix.hpp"
 
+#include <algorithm>
+#include <cmath>
+#include <stdexcept>
+#include <string>
+
+#include "core/earth.hpp"
 #include "drivers/protocols/gps_time.hpp"
 
 namespace imuemu::drivers {
@@ -44,6 +50,57 @@ GnssFix fix_from_frame(const ImuFrameInput& frame, const GnssReceiverConfig& con
     fix.satellites = 0;
   }
   return fix;
+}
+
+namespace {
+
+// The core model's spec for the configured error terms at the device rate.
+aiding::GnssSpec error_spec(const GnssErrorConfig& e, double rate_hz) {
+  if (!(rate_hz > 0.0) || !std::isfinite(rate_hz))
+    throw std::invalid_argument("GNSS errors: the receiver's navigation rate is not known (" + std::to_string(rate_hz) +
+                                " Hz)");
+  aiding::GnssSpec s;
+  s.horizontal_white_m = e.horizontal_white_m;
+  s.horizontal_gm_sigma_m = e.horizontal_gm_sigma_m;
+  s.horizontal_gm_tau_s = e.horizontal_gm_tau_s;
+  s.vertical_white_m = e.vertical_white_m;
+  s.vertical_gm_sigma_m = e.vertical_gm_sigma_m;
+  s.vertical_gm_tau_s = e.vertical_gm_tau_s;
+  s.horizontal_velocity_m_s = e.horizontal_velocity_m_s;
+  s.vertical_velocity_m_s = e.vertical_velocity_m_s;
+  // A whole number of ms per fix (see the header); at least 1 ms.
+  const double period_ms = std::max(1.0, std::round(1000.0 / rate_hz));
+  s.rate_hz = 1000.0 / period_ms;
+  s.seed = e.seed;
+  return s;
+}
+
+}  // namespace
+
+GnssFixSource::GnssFixSource(const GnssReceiverConfig& config, double rate_hz) : config_(config) {
+  if (!config_.errors.any()) return;
+  initial_.emplace(error_spec(config_.errors, rate_hz), 0, config_.device_name);
+  model_ = initial_;
+}
+
+GnssFix GnssFixSource::fix(const ImuFrameInput& frame) {
+  GnssFix f = fix_from_frame(frame, config_);
+  if (!model_ || f.fix_type == GnssFixType::none) return f;
+  const std::uint64_t j = frame.sample_counter;
+  if (!last_j_ || *last_j_ != j) {  // the same fix again (a link fault's duplicate): the same error
+    if (j < model_->next_index()) model_ = initial_;  // a copy of plain numbers: no allocation
+    last_error_ = model_->error(j);
+    last_j_ = j;
+  }
+  const aiding::GnssError& e = last_error_;
+  const Vec3 x_e = earth::ecef_from_geodetic({f.latitude_rad, f.longitude_rad, f.height_m});
+  if (!x_e.allFinite() || !f.velocity_ned_m_s.allFinite()) return f;  // nothing to perturb (the encoders bound it)
+  const earth::Geodetic g = aiding::offset_geodetic(x_e, e.position_ned_m);
+  f.latitude_rad = g.latitude_rad;
+  f.longitude_rad = g.longitude_rad;
+  f.height_m = g.height_m;
+  f.velocity_ned_m_s += e.velocity_ned_m_s;
+  return f;
 }
 
 }  // namespace imuemu::drivers

@@ -8,7 +8,9 @@
 
 #include <cstdint>
 #include <optional>
+#include <string>
 
+#include "core/aiding/gnss.hpp"
 #include "core/types.hpp"
 #include "drivers/protocol.hpp"
 
@@ -53,6 +55,30 @@ struct GnssFix {
   std::uint32_t time_to_first_fix_ms = 0;
 };
 
+// The receiver's position and velocity errors (issue 28; the model is
+// core/aiding/gnss.hpp, in the units receiver datasheets use): per axis in
+// the local NED at the antenna, horizontal (north, east) and vertical apart,
+// white noise plus a first-order Gauss-Markov process (stationary sigma,
+// correlation time), and white velocity noise. All zero (the default): the
+// receiver reports the trajectory itself, bit for bit as before the errors
+// existed. Seeded as the IMU's noise: streams keyed by (seed, device name,
+// sensor 18, axis, term).
+struct GnssErrorConfig {
+  double horizontal_white_m = 0.0;
+  double horizontal_gm_sigma_m = 0.0;
+  double horizontal_gm_tau_s = 60.0;
+  double vertical_white_m = 0.0;
+  double vertical_gm_sigma_m = 0.0;
+  double vertical_gm_tau_s = 60.0;
+  double horizontal_velocity_m_s = 0.0;
+  double vertical_velocity_m_s = 0.0;
+  std::uint64_t seed = 0;
+  bool any() const {
+    return horizontal_white_m > 0.0 || horizontal_gm_sigma_m > 0.0 || vertical_white_m > 0.0 ||
+           vertical_gm_sigma_m > 0.0 || horizontal_velocity_m_s > 0.0 || vertical_velocity_m_s > 0.0;
+  }
+};
+
 // How trajectory time becomes GPS time for a GNSS receiver, and the figures
 // an error-free receiver reports (scene keys [imu.nmea] / [imu.ubx]).
 enum class GnssTimeBase : std::uint8_t {
@@ -73,6 +99,10 @@ struct GnssReceiverConfig {
   double horizontal_accuracy_m = 1.5, vertical_accuracy_m = 2.5, speed_accuracy_m_s = 0.05,
          time_accuracy_ns = 20.0;
   double geoid_separation_m = 0.0;
+  GnssErrorConfig errors;
+  // The device's name (scene [[imu]] name; emit: imu0): part of the error
+  // streams' key, so two receivers of one scene err independently.
+  std::string device_name = "imu0";
 };
 
 // The epoch of one device sample (the GNSS device's grid is its epochs):
@@ -82,5 +112,32 @@ struct GnssReceiverConfig {
 // A time that does not map to GPS time (before the GPS epoch): time_valid
 // false and no fix.
 GnssFix fix_from_frame(const ImuFrameInput& frame, const GnssReceiverConfig& config);
+
+// What a GNSS encoder reports per device sample: fix_from_frame, then, when
+// config.errors has any term, the error of fix j = the sample's counter
+// (aiding::GnssReceiverModel::error: a fix's error depends on its index, not
+// on which fixes were sent) added to the position (a NED offset at the
+// antenna, through ECEF: aiding::offset_geodetic) and the NED velocity.
+// The Gauss-Markov terms are discretised at the whole-millisecond period
+// nearest the device's (u-blox CFG-RATE measRate is in ms): exact at 1, 2,
+// 4, 5, 8 and 10 Hz, 1e-3 of a period off at 3, 6, 7 and 9 Hz.
+// Construction throws SettingError (key: the field) for an error term out
+// of core/aiding/gnss.hpp's bounds, std::invalid_argument for errors without
+// a device rate (rate_hz <= 0). fix() allocates nothing; the same fix again
+// (a link fault's duplicate) has the same error; a sample counter that goes
+// further back (a restarted stream) restarts the error sequence from its
+// initial state, so fix j's error is the same whatever came before.
+class GnssFixSource {
+ public:
+  GnssFixSource(const GnssReceiverConfig& config, double rate_hz);
+  GnssFix fix(const ImuFrameInput& frame);
+  const GnssReceiverConfig& config() const { return config_; }
+
+ private:
+  GnssReceiverConfig config_;
+  std::optional<aiding::GnssReceiverModel> initial_, model_;
+  std::optional<std::uint64_t> last_j_;  // the last fix's index and error
+  aiding::GnssError last_error_;
+};
 
 }  // namespace imuemu::drivers

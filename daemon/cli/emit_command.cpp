@@ -31,6 +31,7 @@
 
 #include "core/stream.hpp"
 #include "core/time_arith.hpp"
+#include "core/time_mapping.hpp"
 #include "daemon/cli/cli_options.hpp"
 #include "daemon/cli/commands.hpp"
 #include "daemon/device/device.hpp"
@@ -174,8 +175,26 @@ int emit(const EmitArgs& a) {
       return kUsageError;
     }
   }
+  // Checked before anything is opened.
+  live::SpeedFactor speed;
+  if (a.speed != "1") {
+    // Faster (or slower) than real time: for a receiver that only reads the
+    // stamps (a GNSS client fed minutes of fixes in seconds). Live poses
+    // arrive in real time: no speed there.
+    if (!a.source.empty()) {
+      std::cerr << "imuemu emit: --speed applies to --trajectory and --sample, not to live --source input\n";
+      return kUsageError;
+    }
+    try {
+      speed = live::parse_speed_factor(a.speed);
+    } catch (const std::exception& e) {
+      std::cerr << "imuemu emit: --speed " << a.speed << ": " << e.what() << "\n";
+      return kUsageError;
+    }
+  }
   emission::DeviceOptions dev;
   emission::EngineOptions eo;
+  eo.speed = speed;
   std::unique_ptr<io::PoseSource> source;
   SceneModel scene;
   scene.physics = a.scene == "flat" ? Physics::flat : Physics::ecef;
@@ -421,6 +440,10 @@ void add_emit_command(CLI::App& app, int& exit_code) {
                 "A tick whose wake-up missed its deadline by more than a period: drop (as a real IMU that skips a "
                 "sample: the sample time jumps; a sequence gap only in native) or send (late)")
       ->capture_default_str()->check(CLI::IsMember({"drop", "send"}));
+  c->add_option("--speed", a.speed,
+                "Trajectory seconds per wall second (2.5, 30, 1/3; --trajectory and --sample only): stamps and "
+                "contents as at 1, sent faster or slower")
+      ->capture_default_str();
   c->add_option("--start", a.start, "now, or next-second (the next whole second of CLOCK_REALTIME)")->capture_default_str()
       ->check(CLI::IsMember({"now", "next-second"}));
   // Protocol options: one flag per row of the protocol option table (the

@@ -41,6 +41,9 @@ struct EmitArgs {
   std::string stats_json_path;
   std::string late_ticks = "drop"; // drop | send: a tick woken more than a period late (EngineOptions::drop_late_ticks)
   std::string start = "now";    // now | next-second
+  // Trajectory time per wall time (a trajectory or --sample only): "1", "2.5",
+  // "30", "1/3" (core/time_mapping.hpp parse_speed_factor).
+  std::string speed = "1";
   // Protocol options as given on the command line: flag (--mavlink-system-id,
   // from drivers/protocols/protocol_options.hpp) -> its text.
   std::map<std::string, std::string> protocol_options;

@@ -755,6 +755,7 @@ ImuConfig parse_imu(const Table& t) {
                              std::to_string(drivers::kMaxGnssRateHz) + " Hz, not " + std::to_string(imu.rate_hz));
   if (const auto m = t.subtable("mounting")) parse_mounting(*m, imu.mounting);
   parse_protocol_options(t, imu);
+  imu.stream_options.gnss.device_name = imu.name;  // the GNSS errors' stream key, as the IMU noise's
   if (const auto dt = t.subtable("device")) {
     // The devices that answer their driver (issue 27): MIP, DroneCAN, J1939.
     if (imu.protocol == "mip") parse_mip_device(*dt, imu.stream_options.mip_device);

@@ -209,7 +209,8 @@ void append_zda(const GnssFix& f, std::string_view talker, std::vector<std::uint
   s.append_to(out);
 }
 
-Encoder::Encoder(const StreamEncoderOptions& options) : config_(options.gnss) {
+Encoder::Encoder(const StreamEncoderOptions& options)
+    : fix_source_(options.gnss, options.nominal_sample_rate_hz) {
   if (options.nmea_talker != "GP" && options.nmea_talker != "GN")
     throw std::invalid_argument("stream protocol 'nmea': talker '" + options.nmea_talker + "' is not GP or GN");
   talker_[0] = options.nmea_talker[0];
@@ -217,7 +218,7 @@ Encoder::Encoder(const StreamEncoderOptions& options) : config_(options.gnss) {
 }
 
 void Encoder::encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out) {
-  const GnssFix fix = fix_from_frame(sample, config_);
+  const GnssFix fix = fix_source_.fix(sample);
   const std::string_view talker(talker_, 2);
   append_rmc(fix, talker, out);
   append_vtg(fix, talker, out);

@@ -57,7 +57,7 @@ class Encoder final : public StreamEncoder {
   StreamFrameLayout frame_layout(std::span<const std::uint8_t> frame) const override;
 
  private:
-  GnssReceiverConfig config_;
+  GnssFixSource fix_source_;  // the trajectory, with the configured errors
   char talker_[3] = {'G', 'P', '\0'};
 };
 

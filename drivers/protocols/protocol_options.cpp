@@ -8,6 +8,9 @@
 #include <sstream>
 #include <stdexcept>
 
+#include "core/aiding/gnss.hpp"
+#include "core/sensor/sensor_model.hpp"
+
 namespace imuemu::drivers {
 
 namespace {
@@ -178,14 +181,44 @@ std::vector<ProtocolOption> make_table() {
     t.push_back(number(p, "geoid_separation_m", -200.0, 200.0, false, "0.0",
                        "geoid above the ellipsoid (no geoid model is carried): MSL height = ellipsoidal height - this",
                        [](ProtocolOptions& o, double v) { o.stream.gnss.geoid_separation_m = v; }));
+    // The receiver's errors (drivers/gnss_fix.hpp GnssErrorConfig; bounds
+    // of core/aiding/gnss.hpp validate): per axis, 1 sigma, local NED.
+    const auto sigma = [&](const char* key, const char* help, double GnssErrorConfig::*field) {
+      t.push_back(number(p, key, 0.0, aiding::kGnssMaxSigma_m, false, "0", help,
+                         [field](ProtocolOptions& o, double v) { o.stream.gnss.errors.*field = v; }));
+    };
+    sigma("horizontal_white_m", "position white noise, north and east each (m, 1 sigma per fix)",
+          &GnssErrorConfig::horizontal_white_m);
+    sigma("horizontal_gm_sigma_m", "position first-order Gauss-Markov error, north and east each (m, stationary sigma)",
+          &GnssErrorConfig::horizontal_gm_sigma_m);
+    t.push_back(number(p, "horizontal_gm_tau_s", sensor::kMinTauS, sensor::kMaxTauS, false, "60",
+                       "correlation time of the horizontal Gauss-Markov error (s)",
+                       [](ProtocolOptions& o, double v) { o.stream.gnss.errors.horizontal_gm_tau_s = v; }));
+    sigma("vertical_white_m", "height white noise (m, 1 sigma per fix)", &GnssErrorConfig::vertical_white_m);
+    sigma("vertical_gm_sigma_m", "height first-order Gauss-Markov error (m, stationary sigma)",
+          &GnssErrorConfig::vertical_gm_sigma_m);
+    t.push_back(number(p, "vertical_gm_tau_s", sensor::kMinTauS, sensor::kMaxTauS, false, "60",
+                       "correlation time of the vertical Gauss-Markov error (s)",
+                       [](ProtocolOptions& o, double v) { o.stream.gnss.errors.vertical_gm_tau_s = v; }));
+    t.push_back(number(p, "horizontal_velocity_m_s", 0.0, aiding::kGnssMaxVelocitySigma_m_s, false, "0",
+                       "velocity white noise, north and east each (m/s, 1 sigma per fix)",
+                       [](ProtocolOptions& o, double v) { o.stream.gnss.errors.horizontal_velocity_m_s = v; }));
+    // NMEA's sentences (GGA, RMC, VTG) carry no vertical velocity.
+    if (p == "ubx")
+      t.push_back(number(p, "vertical_velocity_m_s", 0.0, aiding::kGnssMaxVelocitySigma_m_s, false, "0",
+                         "vertical velocity white noise (m/s, 1 sigma per fix)",
+                         [](ProtocolOptions& o, double v) { o.stream.gnss.errors.vertical_velocity_m_s = v; }));
+    t.push_back(integer(p, "seed", 0, std::numeric_limits<std::int64_t>::max(), "0",
+                        "seed of the error terms (streams keyed by seed and device name, as the IMU's noise)",
+                        [](ProtocolOptions& o, std::int64_t v) { o.stream.gnss.errors.seed = static_cast<std::uint64_t>(v); }));
   }
   t.push_back(choice("nmea", "talker", {"GP", "GN"}, "talker id: GP (GPS) or GN (multi-constellation)",
                      [](ProtocolOptions& o, const std::string& v) { o.stream.nmea_talker = v; }));
-  t.push_back(number("ubx", "horizontal_accuracy_m", 0.0, 1e4, false, "1.5", "hAcc (1 sigma, m)",
+  t.push_back(number("ubx", "horizontal_accuracy_m", 0.0, 1e4, false, "1.5", "hAcc (m; with errors configured: from them, the 2-D RMS)",
                      [](ProtocolOptions& o, double v) { o.stream.gnss.horizontal_accuracy_m = v; }));
-  t.push_back(number("ubx", "vertical_accuracy_m", 0.0, 1e4, false, "2.5", "vAcc (1 sigma, m)",
+  t.push_back(number("ubx", "vertical_accuracy_m", 0.0, 1e4, false, "2.5", "vAcc (1 sigma, m; with errors configured: from them)",
                      [](ProtocolOptions& o, double v) { o.stream.gnss.vertical_accuracy_m = v; }));
-  t.push_back(number("ubx", "speed_accuracy_m_s", 0.0, 1e3, false, "0.05", "sAcc (1 sigma, m/s)",
+  t.push_back(number("ubx", "speed_accuracy_m_s", 0.0, 1e3, false, "0.05", "sAcc (1 sigma, m/s; with errors configured: from them)",
                      [](ProtocolOptions& o, double v) { o.stream.gnss.speed_accuracy_m_s = v; }));
   t.push_back(boolean("ubx", "legacy_nav", true,
                       "NAV-POSLLH, NAV-STATUS, NAV-DOP, NAV-SOL, NAV-VELNED and NAV-TIMEGPS beside NAV-PVT",
@@ -345,6 +378,24 @@ std::optional<OptionProblem> finish_protocol_options(const std::string& protocol
       return OptionProblem{"gps_time_at_t0_ns", "applies to time_base = \"gps\" only"};
     if (has("gps_minus_utc_s") && s.mip_time_base != MipTimeBase::utc)
       return OptionProblem{"gps_minus_utc_s", "applies to time_base = \"utc\" only"};
+  }
+  if (protocol == "ubx" && options.stream.gnss.errors.any()) {
+    // With errors configured, the accuracy a receiver reports is what they
+    // are (aiding::stated_accuracy: hAcc the 2-D RMS of the horizontal
+    // terms, vAcc and sAcc 1 sigma), unless stated otherwise.
+    const GnssErrorConfig& e = options.stream.gnss.errors;
+    aiding::GnssSpec spec;
+    spec.horizontal_white_m = e.horizontal_white_m;
+    spec.horizontal_gm_sigma_m = e.horizontal_gm_sigma_m;
+    spec.vertical_white_m = e.vertical_white_m;
+    spec.vertical_gm_sigma_m = e.vertical_gm_sigma_m;
+    spec.horizontal_velocity_m_s = e.horizontal_velocity_m_s;
+    spec.vertical_velocity_m_s = e.vertical_velocity_m_s;
+    const aiding::GnssAccuracy a = aiding::stated_accuracy(spec);
+    GnssReceiverConfig& g = options.stream.gnss;
+    if (!has("horizontal_accuracy_m")) g.horizontal_accuracy_m = a.horizontal_m;
+    if (!has("vertical_accuracy_m")) g.vertical_accuracy_m = a.vertical_m;
+    if (!has("speed_accuracy_m_s")) g.speed_accuracy_m_s = a.speed_m_s;
   }
   if (protocol == "j1939") {
     const j1939::J1939Options& j = options.can.j1939;

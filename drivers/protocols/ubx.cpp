@@ -272,10 +272,11 @@ void append_nav_eoe(const GnssFix& f, std::vector<std::uint8_t>& out) {
   append_frame(kNavEoe, p, out);
 }
 
-Encoder::Encoder(const StreamEncoderOptions& options) : config_(options.gnss), legacy_nav_(options.ubx_legacy_nav) {}
+Encoder::Encoder(const StreamEncoderOptions& options)
+    : fix_source_(options.gnss, options.nominal_sample_rate_hz), legacy_nav_(options.ubx_legacy_nav) {}
 
 void Encoder::encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out) {
-  const GnssFix fix_value = fix_from_frame(sample, config_);
+  const GnssFix fix_value = fix_source_.fix(sample);
   const GnssFix* fix = &fix_value;
   // One navigation epoch: the messages that carry the epoch's time first
   // (NAV-PVT, NAV-TIMEGPS, NAV-SOL), so that a reader which reports on each

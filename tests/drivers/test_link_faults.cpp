@@ -451,6 +451,18 @@ TEST(LinkFaults, GnssReceiversAllocateNothingOnTheEmissionPath) {
   ubx::Encoder ubx(StreamEncoderOptions{});
   EXPECT_EQ(count(nmea), 0u);
   EXPECT_EQ(count(ubx), 0u);
+  // With the receiver's errors on (drivers/gnss_fix.hpp GnssFixSource: the
+  // error model steps per fix, the offset goes through ECEF).
+  StreamEncoderOptions with_errors;
+  with_errors.nominal_sample_rate_hz = 10.0;
+  with_errors.gnss.errors.horizontal_white_m = 1.0;
+  with_errors.gnss.errors.horizontal_gm_sigma_m = 2.0;
+  with_errors.gnss.errors.vertical_white_m = 3.0;
+  with_errors.gnss.errors.horizontal_velocity_m_s = 0.1;
+  nmea::Encoder nmea_errors(with_errors);
+  ubx::Encoder ubx_errors(with_errors);
+  EXPECT_EQ(count(nmea_errors), 0u);
+  EXPECT_EQ(count(ubx_errors), 0u);
 }
 
 // ============================================================== native

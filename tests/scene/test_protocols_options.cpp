@@ -125,6 +125,10 @@ std::map<std::string, OtherValue> companions_of(const ProtocolOption& o) {
     return {{"mag", {"true", "true"}}};
   if (o.protocol == "mavlink2" && o.key.rfind("gps_", 0) == 0) return {{"hil_gps_rate_hz", {"5", "5"}}};
   if (o.protocol == "mip" && o.key == "gps_minus_utc_s") return {{"time_base", {"utc", "\"utc\""}}};
+  // A GNSS receiver's error correlation time and seed act on an error term.
+  if (is_gnss_protocol(o.protocol) && (o.key == "horizontal_gm_tau_s" || o.key == "seed"))
+    return {{"horizontal_gm_sigma_m", {"2", "2.0"}}};
+  if (is_gnss_protocol(o.protocol) && o.key == "vertical_gm_tau_s") return {{"vertical_gm_sigma_m", {"2", "2.0"}}};
   return {};
 }
 
@@ -201,9 +205,12 @@ TEST(ProtocolOptionTable, SceneFileAndCommandLineGiveTheSameWire) {
     ASSERT_EQ(s.imus.size(), 1u);
 
     // Not protocol options: the random terms' key (the device's name and
-    // its error model's seed) comes from the scene's [[imu]].
+    // its error model's seed) comes from the scene's [[imu]], and a GNSS
+    // receiver's rate (its error model's step) and name (its error streams' key).
     cli.stream.aiding_device = s.imus[0].stream_options.aiding_device;
     cli.stream.aiding_seed = s.imus[0].stream_options.aiding_seed;
+    cli.stream.nominal_sample_rate_hz = s.imus[0].stream_options.nominal_sample_rate_hz;
+    cli.stream.gnss.device_name = s.imus[0].stream_options.gnss.device_name;
     const std::vector<std::uint8_t> from_cli = wire_of(o.protocol, cli);
     EXPECT_EQ(wire_of(o.protocol, s.imus[0].stream_options, s.imus[0].can_options), from_cli);
     EXPECT_NE(from_cli, wire_of(o.protocol, default_protocol_options(kRateHz))) << "the option has no effect";
