@@ -4,6 +4,8 @@
 //
 //   "native"   imuemu native v1 (docs/native-protocol.md): f64, CRC-32C
 //   "mavlink2" MAVLink 2 HIL_SENSOR (#107) [+ HIGHRES_IMU (#105)] + HEARTBEAT
+//              [+ HIL_GPS (#113) at its own rate; barometer and magnetometer
+//              fields when configured]
 //   "mip"      MicroStrain MIP, IMU data set 0x80
 //   "nmea"     a GNSS receiver: NMEA 0183 RMC, VTG, GGA, GSA, ZDA per epoch
 //   "ubx"      a GNSS receiver: u-blox UBX NAV-PVT (+ POSLLH, STATUS, DOP,
