@@ -6,6 +6,7 @@
 #include <sys/eventfd.h>
 #include <unistd.h>
 
+#include <algorithm>
 #include <array>
 #include <cerrno>
 #include <cstdio>
@@ -311,10 +312,14 @@ bool QueuedWriter::reply(std::span<const std::uint8_t> bytes) {
   const auto* b = reinterpret_cast<const std::byte*>(bytes.data());
   replies_.insert(replies_.end(), b, b + bytes.size());
   reply_ends_.push_back(replies_.size());
+  if (baud_after_replies_ && !baud_change_at_) baud_change_at_ = replies_.size();
   return true;
 }
 
-void QueuedWriter::change_baud_after_replies(std::uint32_t baud) { baud_after_replies_ = baud; }
+void QueuedWriter::change_baud_after_replies(std::uint32_t baud) {
+  baud_after_replies_ = baud;
+  baud_change_at_.reset();  // set by the reply queued next (the ACK)
+}
 
 bool QueuedWriter::at_frame_boundary() const noexcept {
   if (next_frame_ >= frame_ends_.size()) return true;
@@ -328,12 +333,15 @@ void QueuedWriter::drop_replies() {
   replies_pos_ = 0;
   next_reply_ = 0;
   baud_after_replies_.reset();  // the command's ACK never left: the device keeps its rate
+  baud_change_at_.reset();
 }
 
 void QueuedWriter::write_replies() {
   // A datagram device (CAN) takes one reply frame per write; a byte stream
   // takes what is queued.
-  const std::size_t end = device_->datagrams() ? reply_ends_[next_reply_] : replies_.size();
+  std::size_t end = device_->datagrams() ? reply_ends_[next_reply_] : replies_.size();
+  // Nothing after the ACK of a rate change leaves at the old rate.
+  if (baud_change_at_ && *baud_change_at_ > replies_pos_) end = std::min(end, *baud_change_at_);
   const DeviceWrite result =
       device_->write(std::span<const std::byte>(replies_).subspan(replies_pos_, end - replies_pos_));
   switch (result.outcome) {
@@ -343,22 +351,23 @@ void QueuedWriter::write_replies() {
         replies_sent_.fetch_add(1, std::memory_order_relaxed);
         ++next_reply_;
       }
+      if (baud_after_replies_ && replies_pos_ == baud_change_at_.value_or(replies_.size())) {
+        const std::uint32_t baud = *baud_after_replies_;
+        baud_after_replies_.reset();
+        baud_change_at_.reset();
+        std::string why;
+        if (device_->set_baud(baud, why)) {
+          baud_.store(baud, std::memory_order_relaxed);
+          log("line rate now " + std::to_string(baud) + " baud (the device was told so by its driver)");
+        } else {
+          log("line rate " + std::to_string(baud) + " baud refused by the port: " + why);
+        }
+      }
       if (replies_pos_ == replies_.size()) {
         replies_.clear();
         reply_ends_.clear();
         replies_pos_ = 0;
         next_reply_ = 0;
-        if (baud_after_replies_) {
-          const std::uint32_t baud = *baud_after_replies_;
-          baud_after_replies_.reset();
-          std::string why;
-          if (device_->set_baud(baud, why)) {
-            baud_.store(baud, std::memory_order_relaxed);
-            log("line rate now " + std::to_string(baud) + " baud (the device was told so by its driver)");
-          } else {
-            log("line rate " + std::to_string(baud) + " baud refused by the port: " + why);
-          }
-        }
       }
       break;
     case DeviceWrite::Outcome::would_block:

@@ -256,7 +256,14 @@ class QueuedWriter final : private InputTap, private ReplySink {
   std::vector<std::size_t> reply_ends_;    // end offset of each reply in replies_
   std::size_t replies_pos_ = 0;            // bytes of replies_ handed to the device
   std::size_t next_reply_ = 0;             // first reply not completely handed over
+  // A line-rate change the device asked for (change_baud_after_replies),
+  // and the offset in replies_ where it happens: the end of the reply queued
+  // next (the ACK the device is building when it asks), so that a reply
+  // queued later (the next command's, arriving while the ACK is still being
+  // written) leaves at the new rate, as on the real part. Unset offset: no
+  // reply followed; the change waits for the queue to drain.
   std::optional<std::uint32_t> baud_after_replies_;
+  std::optional<std::size_t> baud_change_at_;
   std::atomic<std::uint64_t> input_bytes_{0}, replies_sent_{0}, replies_dropped_{0};
   std::atomic<std::uint32_t> baud_{0};
 };
