@@ -157,32 +157,28 @@ std::string file_text(const fs::path& p) {
   return s.str();
 }
 
-}  // namespace
 
-TEST(GnssGpsd, GpsdReportsTheTrajectoryFromImuemusNmeaAndUbx) {
-  if (!fs::exists(kGpsd))
-    GTEST_SKIP() << kGpsd << " is absent: install Debian's gpsd (scripts/setup.sh test installs gpsd gpsd-clients)";
-  const fs::path dir = fs::temp_directory_path() / ("imuemu_gnss_gpsd_" + std::to_string(::getpid()));
-  fs::remove_all(dir);
-  fs::create_directories(dir);
-  write_trajectory(dir / "traj.csv");
-  const std::string nmea_link = (dir / "nmea").string(), ubx_link = (dir / "ubx").string();
+// Two emitters (NMEA and UBX, on pty links nmea_link and ubx_link) and one
+// gpsd reading both: the emitters first (gpsd opens its devices once, at
+// start, so the links must exist), gpsd as soon as they do; gpsd's JSON
+// reports are read until both emitters have ended (each exits at its
+// trajectory's end) and 300 ms more for the last epoch, or give_up.
+struct GpsdRun {
+  std::string json_lines;
+  int nmea_status = 0, ubx_status = 0;
+};
 
-  const pid_t nmea = imuemu::test::spawn_logged(
-      IMUEMU_CLI_PATH, {"emit", "--trajectory", (dir / "traj.csv").string(), "--protocol", "nmea", "--device",
-                        "pty:" + nmea_link},
-      (dir / "nmea.log").string());
-  const pid_t ubx = imuemu::test::spawn_logged(
-      IMUEMU_CLI_PATH, {"emit", "--trajectory", (dir / "traj.csv").string(), "--protocol", "ubx", "--rate", "5",
-                        "--device", "pty:" + ubx_link},
-      (dir / "ubx.log").string());
+void run_gpsd_on_two_emitters(const fs::path& dir, const std::string& nmea_link, const std::string& ubx_link,
+                              const std::vector<std::string>& nmea_args, const std::vector<std::string>& ubx_args,
+                              std::chrono::seconds give_up_after, GpsdRun& run) {
+  const pid_t nmea = imuemu::test::spawn_logged(IMUEMU_CLI_PATH, nmea_args, (dir / "nmea.log").string());
+  const pid_t ubx = imuemu::test::spawn_logged(IMUEMU_CLI_PATH, ubx_args, (dir / "ubx.log").string());
   ASSERT_GT(nmea, 0);
   ASSERT_GT(ubx, 0);
   // A bound, not a timing: the links appear within milliseconds on an idle
   // host; a loaded CI host (or a sanitizer build) may take seconds.
   for (int i = 0; i < 3000 && !(fs::exists(nmea_link) && fs::exists(ubx_link)); ++i) std::this_thread::sleep_for(10ms);
   ASSERT_TRUE(fs::exists(nmea_link) && fs::exists(ubx_link)) << file_text(dir / "nmea.log") << file_text(dir / "ubx.log");
-
   const int port = free_tcp_port();
   ASSERT_GT(port, 0);
   const pid_t gpsd = imuemu::test::spawn_logged(
@@ -194,23 +190,19 @@ TEST(GnssGpsd, GpsdReportsTheTrajectoryFromImuemusNmeaAndUbx) {
   const std::string watch = "?WATCH={\"enable\":true,\"json\":true}\n";
   ASSERT_EQ(::write(fd, watch.data(), watch.size()), static_cast<ssize_t>(watch.size()));
 
-  // Read gpsd's reports until both receivers have finished their trajectory
-  // (emit exits at its end), then a little more for the last epoch.
-  std::string received;
-  int nmea_status = 0, ubx_status = 0;
   bool nmea_done = false, ubx_done = false;
   auto after_both = std::chrono::steady_clock::time_point::max();
-  const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(static_cast<int>(kDurationS) + 30);
+  const auto give_up = std::chrono::steady_clock::now() + give_up_after;
   while (std::chrono::steady_clock::now() < std::min(after_both, give_up)) {
     pollfd p{fd, POLLIN, 0};
     if (::poll(&p, 1, 100) > 0) {
-      char buffer[8192];
+      char buffer[65536];
       const ssize_t n = ::read(fd, buffer, sizeof buffer);
       if (n <= 0) break;
-      received.append(buffer, static_cast<std::size_t>(n));
+      run.json_lines.append(buffer, static_cast<std::size_t>(n));
     }
-    nmea_done = nmea_done || exited(nmea, nmea_status);
-    ubx_done = ubx_done || exited(ubx, ubx_status);
+    nmea_done = nmea_done || exited(nmea, run.nmea_status);
+    ubx_done = ubx_done || exited(ubx, run.ubx_status);
     if (nmea_done && ubx_done && after_both == std::chrono::steady_clock::time_point::max())
       after_both = std::chrono::steady_clock::now() + 300ms;
   }
@@ -218,11 +210,31 @@ TEST(GnssGpsd, GpsdReportsTheTrajectoryFromImuemusNmeaAndUbx) {
   ::kill(gpsd, SIGTERM);
   int gpsd_status = 0;
   ::waitpid(gpsd, &gpsd_status, 0);
-  if (!nmea_done) ::kill(nmea, SIGTERM), ::waitpid(nmea, &nmea_status, 0);
-  if (!ubx_done) ::kill(ubx, SIGTERM), ::waitpid(ubx, &ubx_status, 0);
-  std::ofstream(dir / "gpsd.json") << received;  // kept for a failure's diagnosis
-  EXPECT_TRUE(WIFEXITED(nmea_status) && WEXITSTATUS(nmea_status) == 0) << file_text(dir / "nmea.log");
-  EXPECT_TRUE(WIFEXITED(ubx_status) && WEXITSTATUS(ubx_status) == 0) << file_text(dir / "ubx.log");
+  if (!nmea_done) ::kill(nmea, SIGTERM), ::waitpid(nmea, &run.nmea_status, 0);
+  if (!ubx_done) ::kill(ubx, SIGTERM), ::waitpid(ubx, &run.ubx_status, 0);
+  std::ofstream(dir / "gpsd.json") << run.json_lines;  // kept for a failure's diagnosis
+  EXPECT_TRUE(WIFEXITED(run.nmea_status) && WEXITSTATUS(run.nmea_status) == 0) << file_text(dir / "nmea.log");
+  EXPECT_TRUE(WIFEXITED(run.ubx_status) && WEXITSTATUS(run.ubx_status) == 0) << file_text(dir / "ubx.log");
+}
+}  // namespace
+
+TEST(GnssGpsd, GpsdReportsTheTrajectoryFromImuemusNmeaAndUbx) {
+  if (!fs::exists(kGpsd))
+    GTEST_SKIP() << kGpsd << " is absent: install Debian's gpsd (scripts/setup.sh test installs gpsd gpsd-clients)";
+  const fs::path dir = fs::temp_directory_path() / ("imuemu_gnss_gpsd_" + std::to_string(::getpid()));
+  fs::remove_all(dir);
+  fs::create_directories(dir);
+  write_trajectory(dir / "traj.csv");
+  const std::string nmea_link = (dir / "nmea").string(), ubx_link = (dir / "ubx").string();
+
+  GpsdRun run;
+  ASSERT_NO_FATAL_FAILURE(run_gpsd_on_two_emitters(
+      dir, nmea_link, ubx_link,
+      {"emit", "--trajectory", (dir / "traj.csv").string(), "--protocol", "nmea", "--device", "pty:" + nmea_link},
+      {"emit", "--trajectory", (dir / "traj.csv").string(), "--protocol", "ubx", "--rate", "5", "--device",
+       "pty:" + ubx_link},
+      std::chrono::seconds(static_cast<int>(kDurationS) + 30), run));
+  const std::string& received = run.json_lines;
 
   // Resolution of each format (half a step of the wire field, plus half a
   // step of gpsd's JSON print: lat/lon 9 decimals, altHAE 4, speed 3, track 4):
@@ -373,52 +385,10 @@ TEST(GnssGpsd, GpsdFixesCarryTheConfiguredErrorsOverTenMinutes) {
   for (const std::string& a : error_flags("nmea", 28)) nmea_args.push_back(a);
   for (const std::string& a : error_flags("ubx", 29)) ubx_args.push_back(a);
 
-  // The emitters first (gpsd opens its devices once, at start, so the links
-  // must exist), gpsd as soon as they do.
-  const pid_t nmea = imuemu::test::spawn_logged(IMUEMU_CLI_PATH, nmea_args, (dir / "nmea.log").string());
-  const pid_t ubx = imuemu::test::spawn_logged(IMUEMU_CLI_PATH, ubx_args, (dir / "ubx.log").string());
-  ASSERT_GT(nmea, 0);
-  ASSERT_GT(ubx, 0);
-  for (int i = 0; i < 3000 && !(fs::exists(nmea_link) && fs::exists(ubx_link)); ++i) std::this_thread::sleep_for(10ms);
-  ASSERT_TRUE(fs::exists(nmea_link) && fs::exists(ubx_link)) << file_text(dir / "nmea.log") << file_text(dir / "ubx.log");
-  const int port = free_tcp_port();
-  ASSERT_GT(port, 0);
-  const pid_t gpsd = imuemu::test::spawn_logged(
-      kGpsd, {"-N", "-n", "-b", "-S", std::to_string(port), "-F", (dir / "gpsd.sock").string(), nmea_link, ubx_link},
-      (dir / "gpsd.log").string());
-  ASSERT_GT(gpsd, 0);
-  const int fd = connect_with_retry(port, 10s);
-  ASSERT_GE(fd, 0) << "gpsd did not listen on port " << port << ": " << file_text(dir / "gpsd.log");
-  const std::string watch = "?WATCH={\"enable\":true,\"json\":true}\n";
-  ASSERT_EQ(::write(fd, watch.data(), watch.size()), static_cast<ssize_t>(watch.size()));
-
-  std::string received;
-  int nmea_status = 0, ubx_status = 0;
-  bool nmea_done = false, ubx_done = false;
-  auto after_both = std::chrono::steady_clock::time_point::max();
-  const auto give_up = std::chrono::steady_clock::now() + std::chrono::seconds(static_cast<int>(kErrDurationS / 40) + 30);
-  while (std::chrono::steady_clock::now() < std::min(after_both, give_up)) {
-    pollfd p{fd, POLLIN, 0};
-    if (::poll(&p, 1, 100) > 0) {
-      char buffer[65536];
-      const ssize_t n = ::read(fd, buffer, sizeof buffer);
-      if (n <= 0) break;
-      received.append(buffer, static_cast<std::size_t>(n));
-    }
-    nmea_done = nmea_done || exited(nmea, nmea_status);
-    ubx_done = ubx_done || exited(ubx, ubx_status);
-    if (nmea_done && ubx_done && after_both == std::chrono::steady_clock::time_point::max())
-      after_both = std::chrono::steady_clock::now() + 300ms;
-  }
-  ::close(fd);
-  ::kill(gpsd, SIGTERM);
-  int gpsd_status = 0;
-  ::waitpid(gpsd, &gpsd_status, 0);
-  if (!nmea_done) ::kill(nmea, SIGTERM), ::waitpid(nmea, &nmea_status, 0);
-  if (!ubx_done) ::kill(ubx, SIGTERM), ::waitpid(ubx, &ubx_status, 0);
-  std::ofstream(dir / "gpsd.json") << received;
-  EXPECT_TRUE(WIFEXITED(nmea_status) && WEXITSTATUS(nmea_status) == 0) << file_text(dir / "nmea.log");
-  EXPECT_TRUE(WIFEXITED(ubx_status) && WEXITSTATUS(ubx_status) == 0) << file_text(dir / "ubx.log");
+  GpsdRun run;
+  ASSERT_NO_FATAL_FAILURE(run_gpsd_on_two_emitters(dir, nmea_link, ubx_link, nmea_args, ubx_args,
+                                                   std::chrono::seconds(static_cast<int>(kErrDurationS / 40) + 30), run));
+  const std::string& received = run.json_lines;
 
   // One error sample per distinct epoch (gpsd reports UBX twice an epoch:
   // the first report is kept), in epoch order.
