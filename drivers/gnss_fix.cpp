@@ -77,16 +77,16 @@ aiding::GnssSpec error_spec(const GnssErrorConfig& e, double rate_hz) {
 
 }  // namespace
 
-GnssFixSource::GnssFixSource(const GnssReceiverConfig& config, double rate_hz) : config_(config) {
+GnssFixSource::GnssFixSource(const GnssReceiverConfig& config, double rate_hz, const std::string& device_name)
+    : config_(config) {
   if (!config_.errors.any()) return;
-  initial_.emplace(error_spec(config_.errors, rate_hz), 0, config_.device_name);
+  initial_.emplace(error_spec(config_.errors, rate_hz), 0, device_name);
   model_ = initial_;
 }
 
-GnssFix GnssFixSource::fix(const ImuFrameInput& frame) {
+GnssFix GnssFixSource::fix(const ImuFrameInput& frame, std::uint64_t j) {
   GnssFix f = fix_from_frame(frame, config_);
   if (!model_ || f.fix_type == GnssFixType::none) return f;
-  const std::uint64_t j = frame.sample_counter;
   if (!last_j_ || *last_j_ != j) {  // the same fix again (a link fault's duplicate): the same error
     if (j < model_->next_index()) model_ = initial_;  // a copy of plain numbers: no allocation
     last_error_ = model_->error(j);

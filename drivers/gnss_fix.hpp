@@ -100,9 +100,6 @@ struct GnssReceiverConfig {
          time_accuracy_ns = 20.0;
   double geoid_separation_m = 0.0;
   GnssErrorConfig errors;
-  // The device's name (scene [[imu]] name; emit: imu0): part of the error
-  // streams' key, so two receivers of one scene err independently.
-  std::string device_name = "imu0";
 };
 
 // The epoch of one device sample (the GNSS device's grid is its epochs):
@@ -124,13 +121,21 @@ GnssFix fix_from_frame(const ImuFrameInput& frame, const GnssReceiverConfig& con
 // Construction throws SettingError (key: the field) for an error term out
 // of core/aiding/gnss.hpp's bounds, std::invalid_argument for errors without
 // a device rate (rate_hz <= 0). fix() allocates nothing; the same fix again
-// (a link fault's duplicate) has the same error; a sample counter that goes
+// (a link fault's duplicate) has the same error; a fix index that goes
 // further back (a restarted stream) restarts the error sequence from its
 // initial state, so fix j's error is the same whatever came before.
+// device_name: the device's name (StreamEncoderOptions::device_name: the
+// scene's [[imu]] name; emit: imu0), part of the error streams' key, so two
+// receivers of one scene err independently.
+// Users: the NMEA and UBX receivers (fix j = the device's sample counter)
+// and MAVLink HIL_GPS (fix j = the count of HIL_GPS instants, mavlink2.hpp).
 class GnssFixSource {
  public:
-  GnssFixSource(const GnssReceiverConfig& config, double rate_hz);
-  GnssFix fix(const ImuFrameInput& frame);
+  GnssFixSource(const GnssReceiverConfig& config, double rate_hz, const std::string& device_name);
+  // Fix j = frame.sample_counter (the receiver's epochs are its samples).
+  GnssFix fix(const ImuFrameInput& frame) { return fix(frame, frame.sample_counter); }
+  // Fix j of a source whose epochs are not the frame's samples.
+  GnssFix fix(const ImuFrameInput& frame, std::uint64_t j);
   const GnssReceiverConfig& config() const { return config_; }
 
  private:

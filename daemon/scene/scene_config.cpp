@@ -755,7 +755,9 @@ ImuConfig parse_imu(const Table& t) {
                              std::to_string(drivers::kMaxGnssRateHz) + " Hz, not " + std::to_string(imu.rate_hz));
   if (const auto m = t.subtable("mounting")) parse_mounting(*m, imu.mounting);
   parse_protocol_options(t, imu);
-  imu.stream_options.gnss.device_name = imu.name;  // the GNSS errors' stream key, as the IMU noise's
+  // The key of the protocol's random terms (GNSS receiver errors, MAVLink
+  // barometer, magnetometer and HIL_GPS), with the seed, as the IMU noise's.
+  imu.stream_options.device_name = imu.name;
   if (const auto dt = t.subtable("device")) {
     // The devices that answer their driver (issue 27): MIP, DroneCAN, J1939.
     if (imu.protocol == "mip") parse_mip_device(*dt, imu.stream_options.mip_device);
@@ -802,10 +804,9 @@ ImuConfig parse_imu(const Table& t) {
                        std::string(ex.what()) + at_rate);
     }
   }
-  // The MAVLink barometer and magnetometer models' random terms, keyed as
-  // the IMU's: the error model's seed and the device's name.
+  // The MAVLink barometer, magnetometer and HIL_GPS random terms, keyed as
+  // the IMU's: the error model's seed and the device's name (above).
   imu.stream_options.aiding_seed = imu.error_model.spec.seed;
-  imu.stream_options.aiding_device = imu.name;
   // Faults (daemon/scene/fault_config.cpp), seeded from the error model's seed.
   DeviceFaults faults = parse_device_faults(t.table(), t.ctx().file, t.path(), imu.name, imu.rate_hz, imu.error_model.spec.seed);
   imu.faults = std::move(faults.faults);

@@ -188,16 +188,25 @@ Encoder::Encoder(const StreamEncoderOptions& options) : options_(options) {
     spec.noise_rms_pa = options_.mavlink_baro_noise_rms_pa;
     spec.bias_pa = options_.mavlink_baro_bias_pa;
     spec.seed = options_.aiding_seed;
-    barometer_.emplace(spec, options_.nominal_sample_rate_hz, options_.aiding_device);
+    barometer_.emplace(spec, options_.nominal_sample_rate_hz, options_.device_name);
   }
   if (options_.mavlink_mag) {
     aiding::MagnetometerSpec spec;
     spec.noise_rms_ut = Vec3::Constant(options_.mavlink_mag_noise_rms_ut);
     spec.seed = options_.aiding_seed;
-    magnetometer_.emplace(spec, options_.nominal_sample_rate_hz, options_.aiding_device);
+    magnetometer_.emplace(spec, options_.nominal_sample_rate_hz, options_.device_name);
   }
   pressure_min_pa_ = aiding::isa_at_geopotential(aiding::kIsaMaxGeopotential_m).pressure_pa;
   pressure_max_pa_ = aiding::isa_at_geopotential(aiding::kIsaMinGeopotential_m).pressure_pa;
+  // HIL_GPS: the GNSS receivers' fix source (drivers/gnss_fix.hpp) at the
+  // HIL_GPS rate, seeded as the barometer and magnetometer (one component,
+  // one seed: aiding_seed; stream_protocols.hpp). Its constructor validates
+  // the error terms.
+  if (options_.mavlink_hil_gps_rate_hz > 0) {
+    GnssReceiverConfig gps = options_.gnss;
+    gps.errors.seed = options_.aiding_seed;
+    gps_source_.emplace(gps, static_cast<double>(options_.mavlink_hil_gps_rate_hz), options_.device_name);
+  }
 }
 
 Encoder::Encoder(const Encoder& other)
@@ -209,6 +218,8 @@ Encoder::Encoder(const Encoder& other)
       reading_counter_(other.reading_counter_),
       reading_(other.reading_),
       next_gps_ns_(other.next_gps_ns_),
+      gps_source_(other.gps_source_),
+      gps_first_index_(other.gps_first_index_),
       pressure_min_pa_(other.pressure_min_pa_),
       pressure_max_pa_(other.pressure_max_pa_) {
   if (options_.mavlink_answers_commands) device_ = std::make_unique<Device>(options_);
@@ -226,6 +237,8 @@ Encoder& Encoder::operator=(const Encoder& other) {
     reading_counter_ = fresh.reading_counter_;
     reading_ = fresh.reading_;
     next_gps_ns_ = fresh.next_gps_ns_;
+    gps_source_ = std::move(fresh.gps_source_);
+    gps_first_index_ = fresh.gps_first_index_;
     pressure_min_pa_ = fresh.pressure_min_pa_;
     pressure_max_pa_ = fresh.pressure_max_pa_;
   }
@@ -246,11 +259,11 @@ const Encoder::AidingReading& Encoder::aiding_reading(const ImuFrameInput& sampl
     // Geometric height above the geoid Z = h - N, geopotential
     // H = r0 Z / (r0 + Z) (US 1976 Eq. 18; atmosphere.hpp), inside the
     // model's range with a metre to spare.
-    const double z_m = sample.height_m - options_.mavlink_geoid_undulation_m;
+    const double z_m = sample.height_m - options_.gnss.geoid_separation_m;
     const double h_m = aiding::kIsaEarthRadius_m * z_m / (aiding::kIsaEarthRadius_m + z_m);
     if (std::isfinite(h_m) && h_m > aiding::kIsaMinGeopotential_m + 1.0 && h_m < aiding::kIsaMaxGeopotential_m - 1.0) {
       const aiding::IsaState isa =
-          aiding::isa_at_ellipsoidal_height(sample.height_m, options_.mavlink_geoid_undulation_m);
+          aiding::isa_at_ellipsoidal_height(sample.height_m, options_.gnss.geoid_separation_m);
       const aiding::BarometerSample b = barometer_->measure(k, isa.pressure_pa, isa.temperature_k);
       if (std::isfinite(b.pressure_pa) && std::isfinite(b.temperature_k)) {
         reading_.has_pressure = true;
@@ -387,18 +400,40 @@ T rounded_clamped(double v, double lo, double hi) {
 
 void Encoder::append_hil_gps(const ImuFrameInput& sample, std::vector<std::uint8_t>& out) {
   const std::int64_t rate = options_.mavlink_hil_gps_rate_hz;
-  if (rate <= 0 || !sample.has_navigation) return;
+  if (rate <= 0 || !sample.has_navigation || !gps_source_) return;
   const TimeNs t = sample.t_ns;
   // Due at the first sample at or after each grid instant; a timeline that
   // went back by more than a period starts over from its sample.
   const TimeNs period_ns = kNsPerSecond / rate;
   if (next_gps_ns_ && t < *next_gps_ns_ && t >= saturating_sub_ns(*next_gps_ns_, 2 * period_ns)) return;
-  next_gps_ns_ = gps_grid_ns(gps_grid_index_after(t, rate), rate);
+  const std::int64_t n = gps_grid_index_after(t, rate) - 1;  // the grid instant at or before t
+  const bool restart = !next_gps_ns_ || t < *next_gps_ns_;
+  next_gps_ns_ = gps_grid_ns(n + 1, rate);
+  // The fix index: grid instants since the stream's first HIL_GPS (the
+  // error model's j; not the IMU sample counter, not the instant's index
+  // since trajectory time 0, which a Unix-time trajectory puts beyond what
+  // the model steps through: core/aiding/gnss.hpp). A timeline that went
+  // back, or jumped more than 2^28 fixes ahead (over a year at 5 Hz),
+  // starts the error sequence over from its initial state.
+  if (restart || n < gps_first_index_ || n - gps_first_index_ >= (std::int64_t{1} << 28)) gps_first_index_ = n;
+  GnssFix fix = gps_source_->fix(sample, static_cast<std::uint64_t>(n - gps_first_index_));
+  if (fix.fix_type == GnssFixType::none) {
+    // A time before the GPS epoch on the receivers' time base (the source
+    // reports no fix): HIL_GPS has no GPS time field; the trajectory itself.
+    fix.latitude_rad = sample.latitude_rad;
+    fix.longitude_rad = sample.longitude_rad;
+    fix.height_m = sample.height_m;
+    fix.velocity_ned_m_s = sample.velocity_ned_m_s;
+    fix.geoid_separation_m = options_.gnss.geoid_separation_m;
+    fix.hdop = options_.gnss.hdop;
+    fix.vdop = options_.gnss.vdop;
+    fix.satellites = options_.gnss.satellites;
+  }
 
-  const double lat_deg = sample.latitude_rad * 180.0 / std::numbers::pi;
-  const double lon_deg = std::remainder(sample.longitude_rad * 180.0 / std::numbers::pi, 360.0);
-  const double msl_m = sample.height_m - options_.mavlink_geoid_undulation_m;
-  const Vec3& v = sample.velocity_ned_m_s;
+  const double lat_deg = fix.latitude_rad * 180.0 / std::numbers::pi;
+  const double lon_deg = std::remainder(fix.longitude_rad * 180.0 / std::numbers::pi, 360.0);
+  const double msl_m = fix.height_m - fix.geoid_separation_m;
+  const Vec3& v = fix.velocity_ned_m_s;
   if (!std::isfinite(lat_deg) || !std::isfinite(lon_deg) || !std::isfinite(msl_m) || !v.allFinite()) return;
   // [X] HIL_GPS wire order ([G] sorted by type size): time_usec u64, lat
   // i32 degE7, lon i32 degE7, alt i32 mm (MSL, up), eph u16, epv u16 (DOP
@@ -410,8 +445,8 @@ void Encoder::append_hil_gps(const ImuFrameInput& sample, std::vector<std::uint8
   wire::put_le<std::int32_t>(p.data() + 8, rounded_clamped<std::int32_t>(lat_deg * 1e7, -9e8, 9e8));
   wire::put_le<std::int32_t>(p.data() + 12, rounded_clamped<std::int32_t>(lon_deg * 1e7, -1.8e9, 1.8e9));
   wire::put_le<std::int32_t>(p.data() + 16, rounded_clamped<std::int32_t>(msl_m * 1e3, -2147483647.0, 2147483647.0));
-  wire::put_le<std::uint16_t>(p.data() + 20, rounded_clamped<std::uint16_t>(options_.mavlink_gps_hdop * 100.0, 0.0, 65534.0));
-  wire::put_le<std::uint16_t>(p.data() + 22, rounded_clamped<std::uint16_t>(options_.mavlink_gps_vdop * 100.0, 0.0, 65534.0));
+  wire::put_le<std::uint16_t>(p.data() + 20, rounded_clamped<std::uint16_t>(fix.hdop * 100.0, 0.0, 65534.0));
+  wire::put_le<std::uint16_t>(p.data() + 22, rounded_clamped<std::uint16_t>(fix.vdop * 100.0, 0.0, 65534.0));
   const double ground_m_s = std::hypot(v.x(), v.y());
   wire::put_le<std::uint16_t>(p.data() + 24, rounded_clamped<std::uint16_t>(ground_m_s * 100.0, 0.0, 65534.0));
   for (int i = 0; i < 3; ++i)
@@ -426,7 +461,7 @@ void Encoder::append_hil_gps(const ImuFrameInput& sample, std::vector<std::uint8
   }
   wire::put_le<std::uint16_t>(p.data() + 32, cog);
   p[34] = 3;  // 3D fix
-  p[35] = static_cast<std::uint8_t>(options_.mavlink_gps_satellites);
+  p[35] = static_cast<std::uint8_t>(fix.satellites);
   p[36] = options_.mavlink_sensor_id;
   append_packet(kHilGps, p, out);
 }

@@ -12,6 +12,7 @@
 
 #include "core/aiding/barometer.hpp"
 #include "core/aiding/magnetometer.hpp"
+#include "drivers/gnss_fix.hpp"
 #include "drivers/protocol.hpp"
 #include "drivers/protocols/stream_protocols.hpp"
 
@@ -121,6 +122,10 @@ class Encoder final : public StreamEncoder {
   std::optional<std::uint64_t> reading_counter_;  // the sample `reading_` is of
   AidingReading reading_;
   std::optional<TimeNs> next_gps_ns_;
+  // HIL_GPS: the GNSS receivers' fix source at the HIL_GPS rate, and the
+  // grid index of the stream's first fix (fix j = index - this).
+  std::optional<GnssFixSource> gps_source_;
+  std::int64_t gps_first_index_ = 0;
   // The ISA pressures at the top and the bottom of the model's range
   // (pressure_altitude_m's domain).
   double pressure_min_pa_ = 0.0, pressure_max_pa_ = 0.0;

@@ -210,7 +210,7 @@ void append_zda(const GnssFix& f, std::string_view talker, std::vector<std::uint
 }
 
 Encoder::Encoder(const StreamEncoderOptions& options)
-    : fix_source_(options.gnss, options.nominal_sample_rate_hz) {
+    : fix_source_(options.gnss, options.nominal_sample_rate_hz, options.device_name) {
   if (options.nmea_talker != "GP" && options.nmea_talker != "GN")
     throw std::invalid_argument("stream protocol 'nmea': talker '" + options.nmea_talker + "' is not GP or GN");
   talker_[0] = options.nmea_talker[0];

@@ -76,6 +76,43 @@ ProtocolOption choice(std::string protocol, std::string key, std::vector<std::st
   return o;
 }
 
+// The GNSS receiver's error rows (drivers/gnss_fix.hpp GnssErrorConfig;
+// bounds of core/aiding/gnss.hpp validate): per axis, 1 sigma, local NED.
+// One set for every protocol that sends a GNSS fix: nmea and ubx (keys as
+// they are), mavlink2's HIL_GPS (keys prefixed gps_). Vertical velocity
+// only where the wire carries it.
+void add_gnss_error_rows(std::vector<ProtocolOption>& t, const std::string& p, const std::string& prefix,
+                         const std::string& help_prefix, bool vertical_velocity) {
+  const auto sigma = [&](const char* key, const char* help, double GnssErrorConfig::*field) {
+    t.push_back(number(p, prefix + key, 0.0, aiding::kGnssMaxSigma_m, false, "0", help_prefix + help,
+                       [field](ProtocolOptions& o, double v) { o.stream.gnss.errors.*field = v; }));
+  };
+  const auto tau = [&](const char* key, const char* help, double GnssErrorConfig::*field) {
+    t.push_back(number(p, prefix + key, sensor::kMinTauS, sensor::kMaxTauS, false, "60", help_prefix + help,
+                       [field](ProtocolOptions& o, double v) { o.stream.gnss.errors.*field = v; }));
+  };
+  const auto velocity = [&](const char* key, const char* help, double GnssErrorConfig::*field) {
+    t.push_back(number(p, prefix + key, 0.0, aiding::kGnssMaxVelocitySigma_m_s, false, "0", help_prefix + help,
+                       [field](ProtocolOptions& o, double v) { o.stream.gnss.errors.*field = v; }));
+  };
+  sigma("horizontal_white_m", "position white noise, north and east each (m, 1 sigma per fix)",
+        &GnssErrorConfig::horizontal_white_m);
+  sigma("horizontal_gm_sigma_m", "position first-order Gauss-Markov error, north and east each (m, stationary sigma)",
+        &GnssErrorConfig::horizontal_gm_sigma_m);
+  tau("horizontal_gm_tau_s", "correlation time of the horizontal Gauss-Markov error (s)",
+      &GnssErrorConfig::horizontal_gm_tau_s);
+  sigma("vertical_white_m", "height white noise (m, 1 sigma per fix)", &GnssErrorConfig::vertical_white_m);
+  sigma("vertical_gm_sigma_m", "height first-order Gauss-Markov error (m, stationary sigma)",
+        &GnssErrorConfig::vertical_gm_sigma_m);
+  tau("vertical_gm_tau_s", "correlation time of the vertical Gauss-Markov error (s)",
+      &GnssErrorConfig::vertical_gm_tau_s);
+  velocity("horizontal_velocity_m_s", "velocity white noise, north and east each (m/s, 1 sigma per fix)",
+           &GnssErrorConfig::horizontal_velocity_m_s);
+  if (vertical_velocity)
+    velocity("vertical_velocity_m_s", "vertical velocity white noise (m/s, 1 sigma per fix)",
+             &GnssErrorConfig::vertical_velocity_m_s);
+}
+
 std::vector<ProtocolOption> make_table() {
   std::vector<ProtocolOption> t;
   // ---- native (docs/native-protocol.md)
@@ -116,7 +153,7 @@ std::vector<ProtocolOption> make_table() {
   t.push_back(number("mavlink2", "geoid_undulation_m", -200.0, 200.0, false, "0.0",
                      "geoid above the ellipsoid (no geoid model is carried): mean sea level for the atmosphere and "
                      "HIL_GPS alt is the ellipsoidal height minus this",
-                     [](ProtocolOptions& p, double v) { p.stream.mavlink_geoid_undulation_m = v; }));
+                     [](ProtocolOptions& p, double v) { p.stream.gnss.geoid_separation_m = v; }));
   t.push_back(number("mavlink2", "baro_noise_rms_pa", 0.0, 1000.0, false, "0.0",
                      "barometer white noise per sample (Pa RMS; MS5611 at OSR 4096: 1.2)",
                      [](ProtocolOptions& p, double v) { p.stream.mavlink_baro_noise_rms_pa = v; }));
@@ -127,11 +164,16 @@ std::vector<ProtocolOption> make_table() {
                      "magnetometer white noise per sample and axis (uT RMS; LIS3MDL at +-4 G: 0.32)",
                      [](ProtocolOptions& p, double v) { p.stream.mavlink_mag_noise_rms_ut = v; }));
   t.push_back(integer("mavlink2", "gps_satellites", 0, 254, "12", "HIL_GPS satellites_visible (255 means unknown)",
-                      [](ProtocolOptions& p, std::int64_t v) { p.stream.mavlink_gps_satellites = static_cast<int>(v); }));
+                      [](ProtocolOptions& p, std::int64_t v) { p.stream.gnss.satellites = static_cast<int>(v); }));
   t.push_back(number("mavlink2", "gps_hdop", 0.0, 99.0, true, "0.7", "HIL_GPS eph: horizontal dilution of precision (sent x 100)",
-                     [](ProtocolOptions& p, double v) { p.stream.mavlink_gps_hdop = v; }));
+                     [](ProtocolOptions& p, double v) { p.stream.gnss.hdop = v; }));
   t.push_back(number("mavlink2", "gps_vdop", 0.0, 99.0, true, "1.0", "HIL_GPS epv: vertical dilution of precision (sent x 100)",
-                     [](ProtocolOptions& p, double v) { p.stream.mavlink_gps_vdop = v; }));
+                     [](ProtocolOptions& p, double v) { p.stream.gnss.vdop = v; }));
+  // HIL_GPS's position and velocity errors: the GNSS receivers' (one
+  // source, drivers/gnss_fix.hpp GnssFixSource, fix j = the j-th HIL_GPS
+  // instant), seeded by the device's seed as the barometer and magnetometer
+  // (no key of their own: stream_protocols.hpp aiding_seed).
+  add_gnss_error_rows(t, "mavlink2", "gps_", "HIL_GPS ", true);
 
   // ---- mip (mip.hpp)
   t.push_back(boolean("mip", "include_deltas", true, "delta-theta / delta-velocity fields (0x80, 0x07 / 0x08)",
@@ -181,33 +223,8 @@ std::vector<ProtocolOption> make_table() {
     t.push_back(number(p, "geoid_separation_m", -200.0, 200.0, false, "0.0",
                        "geoid above the ellipsoid (no geoid model is carried): MSL height = ellipsoidal height - this",
                        [](ProtocolOptions& o, double v) { o.stream.gnss.geoid_separation_m = v; }));
-    // The receiver's errors (drivers/gnss_fix.hpp GnssErrorConfig; bounds
-    // of core/aiding/gnss.hpp validate): per axis, 1 sigma, local NED.
-    const auto sigma = [&](const char* key, const char* help, double GnssErrorConfig::*field) {
-      t.push_back(number(p, key, 0.0, aiding::kGnssMaxSigma_m, false, "0", help,
-                         [field](ProtocolOptions& o, double v) { o.stream.gnss.errors.*field = v; }));
-    };
-    sigma("horizontal_white_m", "position white noise, north and east each (m, 1 sigma per fix)",
-          &GnssErrorConfig::horizontal_white_m);
-    sigma("horizontal_gm_sigma_m", "position first-order Gauss-Markov error, north and east each (m, stationary sigma)",
-          &GnssErrorConfig::horizontal_gm_sigma_m);
-    t.push_back(number(p, "horizontal_gm_tau_s", sensor::kMinTauS, sensor::kMaxTauS, false, "60",
-                       "correlation time of the horizontal Gauss-Markov error (s)",
-                       [](ProtocolOptions& o, double v) { o.stream.gnss.errors.horizontal_gm_tau_s = v; }));
-    sigma("vertical_white_m", "height white noise (m, 1 sigma per fix)", &GnssErrorConfig::vertical_white_m);
-    sigma("vertical_gm_sigma_m", "height first-order Gauss-Markov error (m, stationary sigma)",
-          &GnssErrorConfig::vertical_gm_sigma_m);
-    t.push_back(number(p, "vertical_gm_tau_s", sensor::kMinTauS, sensor::kMaxTauS, false, "60",
-                       "correlation time of the vertical Gauss-Markov error (s)",
-                       [](ProtocolOptions& o, double v) { o.stream.gnss.errors.vertical_gm_tau_s = v; }));
-    t.push_back(number(p, "horizontal_velocity_m_s", 0.0, aiding::kGnssMaxVelocitySigma_m_s, false, "0",
-                       "velocity white noise, north and east each (m/s, 1 sigma per fix)",
-                       [](ProtocolOptions& o, double v) { o.stream.gnss.errors.horizontal_velocity_m_s = v; }));
     // NMEA's sentences (GGA, RMC, VTG) carry no vertical velocity.
-    if (p == "ubx")
-      t.push_back(number(p, "vertical_velocity_m_s", 0.0, aiding::kGnssMaxVelocitySigma_m_s, false, "0",
-                         "vertical velocity white noise (m/s, 1 sigma per fix)",
-                         [](ProtocolOptions& o, double v) { o.stream.gnss.errors.vertical_velocity_m_s = v; }));
+    add_gnss_error_rows(t, p, "", "", p == "ubx");
     t.push_back(integer(p, "seed", 0, std::numeric_limits<std::int64_t>::max(), "0",
                         "seed of the error terms (streams keyed by seed and device name, as the IMU's noise)",
                         [](ProtocolOptions& o, std::int64_t v) { o.stream.gnss.errors.seed = static_cast<std::uint64_t>(v); }));

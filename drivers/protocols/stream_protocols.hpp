@@ -81,22 +81,23 @@ struct StreamEncoderOptions {
   // The decimal year of trajectory time 0 (WMM2025's validity, 2025.0 ..
   // 2030.0): the date the field is evaluated at is this + t / 365.25 d.
   double mavlink_date_at_t0_year = 2026.0;
-  // Geoid undulation N (geoid above the ellipsoid; no geoid model is
-  // carried): the atmosphere's and HIL_GPS alt's mean sea level is h - N.
-  double mavlink_geoid_undulation_m = 0.0;
+  // Geoid undulation N: gnss.geoid_separation_m below (geoid above the
+  // ellipsoid; no geoid model is carried): the atmosphere's and HIL_GPS
+  // alt's mean sea level is h - N.
   // Barometer errors (core/aiding/barometer.hpp terms); magnetometer noise
   // per axis. 0: truth.
   double mavlink_baro_noise_rms_pa = 0.0;
   double mavlink_baro_bias_pa = 0.0;
   double mavlink_mag_noise_rms_ut = 0.0;
-  // HIL_GPS satellites_visible and eph / epv (the DOPs, sent x 100).
-  int mavlink_gps_satellites = 12;
-  double mavlink_gps_hdop = 0.7;
-  double mavlink_gps_vdop = 1.0;
-  // The random terms' streams, keyed as the IMU's (scene: the error model's
-  // seed and the device's name).
+  // HIL_GPS is the fix of the GNSS receivers (gnss below, through
+  // drivers/gnss_fix.hpp GnssFixSource at mavlink_hil_gps_rate_hz): its
+  // satellites, hdop / vdop (eph / epv, sent x 100), geoid_separation_m and
+  // position / velocity errors; errors off (the default): the trajectory.
+  // The random terms of the barometer, the magnetometer and HIL_GPS: the
+  // scene's error-model seed (emit: --seed), streams keyed as the IMU's by
+  // that seed and device_name. HIL_GPS takes this seed, not gnss.errors.seed
+  // (the receivers' own key): one MAVLink component, one seed.
   std::uint64_t aiding_seed = 0;
-  std::string aiding_device = "imu";
 
   // mip. What trajectory time is, which decides the GPS timestamp field
   // (0x80,0x12): tow and week of a GPS time with the valid flags set
@@ -121,12 +122,18 @@ struct StreamEncoderOptions {
   MipDeviceConfig mip_device;
 
   // nmea and ubx (issue 28, drivers/gnss_fix.hpp): the receiver's time base
-  // and the figures it reports.
+  // and the figures it reports; mavlink2 HIL_GPS: its satellites, DOPs,
+  // geoid separation and errors (the time fields are not used).
   GnssReceiverConfig gnss;
   std::string nmea_talker = "GP";  // GP (GPS) or GN (multi-constellation)
   // ubx: NAV-POSLLH, NAV-STATUS, NAV-DOP, NAV-SOL, NAV-VELNED, NAV-TIMEGPS
   // beside NAV-PVT (what ArduPilot's UBX driver reads); false: NAV-PVT only.
   bool ubx_legacy_nav = true;
+
+  // The device's name (scene [[imu]] name; emit: imu0): with the seed, the
+  // key of every random term a protocol adds (MAVLink barometer,
+  // magnetometer and HIL_GPS; NMEA/UBX receiver errors), as the IMU noise's.
+  std::string device_name = "imu0";
 
   // The sample rate the encoder will run at, only to spread periodic traffic
   // (heartbeats) over samples in max_bytes_per_sample(); 0 = unknown (then

@@ -273,7 +273,7 @@ void append_nav_eoe(const GnssFix& f, std::vector<std::uint8_t>& out) {
 }
 
 Encoder::Encoder(const StreamEncoderOptions& options)
-    : fix_source_(options.gnss, options.nominal_sample_rate_hz), legacy_nav_(options.ubx_legacy_nav) {}
+    : fix_source_(options.gnss, options.nominal_sample_rate_hz, options.device_name), legacy_nav_(options.ubx_legacy_nav) {}
 
 void Encoder::encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out) {
   const GnssFix fix_value = fix_source_.fix(sample);

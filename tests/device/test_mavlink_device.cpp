@@ -46,6 +46,7 @@
 #include "drivers/pty_transport.hpp"
 #include "drivers/protocols/mavlink_device.hpp"
 #include "drivers/protocols/stream_protocols.hpp"
+#include "tests/support/gnss_error_stats.hpp"
 
 namespace {
 
@@ -902,7 +903,7 @@ TEST(MavlinkAiding, HilSensorCarries7167WithIsaPressureAndTheWmmTestValues) {
 TEST(MavlinkAiding, TheFieldTurnsWithTheSensorAndThePressureFollowsTheHeight) {
   StreamEncoderOptions o = aiding_options();
   o.mavlink_date_at_t0_year = 2025.0;
-  o.mavlink_geoid_undulation_m = 30.0;  // MSL 30 m above the ellipsoid
+  o.gnss.geoid_separation_m = 30.0;  // MSL 30 m above the ellipsoid
   mavlink2::Encoder enc(o);
   // Sensor x east, y south, z down (a yaw of +90 deg): R_s^n columns are the
   // sensor axes in NED, so the sensor reads (Y, -X, Z).
@@ -984,7 +985,7 @@ TEST(MavlinkAiding, HilGpsDecodesToTheTrajectoryAtItsRate) {
   StreamEncoderOptions o;
   o.nominal_sample_rate_hz = 100.0;
   o.mavlink_hil_gps_rate_hz = 5;
-  o.mavlink_geoid_undulation_m = geoid;
+  o.gnss.geoid_separation_m = geoid;
   o.mavlink_sensor_id = 2;
   mavlink2::Encoder enc(o);
   Bytes out;
@@ -1072,4 +1073,152 @@ TEST(MavlinkAiding, BarometerAndMagnetometerNoiseIsSeededAndHasItsStatedSigma) {
   EXPECT_NEAR(sigma, 1.2, 5.0 * 0.011 * 1.2);
   const double mmean = msum / n, msigma = std::sqrt(msum2 / n - mmean * mmean);
   EXPECT_NEAR(msigma, 0.5, 5.0 * 0.011 * 0.5);
+}
+
+namespace {
+
+// HIL_GPS with the receiver's errors (issue 28; drivers/gnss_fix.hpp
+// GnssFixSource, the nmea/ubx receivers' source). The truth: latitude,
+// longitude and ellipsoidal height linear in time (a trajectory of its own
+// definition, fed to the encoder as its navigation fields); the errors are
+// the decoded fix minus the truth at its time_usec, in the local NED.
+struct HgTruth {
+  double lat_rad, lon_rad, h_m;
+  double meridian_m, normal_m;  // WGS84 radii of curvature M, N (NIMA TR8350.2)
+};
+constexpr double kHgLat0Deg = -33.9, kHgLon0Deg = 151.2, kHgH0M = 120.0;
+constexpr double kHgLatRateDegS = -1.8e-5, kHgLonRateDegS = 3.1e-5, kHgClimbMS = 0.02;
+
+HgTruth hg_truth(double t_s) {
+  HgTruth x{};
+  x.lat_rad = (kHgLat0Deg + kHgLatRateDegS * t_s) * kRadPerDegHere;
+  x.lon_rad = (kHgLon0Deg + kHgLonRateDegS * t_s) * kRadPerDegHere;
+  x.h_m = kHgH0M + kHgClimbMS * t_s;
+  const double a = 6378137.0, f = 1.0 / 298.257223563, e2 = f * (2.0 - f);
+  const double s = std::sin(x.lat_rad), w = std::sqrt(1.0 - e2 * s * s);
+  x.meridian_m = a * (1.0 - e2) / (w * w * w);
+  x.normal_m = a / w;
+  return x;
+}
+Vec3 hg_velocity_ned(const HgTruth& x) {
+  return Vec3((x.meridian_m + x.h_m) * kHgLatRateDegS * kRadPerDegHere,
+              (x.normal_m + x.h_m) * std::cos(x.lat_rad) * kHgLonRateDegS * kRadPerDegHere, -kHgClimbMS);
+}
+
+// `n` samples at `rate_hz` from t = 0 through a fresh encoder: its output.
+Bytes hg_run(const StreamEncoderOptions& o, std::uint64_t n) {
+  mavlink2::Encoder enc(o);
+  Bytes out;
+  const TimeNs period_ns = static_cast<TimeNs>(std::llround(1e9 / o.nominal_sample_rate_hz));
+  for (std::uint64_t k = 0; k < n; ++k) {
+    ImuFrameInput s;
+    s.sample_counter = k;
+    s.period_ns = period_ns;
+    s.t_ns = static_cast<TimeNs>(k) * period_ns;
+    s.accel_m_s2 = Vec3(0.0, 0.0, -9.81);
+    s.has_navigation = true;
+    const HgTruth x = hg_truth(static_cast<double>(s.t_ns) * 1e-9);
+    s.latitude_rad = x.lat_rad;
+    s.longitude_rad = x.lon_rad;
+    s.height_m = x.h_m;
+    s.velocity_ned_m_s = hg_velocity_ned(x);
+    enc.encode(s, out);
+  }
+  return out;
+}
+
+StreamEncoderOptions hg_error_options(double rate_hz, std::int64_t gps_rate_hz) {
+  StreamEncoderOptions o;
+  o.nominal_sample_rate_hz = rate_hz;
+  o.mavlink_heartbeat = false;
+  o.mavlink_hil_gps_rate_hz = gps_rate_hz;
+  o.gnss.geoid_separation_m = 25.0;
+  GnssErrorConfig& e = o.gnss.errors;
+  e.horizontal_white_m = 1.2;
+  e.horizontal_gm_sigma_m = 2.0;
+  e.horizontal_gm_tau_s = 15.0;
+  e.vertical_white_m = 1.8;
+  e.vertical_gm_sigma_m = 3.0;
+  e.vertical_gm_tau_s = 25.0;
+  e.horizontal_velocity_m_s = 0.15;
+  e.vertical_velocity_m_s = 0.25;
+  o.aiding_seed = 2028;
+  return o;
+}
+
+}  // namespace
+
+TEST(MavlinkAiding, HilGpsErrorsHaveTheConfiguredMeanAndSigmaPerAxis) {
+  // 24 000 fixes at 10 Hz (40 min), the encoder driven directly at the GPS rate.
+  constexpr double kRateHz = 10.0;
+  constexpr std::uint64_t kFixes = 24'000;
+  const StreamEncoderOptions o = hg_error_options(kRateHz, 10);
+  const std::vector<Frame> gps = of_id(decode_all(hg_run(o, kFixes)), 113);
+  ASSERT_EQ(gps.size(), kFixes);
+  std::vector<double> e[6];
+  for (const Frame& f : gps) {
+    const Bytes& p = f.payload;
+    const double t_s = static_cast<double>(get_u64(p, 0)) * 1e-6;
+    const HgTruth x = hg_truth(t_s);
+    const Vec3 v = hg_velocity_ned(x);
+    // [X] lat/lon degE7, alt mm above MSL (= h - N), vn/ve/vd cm/s.
+    e[0].push_back((get_i32(p, 8) * 1e-7 * kRadPerDegHere - x.lat_rad) * (x.meridian_m + x.h_m));
+    e[1].push_back((get_i32(p, 12) * 1e-7 * kRadPerDegHere - x.lon_rad) * (x.normal_m + x.h_m) * std::cos(x.lat_rad));
+    e[2].push_back(-((get_i32(p, 16) * 1e-3 + 25.0) - x.h_m));
+    for (int i = 0; i < 3; ++i) e[3 + i].push_back(get_i16(p, 26 + 2 * static_cast<std::size_t>(i)) * 1e-2 - v[i]);
+    EXPECT_EQ(get_u16(p, 20), 70);  // eph, epv: the DOPs x 100, errors or not
+    EXPECT_EQ(get_u16(p, 22), 100);
+    EXPECT_EQ(p[34], 3);
+  }
+  const GnssErrorConfig& c = o.gnss.errors;
+  const double lat0 = kHgLat0Deg * kRadPerDegHere;
+  // The wire's steps: 1e-7 deg of latitude / longitude, 1 mm, 1 cm/s.
+  const double step_n = 1e-7 * kRadPerDegHere * 6.36e6, step_e = step_n * std::cos(lat0);
+  using test::GnssAxisModel;
+  const GnssAxisModel models[6] = {
+      {c.horizontal_white_m, c.horizontal_gm_sigma_m, c.horizontal_gm_tau_s, step_n},
+      {c.horizontal_white_m, c.horizontal_gm_sigma_m, c.horizontal_gm_tau_s, step_e},
+      {c.vertical_white_m, c.vertical_gm_sigma_m, c.vertical_gm_tau_s, 1e-3},
+      {c.horizontal_velocity_m_s, 0.0, 1.0, 0.01},
+      {c.horizontal_velocity_m_s, 0.0, 1.0, 0.01},
+      {c.vertical_velocity_m_s, 0.0, 1.0, 0.01},
+  };
+  const char* names[6] = {"hil_gps north m", "hil_gps east m", "hil_gps down m",
+                          "hil_gps vn m/s", "hil_gps ve m/s", "hil_gps vd m/s"};
+  std::string log;
+  for (int i = 0; i < 6; ++i) test::check_gnss_axis(names[i], e[i], models[i], 1.0 / kRateHz, log);
+  std::printf("%s", log.c_str());
+}
+
+TEST(MavlinkAiding, HilGpsErrorsFollowTheSeedAndTheFixIndexNotTheImuCounter) {
+  const StreamEncoderOptions o = hg_error_options(100.0, 5);
+  const Bytes first = hg_run(o, 3000);  // 30 s: 150 fixes
+  EXPECT_EQ(first, hg_run(o, 3000));    // the same seed, the same bits
+  StreamEncoderOptions other = o;
+  other.aiding_seed = 2029;
+  const Bytes second = hg_run(other, 3000);
+  EXPECT_NE(first, second);
+  std::vector<Frame> a = of_id(decode_all(first), 113), b = of_id(decode_all(second), 113);
+  ASSERT_EQ(a.size(), 150u);
+  ASSERT_EQ(b.size(), 150u);
+  int same_lat = 0;
+  for (std::size_t i = 0; i < a.size(); ++i) same_lat += get_i32(a[i].payload, 8) == get_i32(b[i].payload, 8);
+  EXPECT_LT(same_lat, 10);  // another seed: other errors, not one shifted fix
+  // Another device name: other streams (keyed as the IMU noise's).
+  StreamEncoderOptions renamed = o;
+  renamed.device_name = "gps-other";
+  EXPECT_NE(first, hg_run(renamed, 3000));
+  // The fix index is the count of HIL_GPS instants (5 Hz), not the IMU
+  // sample counter: a 10 Hz device sends the same fixes as the 100 Hz one.
+  StreamEncoderOptions slow = o;
+  slow.nominal_sample_rate_hz = 10.0;
+  const std::vector<Frame> c = of_id(decode_all(hg_run(slow, 300)), 113);
+  ASSERT_EQ(c.size(), a.size());
+  for (std::size_t i = 0; i < a.size(); ++i) ASSERT_EQ(a[i].payload, c[i].payload) << "fix " << i;
+  // Errors off: the truth (the existing HilGpsDecodesToTheTrajectoryAtItsRate)
+  // and bytes that do not depend on the seed.
+  StreamEncoderOptions off = o, off_other = other;
+  off.gnss.errors = GnssErrorConfig{};
+  off_other.gnss.errors = GnssErrorConfig{};
+  EXPECT_EQ(hg_run(off, 3000), hg_run(off_other, 3000));
 }

@@ -299,7 +299,7 @@ TEST(GnssErrorsOnTheWire, SeededReproducibleAndOffIsTheTrajectory) {
     EXPECT_EQ(bytes(opts(7)), bytes(opts(7)));
     EXPECT_NE(bytes(opts(7)), bytes(opts(8)));
     StreamEncoderOptions renamed = opts(7);
-    renamed.gnss.device_name = "gnss1";
+    renamed.device_name = "gnss1";
     EXPECT_NE(bytes(opts(7)), bytes(renamed));
     StreamEncoderOptions off = imuemu::drivers::default_protocol_options(1.0).stream;
     StreamEncoderOptions off_seeded = off;

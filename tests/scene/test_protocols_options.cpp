@@ -206,11 +206,10 @@ TEST(ProtocolOptionTable, SceneFileAndCommandLineGiveTheSameWire) {
 
     // Not protocol options: the random terms' key (the device's name and
     // its error model's seed) comes from the scene's [[imu]], and a GNSS
-    // receiver's rate (its error model's step) and name (its error streams' key).
-    cli.stream.aiding_device = s.imus[0].stream_options.aiding_device;
+    // receiver's rate (its error model's step).
+    cli.stream.device_name = s.imus[0].stream_options.device_name;
     cli.stream.aiding_seed = s.imus[0].stream_options.aiding_seed;
     cli.stream.nominal_sample_rate_hz = s.imus[0].stream_options.nominal_sample_rate_hz;
-    cli.stream.gnss.device_name = s.imus[0].stream_options.gnss.device_name;
     const std::vector<std::uint8_t> from_cli = wire_of(o.protocol, cli);
     EXPECT_EQ(wire_of(o.protocol, s.imus[0].stream_options, s.imus[0].can_options), from_cli);
     EXPECT_NE(from_cli, wire_of(o.protocol, default_protocol_options(kRateHz))) << "the option has no effect";
