@@ -20,6 +20,11 @@
 #include "daemon/cli/commands.hpp"
 #include "io/sample_writers.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_cli_test_allan_command {
+namespace imuemu { using namespace ::imuemu; }
+
 namespace cli = imuemu::cli;
 namespace fs = std::filesystem;
 
@@ -381,3 +386,4 @@ TEST_F(AllanCommand, DroppedTicksAndTimeGaps) {
   EXPECT_EQ(run(args), cli::kBadInput);
   EXPECT_NE(err_.str().find("repeated.csv:52: column 'sequence' (1): sequence 49 after 49"), std::string::npos) << err_.str();
 }
+}  // namespace unity_cli_test_allan_command

@@ -26,6 +26,11 @@
 #include "daemon/cli/allan_command.hpp"
 #include "daemon/scene/error_model_config.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_cli_test_allan_presets {
+namespace imuemu { using namespace ::imuemu; }
+
 namespace cli = imuemu::cli;
 namespace allan = imuemu::allan;
 using imuemu::ImuSample;
@@ -326,3 +331,4 @@ TEST(AllanPresets, DISABLED_CoverageOverSeeds) {
 }
 
 }  // namespace
+}  // namespace unity_cli_test_allan_presets

@@ -42,6 +42,11 @@
 #include "tests/support/gnss_error_stats.hpp"
 #include "tests/support/spawn.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_cli_test_gnss_gpsd {
+namespace imuemu { using namespace ::imuemu; }
+
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
 
@@ -471,3 +476,4 @@ TEST(GnssGpsd, GpsdFixesCarryTheConfiguredErrorsOverTenMinutes) {
   std::printf("%s", log.c_str());
   if (!HasFailure()) fs::remove_all(dir);
 }
+}  // namespace unity_cli_test_gnss_gpsd

@@ -37,6 +37,11 @@
 #include "drivers/socketcan.hpp"
 #include "drivers/transport.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_cli_test_listen {
+namespace imuemu { using namespace ::imuemu; }
+
 namespace fs = std::filesystem;
 namespace drv = imuemu::drivers;
 using namespace std::chrono_literals;
@@ -814,3 +819,4 @@ TEST(ArrivalJitter, MemoryDoesNotGrowWithTheRun) {
   EXPECT_LE(j.p50_us, j.p99_us);
   EXPECT_LE(j.p99_us, j.max_us);
 }
+}  // namespace unity_cli_test_listen

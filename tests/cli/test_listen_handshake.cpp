@@ -29,6 +29,11 @@
 
 #include "daemon/cli/listen_command.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_cli_test_listen_handshake {
+namespace imuemu { using namespace ::imuemu; }
+
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
 
@@ -239,3 +244,4 @@ TEST(ListenHandshake, TheRealMavlinkComponentAnswersAsAGroundStationExpects) {
 }
 
 }  // namespace
+}  // namespace unity_cli_test_listen_handshake

@@ -25,6 +25,11 @@
 #include <string>
 #include <vector>
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_cli_test_man_pages {
+namespace imuemu { using namespace ::imuemu; }
+
 namespace {
 
 std::string help_of(const std::string& program, const std::string& command) {
@@ -178,3 +183,4 @@ TEST(ManPages, TheCheckSeesBothDirections) {
 }
 
 }  // namespace
+}  // namespace unity_cli_test_man_pages

@@ -31,6 +31,13 @@
 #include "io/pose_source.hpp"
 #include "tests/support/udp_sender.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace imuemu::io {}
+namespace unity_cli_test_mavlink_senders {
+namespace imuemu { using namespace ::imuemu; }
+namespace imuemu::io { using namespace ::imuemu::io; }
+
 namespace imuemu::io {
 namespace {
 
@@ -346,3 +353,4 @@ TEST(MavlinkSenders, StatusSummaryNamesTheOtherSendersPackets) {
 
 }  // namespace
 }  // namespace imuemu::io
+}  // namespace unity_cli_test_mavlink_senders

@@ -44,6 +44,11 @@
 #include "io/trajectory_csv.hpp"
 #include "tests/support/spawn.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_cli_test_send {
+namespace imuemu { using namespace ::imuemu; }
+
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
 
@@ -458,3 +463,4 @@ TEST_F(Send, TcpDrivesImuemuStreamLikeGenerate) {
 }
 
 }  // namespace
+}  // namespace unity_cli_test_send

@@ -12,6 +12,11 @@
 #include <sstream>
 #include <string>
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_cli_test_version {
+namespace imuemu { using namespace ::imuemu; }
+
 namespace {
 
 std::pair<std::string, int> run_version(const std::string& program) {
@@ -48,3 +53,4 @@ TEST(Version, BothProgramsPrintTheDeclaredVersionAndTheCommit) {
 }
 
 }  // namespace
+}  // namespace unity_cli_test_version

@@ -15,6 +15,13 @@
 #include "core/aiding/barometer.hpp"
 #include "core/setting_error.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace imuemu::aiding {}
+namespace unity_core_test_aiding_barometer {
+namespace imuemu { using namespace ::imuemu; }
+namespace imuemu::aiding { using namespace ::imuemu::aiding; }
+
 namespace imuemu::aiding {
 namespace {
 
@@ -200,3 +207,4 @@ TEST(Barometer, RefusesBadSpecsAndInputsAndARefusedCallChangesNothing) {
 
 }  // namespace
 }  // namespace imuemu::aiding
+}  // namespace unity_core_test_aiding_barometer

@@ -16,6 +16,13 @@
 #include "core/attitude.hpp"
 #include "core/setting_error.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace imuemu::aiding {}
+namespace unity_core_test_aiding_gnss {
+namespace imuemu { using namespace ::imuemu; }
+namespace imuemu::aiding { using namespace ::imuemu::aiding; }
+
 namespace imuemu::aiding {
 namespace {
 
@@ -265,3 +272,4 @@ TEST(GnssErrors, RefusesBadSpecs) {
 
 }  // namespace
 }  // namespace imuemu::aiding
+}  // namespace unity_core_test_aiding_gnss

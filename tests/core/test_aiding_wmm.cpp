@@ -22,6 +22,13 @@
 #include "core/attitude.hpp"
 #include "core/setting_error.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace imuemu::aiding {}
+namespace unity_core_test_aiding_wmm {
+namespace imuemu { using namespace ::imuemu; }
+namespace imuemu::aiding { using namespace ::imuemu::aiding; }
+
 namespace imuemu::aiding {
 namespace {
 
@@ -307,3 +314,4 @@ TEST(Magnetometer, RefusesBadSpecsAndInputs) {
 
 }  // namespace
 }  // namespace imuemu::aiding
+}  // namespace unity_core_test_aiding_wmm

@@ -21,6 +21,11 @@
 
 #include "core/allan/allan.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_core_test_allan {
+namespace imuemu { using namespace ::imuemu; }
+
 namespace allan = imuemu::allan;
 
 namespace {
@@ -537,3 +542,4 @@ TEST(AllanBadInput, ConstantSeriesGivesZerosNotNaN) {
   for (const allan::FittedTerm& t : a.terms) EXPECT_EQ(t.value, 0.0);
   for (double v : a.model_adev) EXPECT_EQ(v, 0.0);
 }
+}  // namespace unity_core_test_allan

@@ -17,6 +17,11 @@
 #include "core/earth.hpp"
 #include "core/so3.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_core_test_attitude_earth {
+namespace imuemu { using namespace ::imuemu; }
+
 namespace {
 
 using imuemu::Mat3;
@@ -451,3 +456,4 @@ TEST(Earth, LocalNedRoundTripAndAxes) {
 }
 
 }  // namespace
+}  // namespace unity_core_test_attitude_earth

@@ -30,6 +30,11 @@
 #include "core/so3.hpp"
 #include "tests/support/imu_errors.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_core_test_bspline {
+namespace imuemu { using namespace ::imuemu; }
+
 using namespace imuemu;
 
 namespace {
@@ -910,3 +915,4 @@ TEST(BSpline, JitteredKnotsReproduceCubicsUpToTheUniformBias) {
   EXPECT_LT(a_err, 1e-8);
   EXPECT_GT(bias_max, 0.1);  // the bias is real, and predicted
 }
+}  // namespace unity_core_test_bspline

@@ -17,6 +17,11 @@
 #include "core/imu_model.hpp"
 #include "core/so3.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_core_test_causal_hermite {
+namespace imuemu { using namespace ::imuemu; }
+
 namespace imuemu {
 namespace {
 
@@ -158,3 +163,4 @@ TEST(CausalHermite, ARefusedKnotChangesNothing) {
 
 }  // namespace
 }  // namespace imuemu
+}  // namespace unity_core_test_causal_hermite

@@ -25,6 +25,11 @@
 #include "core/so3.hpp"
 #include "core/so3_spline.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_core_test_fast_rotation_and_ends {
+namespace imuemu { using namespace ::imuemu; }
+
 using namespace imuemu;
 
 namespace {
@@ -142,3 +147,4 @@ TEST(Ends, DenseFloatKnotsWithALongPaddingStayNearTheTrueRate) {
   std::printf("  worst gyro error %.3e rad/s over %zu samples\n", worst_rad_s, out.imu.size());
   EXPECT_LT(worst_rad_s, 0.02);
 }
+}  // namespace unity_core_test_fast_rotation_and_ends

@@ -28,6 +28,11 @@
 #include "core/reference_motion.hpp"
 #include "core/so3.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_core_test_flight_accuracy {
+namespace imuemu { using namespace ::imuemu; }
+
 using namespace imuemu;
 
 namespace {
@@ -585,3 +590,4 @@ TEST_F(FlightAccuracy, FlatDefaultAndGlobalChart) {
   expect_within(p, kProductBounds, "product default, flat");
   check_global_chart(Physics::flat, "hermite (product default)", product_options(Physics::flat), kProductBounds);
 }
+}  // namespace unity_core_test_flight_accuracy

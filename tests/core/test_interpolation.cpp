@@ -16,6 +16,11 @@
 #include "core/interpolation.hpp"
 #include "core/so3.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_core_test_interpolation {
+namespace imuemu { using namespace ::imuemu; }
+
 namespace {
 
 using imuemu::kNsPerSecond;
@@ -588,3 +593,4 @@ TEST(Interpolate, ManySamplesAcrossManySegments) {
 }
 
 }  // namespace
+}  // namespace unity_core_test_interpolation

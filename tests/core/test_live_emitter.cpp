@@ -37,6 +37,11 @@
 #include "core/strapdown.hpp"
 #include "core/time_mapping.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_core_test_live_emitter {
+namespace imuemu { using namespace ::imuemu; }
+
 namespace {
 
 using imuemu::ImuSample;
@@ -881,3 +886,4 @@ TEST(TimeMapping, StartAlignments) {
 }
 
 }  // namespace
+}  // namespace unity_core_test_live_emitter

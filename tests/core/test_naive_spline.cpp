@@ -28,6 +28,11 @@
 #include "core/so3.hpp"
 #include "tests/support/imu_errors.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_core_test_naive_spline {
+namespace imuemu { using namespace ::imuemu; }
+
 using namespace imuemu;
 
 namespace {
@@ -343,3 +348,4 @@ TEST(NaiveSpline, FailsNearPitch90WhereTheBSplineDoesNot) {
     }
   }
 }
+}  // namespace unity_core_test_naive_spline

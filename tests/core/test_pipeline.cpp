@@ -12,6 +12,11 @@
 #include "core/reference_motion.hpp"
 #include "core/so3.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_core_test_pipeline {
+namespace imuemu { using namespace ::imuemu; }
+
 using namespace imuemu;
 constexpr double kDeg = std::numbers::pi / 180.0;
 
@@ -205,3 +210,4 @@ TEST(Pipeline, ClosedFormPositionSmoothingEqualsTheDenseSum) {
     }
   }
 }
+}  // namespace unity_core_test_pipeline

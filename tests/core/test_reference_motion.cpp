@@ -15,6 +15,11 @@
 #include "core/reference_motion.hpp"
 #include "core/so3.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_core_test_reference_motion {
+namespace imuemu { using namespace ::imuemu; }
+
 namespace imuemu {
 namespace {
 
@@ -286,3 +291,4 @@ TEST(ReferenceMotion, SampleKnotsAndTruthSeries) {
 
 }  // namespace
 }  // namespace imuemu
+}  // namespace unity_core_test_reference_motion

@@ -15,6 +15,13 @@
 #include "core/sensor/datasheet.hpp"
 #include "core/sensor/sensor_model.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace imuemu::sensor {}
+namespace unity_core_test_sensor_model {
+namespace imuemu { using namespace ::imuemu; }
+namespace imuemu::sensor { using namespace ::imuemu::sensor; }
+
 namespace imuemu::sensor {
 namespace {
 
@@ -473,3 +480,4 @@ TEST(Datasheet, KeysConvertOnceToSiAndUnitlessKeysAreRefused) {
 
 }  // namespace
 }  // namespace imuemu::sensor
+}  // namespace unity_core_test_sensor_model

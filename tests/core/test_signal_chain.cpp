@@ -16,6 +16,13 @@
 #include "core/signal_chain/signal_chain.hpp"
 #include "core/so3.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace imuemu::signal_chain {}
+namespace unity_core_test_signal_chain {
+namespace imuemu { using namespace ::imuemu; }
+namespace imuemu::signal_chain { using namespace ::imuemu::signal_chain; }
+
 namespace imuemu::signal_chain {
 namespace {
 
@@ -1018,3 +1025,4 @@ TEST(SignalChain, RandomVibrationScaledOverTimeIsTheProfileTimesTheScaleAndStays
 
 }  // namespace
 }  // namespace imuemu::signal_chain
+}  // namespace unity_core_test_signal_chain

@@ -10,6 +10,11 @@
 #include "core/derivatives.hpp"
 #include "core/smoothing.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_core_test_smoothing {
+namespace imuemu { using namespace ::imuemu; }
+
 using namespace imuemu;
 
 TEST(Bump, ValuesAndNormalization) {
@@ -154,3 +159,4 @@ TEST(KernelDerivatives, ExactForQuadraticMotionEvenWithFewSamplesPerWindow) {
   EXPECT_LT(worst_rate, 1e-10);
   EXPECT_LT(worst_accel, 1e-8);
 }
+}  // namespace unity_core_test_smoothing

@@ -23,6 +23,11 @@
 
 #include "core/so3.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_core_test_so3 {
+namespace imuemu { using namespace ::imuemu; }
+
 namespace {
 
 using imuemu::Mat3;
@@ -425,3 +430,4 @@ TEST(So3, HatVee) {
 }
 
 }  // namespace
+}  // namespace unity_core_test_so3

@@ -20,6 +20,11 @@
 #include "core/so3.hpp"
 #include "core/so3_spline.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_core_test_so3_spline {
+namespace imuemu { using namespace ::imuemu; }
+
 using namespace imuemu;
 
 namespace {
@@ -126,3 +131,4 @@ TEST(So3Spline, AFixedAxisRotationIsTheNaturalCubicSplineOfItsAngle) {
   std::cout << "  fixed axis: knot rates vs the scalar natural spline " << worst << " rad/s\n";
   EXPECT_LT(worst, 1e-13);
 }
+}  // namespace unity_core_test_so3_spline

@@ -24,6 +24,11 @@
 #include "core/so3.hpp"
 #include "core/strapdown.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_core_test_strapdown {
+namespace imuemu { using namespace ::imuemu; }
+
 namespace imuemu {
 namespace {
 
@@ -296,3 +301,4 @@ TEST(Strapdown, OutputLayoutAndInputChecks) {
 
 }  // namespace
 }  // namespace imuemu
+}  // namespace unity_core_test_strapdown

@@ -17,6 +17,11 @@
 #include "core/strapdown.hpp"
 #include "core/stream.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_core_test_stream {
+namespace imuemu { using namespace ::imuemu; }
+
 using namespace imuemu;
 
 namespace {
@@ -503,3 +508,4 @@ TEST(Stream, AHeadingGlitchIsRefusedAndTheRestStreamsAsWithoutIt) {
   EXPECT_EQ(d.count_a, d.count_b);
   EXPECT_EQ(d.relative, 0.0);
 }
+}  // namespace unity_core_test_stream

@@ -26,6 +26,11 @@
 #include "core/interpolation.hpp"
 #include "core/so3.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_core_test_thesis_appendix {
+namespace imuemu { using namespace ::imuemu; }
+
 namespace {
 
 using imuemu::kNsPerSecond;
@@ -349,3 +354,4 @@ TEST(ThesisAppendixB, Fig7Fig8SmoothingRemovesTheGeodesicKinks) {
 }
 
 }  // namespace
+}  // namespace unity_core_test_thesis_appendix

@@ -48,6 +48,11 @@
 #include "drivers/protocols/stream_protocols.hpp"
 #include "tests/support/gnss_error_stats.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_device_test_mavlink_device {
+namespace imuemu { using namespace ::imuemu; }
+
 namespace {
 
 using namespace imuemu;
@@ -1222,3 +1227,4 @@ TEST(MavlinkAiding, HilGpsErrorsFollowTheSeedAndTheFixIndexNotTheImuCounter) {
   off_other.gnss.errors = GnssErrorConfig{};
   EXPECT_EQ(hg_run(off, 3000), hg_run(off_other, 3000));
 }
+}  // namespace unity_device_test_mavlink_device

@@ -34,6 +34,13 @@
 #include "drivers/protocols/dronecan.hpp"
 #include "drivers/protocols/j1939.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace imuemu::drivers {}
+namespace unity_drivers_test_can_device {
+namespace imuemu { using namespace ::imuemu; }
+namespace imuemu::drivers { using namespace ::imuemu::drivers; }
+
 namespace imuemu::drivers {
 namespace {
 
@@ -547,3 +554,4 @@ TEST(CanDeviceJ1939, ArbitraryAddressCapableNodeMovesToAFreeAddress) {
 
 }  // namespace
 }  // namespace imuemu::drivers
+}  // namespace unity_drivers_test_can_device

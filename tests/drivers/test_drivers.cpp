@@ -4,6 +4,11 @@
 
 #include "drivers/transport.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_drivers_test_drivers {
+namespace imuemu { using namespace ::imuemu; }
+
 TEST(NullTransport, CountsFramesAndBytes) {
   imuemu::drivers::NullTransport t;
   std::array<std::byte, 7> a{};
@@ -15,3 +20,4 @@ TEST(NullTransport, CountsFramesAndBytes) {
   EXPECT_EQ(t.counters().write_errors, 0u);
   EXPECT_EQ(t.describe(), "null");
 }
+}  // namespace unity_drivers_test_drivers

@@ -26,6 +26,11 @@
 #include "drivers/protocols/stream_protocols.hpp"
 #include "tests/support/gnss_error_stats.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_drivers_test_gnss_errors {
+namespace imuemu { using namespace ::imuemu; }
+
 namespace {
 
 using imuemu::drivers::ImuFrameInput;
@@ -326,3 +331,4 @@ TEST(GnssErrorsOnTheWire, SeededReproducibleAndOffIsTheTrajectory) {
   no_rate.nominal_sample_rate_hz = 0.0;
   EXPECT_THROW(imuemu::drivers::make_stream_encoder("nmea", no_rate), std::invalid_argument);
 }
+}  // namespace unity_drivers_test_gnss_errors

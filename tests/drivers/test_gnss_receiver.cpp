@@ -19,6 +19,11 @@
 #include "drivers/protocols/stream_protocols.hpp"
 #include "drivers/protocols/ubx.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_drivers_test_gnss_receiver {
+namespace imuemu { using namespace ::imuemu; }
+
 using namespace imuemu;
 using namespace imuemu::drivers;
 
@@ -349,3 +354,4 @@ TEST(UbxFrames, TimeOfWeekRoundsToTheMillisecondWithTheRestInFtow) {
   EXPECT_EQ(i4(frames[0].payload, 4), -432'109);
   EXPECT_EQ(u2(frames[0].payload, 8), 2400);
 }
+}  // namespace unity_drivers_test_gnss_receiver

@@ -19,6 +19,11 @@
 #include "drivers/protocols/can_protocols.hpp"
 #include "drivers/protocols/stream_protocols.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_drivers_test_link_budget {
+namespace imuemu { using namespace ::imuemu; }
+
 namespace drv = imuemu::drivers;
 using drv::BudgetVerdict;
 
@@ -307,3 +312,4 @@ TEST(BudgetCommand, RefusesWhatDoesNotFitAndNamesTheNumbers) {
   EXPECT_NE(can.find("448160"), std::string::npos) << can;
   EXPECT_NE(can.find("warning"), std::string::npos) << can;
 }
+}  // namespace unity_drivers_test_link_budget

@@ -22,6 +22,11 @@
 
 #include "drivers/net_transport.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_drivers_test_net_transport {
+namespace imuemu { using namespace ::imuemu; }
+
 namespace drv = imuemu::drivers;
 using namespace std::chrono_literals;
 
@@ -192,3 +197,4 @@ TEST(NetTransport, DeviceStringsParseOrSayWhatWasExpected) {
 }
 
 }  // namespace
+}  // namespace unity_drivers_test_net_transport

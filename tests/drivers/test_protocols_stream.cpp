@@ -30,6 +30,11 @@
 #include "drivers/protocols/native.hpp"
 #include "drivers/protocols/stream_protocols.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_drivers_test_protocols_stream {
+namespace imuemu { using namespace ::imuemu; }
+
 using namespace imuemu;
 using namespace imuemu::drivers;
 using Bytes = std::vector<std::uint8_t>;
@@ -1346,3 +1351,4 @@ TEST(MipTimeBase, UtcTimeBaseAddsTheLeapSecondsExplicitly) {
   EXPECT_EQ(decode("mip", o, encode_one(*enc19, sample_of(0, utc_2024, {0, 0, 0}, {0, 0, -kG}))).samples.at(0).t_ns,
             utc_2024);
 }
+}  // namespace unity_drivers_test_protocols_stream

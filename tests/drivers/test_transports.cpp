@@ -42,6 +42,11 @@
 #include "drivers/socketcan_wire.hpp"
 #include "drivers/transport.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_drivers_test_transports {
+namespace imuemu { using namespace ::imuemu; }
+
 namespace fs = std::filesystem;
 using namespace std::chrono_literals;
 using imuemu::drivers::ByteStreamReader;
@@ -1216,3 +1221,4 @@ TEST(GpioSync, AFailedLineWriteIsCounted) {
 }
 
 }  // namespace
+}  // namespace unity_drivers_test_transports

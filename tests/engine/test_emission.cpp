@@ -42,6 +42,15 @@
 #include "io/scene_poses.hpp"
 #include "io/trajectory_csv.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace imuemu::emission {}
+namespace imuemu::drivers {}
+namespace unity_engine_test_emission {
+namespace imuemu { using namespace ::imuemu; }
+namespace imuemu::emission { using namespace ::imuemu::emission; }
+namespace imuemu::drivers { using namespace ::imuemu::drivers; }
+
 namespace imuemu::emission {
 namespace {
 
@@ -1082,3 +1091,4 @@ TEST(QueuedWriterStop, CountsWhatTheDeviceDidNotTakeAndReturnsWithinTheBound) {
 
 }  // namespace
 }  // namespace imuemu::drivers
+}  // namespace unity_engine_test_emission

@@ -24,6 +24,13 @@
 #include "drivers/protocols/stream_protocols.hpp"
 #include "tests/support/recording_transport.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace imuemu::emission {}
+namespace unity_engine_test_gnss_navigation {
+namespace imuemu { using namespace ::imuemu; }
+namespace imuemu::emission { using namespace ::imuemu::emission; }
+
 namespace imuemu::emission {
 namespace {
 
@@ -216,3 +223,4 @@ TEST(GnssNavigation, FlatSceneHasNoGeodeticPositionAndImuProtocolsDoNotAskForOne
 
 }  // namespace
 }  // namespace imuemu::emission
+}  // namespace unity_engine_test_gnss_navigation

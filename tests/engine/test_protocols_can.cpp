@@ -27,6 +27,11 @@
 #include "drivers/protocols/dronecan.hpp"
 #include "drivers/protocols/j1939.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_engine_test_protocols_can {
+namespace imuemu { using namespace ::imuemu; }
+
 namespace {
 
 using imuemu::TimeNs;
@@ -1268,3 +1273,4 @@ TEST(J1939Emission, SlopeSensor2CarriesTheSensorAttitudeFromTheEngine) {
     EXPECT_EQ(static_cast<std::uint64_t>(slope_frames), engine.stats().devices[0].emitted);
   }
 }
+}  // namespace unity_engine_test_protocols_can

@@ -20,6 +20,13 @@
 // Counts this binary's allocations while g_counting is set (the timeline's step() must allocate nothing per sample).
 #include "tests/support/allocation_counter.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace imuemu::fault {}
+namespace unity_io_test_faults {
+namespace imuemu { using namespace ::imuemu; }
+namespace imuemu::fault { using namespace ::imuemu::fault; }
+
 namespace imuemu::fault {
 namespace {
 
@@ -712,3 +719,4 @@ TEST(FaultLog, OneJsonLinePerEventWithTheSamplesAndParameters) {
 
 }  // namespace
 }  // namespace imuemu::fault
+}  // namespace unity_io_test_faults

@@ -34,6 +34,11 @@
 #include "io/scene_poses.hpp"
 #include "io/trajectory_csv.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_io_test_hard_cases {
+namespace imuemu { using namespace ::imuemu; }
+
 using namespace imuemu;
 
 namespace {
@@ -782,3 +787,4 @@ TEST(HardCases, OutputRatesFrom50HzTo10kHz) {
     EXPECT_GT(line_fd_10k.accel_max, 10.0 * line_fd_100.accel_max);
   }
 }
+}  // namespace unity_io_test_hard_cases

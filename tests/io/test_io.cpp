@@ -32,6 +32,13 @@
 #include "io/sample_writers.hpp"
 #include "io/trajectory_csv.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace imuemu::io {}
+namespace unity_io_test_io {
+namespace imuemu { using namespace ::imuemu; }
+namespace imuemu::io { using namespace ::imuemu::io; }
+
 namespace imuemu::io {
 namespace {
 
@@ -1117,3 +1124,4 @@ TEST(TrajectoryCsv, UnterminatedLastRecordIsRefusedNamingItsLine) {
 
 }  // namespace
 }  // namespace imuemu::io
+}  // namespace unity_io_test_io

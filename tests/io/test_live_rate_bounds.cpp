@@ -17,6 +17,13 @@
 #include "io/pose_admission.hpp"
 #include "io/pose_wire.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace imuemu::io {}
+namespace unity_io_test_live_rate_bounds {
+namespace imuemu { using namespace ::imuemu; }
+namespace imuemu::io { using namespace ::imuemu::io; }
+
 namespace imuemu::io {
 namespace {
 
@@ -163,3 +170,4 @@ TEST(LiveRateBounds, MavlinkBodyRatesBeyondPhysicalBoundsAreRefused) {
 
 }  // namespace
 }  // namespace imuemu::io
+}  // namespace unity_io_test_live_rate_bounds

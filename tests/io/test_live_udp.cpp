@@ -37,6 +37,11 @@
 #include "io/pose_source.hpp"
 #include "io/pose_wire.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_io_test_live_udp {
+namespace imuemu { using namespace ::imuemu; }
+
 using namespace imuemu;
 
 namespace {
@@ -251,3 +256,4 @@ TEST(LiveUdp, DroppedAndReorderedDatagramsGiveAContinuousFlaggedStream) {
   EXPECT_GT(lc.underrun_events, 0u);  // the drops did starve the window
   EXPECT_EQ(non_finite, 0u);
 }
+}  // namespace unity_io_test_live_udp

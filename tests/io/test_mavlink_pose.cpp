@@ -34,6 +34,13 @@
 #include "io/pose_wire.hpp"
 #include "io/scene_poses.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace imuemu::io {}
+namespace unity_io_test_mavlink_pose {
+namespace imuemu { using namespace ::imuemu; }
+namespace imuemu::io { using namespace ::imuemu::io; }
+
 namespace imuemu::io {
 namespace {
 
@@ -460,3 +467,4 @@ TEST(MavlinkUdpPoseSource, LoopbackDeliversPosesWithRatesAndCountsCorruption) {
 
 }  // namespace
 }  // namespace imuemu::io
+}  // namespace unity_io_test_mavlink_pose

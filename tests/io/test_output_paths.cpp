@@ -27,6 +27,13 @@
 
 #include "io/atomic_file.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace imuemu::io {}
+namespace unity_io_test_output_paths {
+namespace imuemu { using namespace ::imuemu; }
+namespace imuemu::io { using namespace ::imuemu::io; }
+
 namespace imuemu::io {
 namespace {
 
@@ -252,3 +259,4 @@ TEST(OutputPaths, TheCliWritesThroughALinkAndToAPipe) {
 
 }  // namespace
 }  // namespace imuemu::io
+}  // namespace unity_io_test_output_paths

@@ -20,6 +20,13 @@
 #include "io/pose_wire.hpp"
 #include "tests/support/udp_sender.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace imuemu::io {}
+namespace unity_io_test_pose_counter_snapshots {
+namespace imuemu { using namespace ::imuemu; }
+namespace imuemu::io { using namespace ::imuemu::io; }
+
 namespace imuemu::io {
 namespace {
 
@@ -132,3 +139,4 @@ TEST(PoseCounterSnapshots, AUdpSourceShowingReceivedHasQueuedWhatItAccepted) {
 
 }  // namespace
 }  // namespace imuemu::io
+}  // namespace unity_io_test_pose_counter_snapshots

@@ -39,6 +39,13 @@
 #include "io/trajectory_csv.hpp"
 #include "tests/support/udp_sender.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace imuemu::io {}
+namespace unity_io_test_pose_sources {
+namespace imuemu { using namespace ::imuemu; }
+namespace imuemu::io { using namespace ::imuemu::io; }
+
 namespace imuemu::io {
 namespace {
 
@@ -1630,3 +1637,4 @@ TEST(FileReplaySource, BadFilesAndOptionsFailAtOnceAndStopIsPrompt) {
 
 }  // namespace
 }  // namespace imuemu::io
+}  // namespace unity_io_test_pose_sources

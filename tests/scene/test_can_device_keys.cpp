@@ -6,6 +6,11 @@
 
 #include "daemon/scene/scene_config.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_scene_test_can_device_keys {
+namespace imuemu { using namespace ::imuemu; }
+
 namespace imuemu {
 namespace {
 
@@ -63,3 +68,4 @@ TEST(CanDeviceSceneKeys, J1939Identification) {
 
 }  // namespace
 }  // namespace imuemu
+}  // namespace unity_scene_test_can_device_keys

@@ -21,6 +21,11 @@
 #include "daemon/scene/fault_config.hpp"
 #include "daemon/scene/scene_config.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_scene_test_fault_config {
+namespace imuemu { using namespace ::imuemu; }
+
 using namespace imuemu;
 using namespace imuemu::scene;
 
@@ -290,3 +295,4 @@ TEST(FaultGenerate, SceneFaultsChangeExactlyTheirSamplesAndTheLogNamesThem) {
   }
   std::filesystem::remove_all(dir);
 }
+}  // namespace unity_scene_test_fault_config

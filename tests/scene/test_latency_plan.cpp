@@ -10,6 +10,13 @@
 #include "daemon/scene/scene_check.hpp"
 #include "daemon/scene/scene_config.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace imuemu::scene {}
+namespace unity_scene_test_latency_plan {
+namespace imuemu { using namespace ::imuemu; }
+namespace imuemu::scene { using namespace ::imuemu::scene; }
+
 namespace imuemu::scene {
 namespace {
 
@@ -76,3 +83,4 @@ TEST(LatencyPlan, BudgetAndMarginTogetherAreRefused) {
 
 }  // namespace
 }  // namespace imuemu::scene
+}  // namespace unity_scene_test_latency_plan

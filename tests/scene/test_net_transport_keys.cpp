@@ -10,6 +10,11 @@
 #include "daemon/scene/scene_config.hpp"
 #include "daemon/scene/scene_runner.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_scene_test_net_transport_keys {
+namespace imuemu { using namespace ::imuemu; }
+
 namespace imuemu {
 namespace {
 
@@ -74,3 +79,4 @@ TEST(NetTransportSceneKeys, TwoDevicesOnOneLocalPortAreRefusedBeforeAnythingOpen
 
 }  // namespace
 }  // namespace imuemu
+}  // namespace unity_scene_test_net_transport_keys

@@ -26,6 +26,11 @@
 #include "drivers/byte_stream_reader.hpp"
 #include "drivers/protocols/protocol_options.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_scene_test_protocols_options {
+namespace imuemu { using namespace ::imuemu; }
+
 using namespace imuemu;
 using namespace imuemu::drivers;
 
@@ -353,3 +358,4 @@ TEST(ProtocolOptionTable, EmitFlagsReachTheWire) {
   EXPECT_EQ(WEXITSTATUS(::pclose(p)), 2);
   EXPECT_NE(out.find("--mavlink-system-id: applies to --protocol mavlink2, not mip"), std::string::npos) << out;
 }
+}  // namespace unity_scene_test_protocols_options

@@ -22,6 +22,11 @@
 #include "daemon/scene/scene_config.hpp"
 #include "daemon/scene/scene_runner.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_scene_test_scene_config {
+namespace imuemu { using namespace ::imuemu; }
+
 using namespace imuemu;
 using namespace imuemu::scene;
 
@@ -653,3 +658,4 @@ TEST(SceneLoop, LoopedCopiesAreCappedInKnots) {
   EXPECT_EQ(day.size(), 2u * static_cast<std::size_t>((kLoopSpanNs + few_shift_ns - 1) / few_shift_ns));
   EXPECT_GE(day.back().t_ns, kLoopSpanNs - few_shift_ns);
 }
+}  // namespace unity_scene_test_scene_config

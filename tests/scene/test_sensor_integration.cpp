@@ -34,6 +34,11 @@
 #include "drivers/protocols/can_protocols.hpp"
 #include "drivers/protocols/stream_protocols.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_scene_test_sensor_integration {
+namespace imuemu { using namespace ::imuemu; }
+
 namespace imuemu {
 namespace {
 
@@ -673,3 +678,4 @@ TEST(SignalChainConfig, RefusesUnknownKeysAndChainsTheRateCannotRunNamingFileLin
 
 }  // namespace
 }  // namespace imuemu
+}  // namespace unity_scene_test_sensor_integration

@@ -42,6 +42,11 @@
 #include "tests/support/io_thread.hpp"
 #include "daemon/cli/status_command.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_service_test_control_socket {
+namespace imuemu { using namespace ::imuemu; }
+
 namespace svc = imuemu::service;
 using imuemu::test::IoThread;
 using imuemu::test::TempDir;
@@ -765,3 +770,4 @@ TEST(ControlSocket, ANumberBeyondADoubleIsRefusedWithAClearMessage) {
     EXPECT_EQ(what.find("[json.exception"), std::string::npos) << what;
   }
 }
+}  // namespace unity_service_test_control_socket

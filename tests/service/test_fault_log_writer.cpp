@@ -20,6 +20,11 @@
 
 #include "daemon/service/fault_log_writer.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_service_test_fault_log_writer {
+namespace imuemu { using namespace ::imuemu; }
+
 namespace {
 
 namespace fs = std::filesystem;
@@ -103,3 +108,4 @@ TEST(FaultLogWriter, LinesBeyondTheQueueAndLeftAtExitAreCounted) {
 }
 
 }  // namespace
+}  // namespace unity_service_test_fault_log_writer

@@ -38,6 +38,11 @@
 #include "tests/support/sanitizer.hpp"
 #include "tests/support/spawn.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_service_test_imuemud {
+namespace imuemu { using namespace ::imuemu; }
+
 namespace {
 
 namespace fs = std::filesystem;
@@ -1166,3 +1171,4 @@ TEST_F(Imuemud, AnInjectedFaultIsLoggedAndListedAtTheSameTimeSinceStart) {
 }
 
 }  // namespace
+}  // namespace unity_service_test_imuemud

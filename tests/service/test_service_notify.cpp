@@ -35,6 +35,11 @@
 #include "daemon/service/service_signals.hpp"
 #include "daemon/service/status_report.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_service_test_service_notify {
+namespace imuemu { using namespace ::imuemu; }
+
 namespace svc = imuemu::service;
 using imuemu::test::IoThread;
 using namespace std::chrono_literals;
@@ -488,3 +493,4 @@ TEST(StatusReport, StatusReplyNullsWhatIsAbsent) {
   EXPECT_EQ(status["engine"]["poses_refused"], 8u);
   EXPECT_EQ(status["engine"]["devices"][1]["name"], "imu1");
 }
+}  // namespace unity_service_test_service_notify
