@@ -19,6 +19,7 @@
 #include "core/signal_chain/signal_chain.hpp"
 #include "core/stream.hpp"
 #include "daemon/scene/error_model_config.hpp"
+#include "drivers/protocols/stream_protocols.hpp"
 
 namespace imuemu::cli {
 
@@ -77,6 +78,19 @@ struct BatchOutputs {
   // Faults on the samples and their log (written, like the other outputs,
   // only when the whole run succeeded; only when there are faults).
   BatchFaults faults;
+  // Issue 28: the device's aiding sensors, as its encoder computes them for
+  // the wire (an ecef scene: they need the samples' geodetic position).
+  // gnss_csv_path: protocol mavlink2, the HIL_GPS fixes
+  // (mavlink2::Encoder::hil_gps_fix, at hil_gps_rate_hz); nmea / ubx, the
+  // receiver's fix of every sample (GnssFixSource::fix(sample), as their
+  // encoders). baro_csv_path: mavlink2 with baro, each sample's reading
+  // (mavlink2::Encoder::aiding_of). The encoder is built from
+  // aiding_options (the device's StreamEncoderOptions with its nominal rate
+  // and seed) and stepped on every sample before end_ns, as encode() is.
+  // Empty paths: nothing built, nothing written.
+  std::string gnss_csv_path, baro_csv_path;
+  std::string aiding_protocol;
+  drivers::StreamEncoderOptions aiding_options;
 };
 
 struct BatchCounts {

@@ -178,7 +178,21 @@ int generate_for_scene(const GenerateArgs& args) {
   describe_sensor_stage(seeded, imu->name, imu->rate_hz, args.quiet);
   // Faults ([[imu.fault]], [imu.random_faults]; docs/faults.md): on the
   // samples as imuemud's producer applies them, logged beside the output.
-  BatchOutputs outputs{args.out_path, "", opt.scene.physics, end_ns, {}};
+  BatchOutputs outputs;
+  outputs.imu_csv_path = args.out_path;
+  outputs.trajectory_csv_path = args.trajectory_out_path;
+  outputs.physics = opt.scene.physics;
+  outputs.end_ns = end_ns;
+  // Issue 28: the device's GNSS and barometer as its encoder sends them,
+  // seeded as imuemud seeds them (scene_config.cpp: aiding_seed = the error
+  // model's seed; here --seed's when given) at the device's rate
+  // (scene_runner.cpp: nominal_sample_rate_hz).
+  outputs.gnss_csv_path = args.gnss_out_path;
+  outputs.baro_csv_path = args.baro_out_path;
+  outputs.aiding_protocol = imu->protocol;
+  outputs.aiding_options = imu->stream_options;
+  outputs.aiding_options.nominal_sample_rate_hz = static_cast<double>(imu->rate_hz);
+  outputs.aiding_options.aiding_seed = seeded.spec.seed;
   outputs.faults.faults = imu->faults;
   outputs.faults.random = imu->random_faults;
   if (!args.quiet)
@@ -241,8 +255,11 @@ int generate(const GenerateArgs& args) {
       // (batch_generation.hpp); neither file is replaced unless both are written.
       ProgressBar bar(!args.quiet);
       try {
-        counts = generate_to_files(knots, opt, model, "imu0",
-                                   {args.out_path, args.trajectory_out_path, opt.scene.physics, std::numeric_limits<TimeNs>::max(), {}},
+        BatchOutputs outputs;
+        outputs.imu_csv_path = args.out_path;
+        outputs.trajectory_csv_path = args.trajectory_out_path;
+        outputs.physics = opt.scene.physics;
+        counts = generate_to_files(knots, opt, model, "imu0", outputs,
                                    [&](double f) { bar.update(f); });
       } catch (const GapError& e) {
         // Named by file line (knot k is the record at knot_lines[k]), not by

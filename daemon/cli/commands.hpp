@@ -48,6 +48,11 @@ struct GenerateArgs {
   // "ideal"; empty: the scene's [imu.error_model] with --scene-file, else ideal.
   std::string sensor;
   std::int64_t seed = -1;  // >= 0: replaces the model's seed
+  // --scene-file (an ecef scene): the device's aiding sensors as it sends
+  // them (issue 28), one CSV each: the HIL_GPS fixes ([imu.mavlink]
+  // hil_gps_rate_hz; an nmea/ubx device: its fix of every sample) and the
+  // barometer ([imu.mavlink] baro). Empty: not written.
+  std::string gnss_out_path, baro_out_path;
 };
 int generate(const GenerateArgs& args);
 

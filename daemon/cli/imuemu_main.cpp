@@ -35,6 +35,17 @@ int main(int argc, char** argv) {
                 "the file it names; a FIFO, character device or /dev/stdout is written as a stream (not atomic); "
                 "a directory is refused")->required();
   g->add_option("--trajectory-out", gen.trajectory_out_path, "Also write the smoothed trajectory CSV");
+  auto* gen_gnss = g->add_option("--gnss-out", gen.gnss_out_path,
+                "--scene-file (ecef scene): also write the device's GNSS fixes as it sends them (HIL_GPS of "
+                "[imu.mavlink] hil_gps_rate_hz, or an nmea/ubx device's fixes), before the wire's rounding: CSV "
+                "time_ns, gps_time_ns, latitude_rad, longitude_rad, height_m (ellipsoid), velocity_north/east/down_m_s, "
+                "fix_type, satellites, hdop, vdop");
+  auto* gen_baro = g->add_option("--baro-out", gen.baro_out_path,
+                "--scene-file (ecef scene): also write the device's barometer ([imu.mavlink] baro) as it sends it, "
+                "one row per sample: CSV time_ns, pressure_pa, temperature_k, pressure_altitude_m (empty outside "
+                "the atmosphere's range)");
+  gen_gnss->needs(gen_scene);
+  gen_baro->needs(gen_scene);
   g->add_option("--rate", gen.rate_hz, "Output rate in Hz (integer)")->capture_default_str()->check(CLI::Range(1, 1000000));
   g->add_option("--delta", gen.delta, "Window half-length Delta of Eq. 3.68, in output samples (default: one median knot interval of output samples with --method hermite, the default, two with the other methods; 0 only with --derivatives finite-difference)")->check(CLI::Range(std::int64_t{0}, imuemu::limits::kMaxWindowSamples));
   g->add_option("--method", gen.method, "Base curve: hermite (C2 in local charts), geodesic (Eq. 3.44), min-accel (Lemma 3.22), park-ravani (3.6.1)")->capture_default_str()

@@ -398,14 +398,14 @@ T rounded_clamped(double v, double lo, double hi) {
 
 }  // namespace
 
-void Encoder::append_hil_gps(const ImuFrameInput& sample, std::vector<std::uint8_t>& out) {
+std::optional<GnssFix> Encoder::hil_gps_fix(const ImuFrameInput& sample) {
   const std::int64_t rate = options_.mavlink_hil_gps_rate_hz;
-  if (rate <= 0 || !sample.has_navigation || !gps_source_) return;
+  if (rate <= 0 || !sample.has_navigation || !gps_source_) return std::nullopt;
   const TimeNs t = sample.t_ns;
   // Due at the first sample at or after each grid instant; a timeline that
   // went back by more than a period starts over from its sample.
   const TimeNs period_ns = kNsPerSecond / rate;
-  if (next_gps_ns_ && t < *next_gps_ns_ && t >= saturating_sub_ns(*next_gps_ns_, 2 * period_ns)) return;
+  if (next_gps_ns_ && t < *next_gps_ns_ && t >= saturating_sub_ns(*next_gps_ns_, 2 * period_ns)) return std::nullopt;
   const std::int64_t n = gps_grid_index_after(t, rate) - 1;  // the grid instant at or before t
   const bool restart = !next_gps_ns_ || t < *next_gps_ns_;
   next_gps_ns_ = gps_grid_ns(n + 1, rate);
@@ -429,7 +429,17 @@ void Encoder::append_hil_gps(const ImuFrameInput& sample, std::vector<std::uint8
     fix.vdop = options_.gnss.vdop;
     fix.satellites = options_.gnss.satellites;
   }
+  if (!std::isfinite(fix.latitude_rad) || !std::isfinite(fix.longitude_rad) ||
+      !std::isfinite(fix.height_m - fix.geoid_separation_m) || !fix.velocity_ned_m_s.allFinite())
+    return std::nullopt;
+  return fix;
+}
 
+void Encoder::append_hil_gps(const ImuFrameInput& sample, std::vector<std::uint8_t>& out) {
+  const std::optional<GnssFix> due = hil_gps_fix(sample);
+  if (!due) return;
+  const GnssFix& fix = *due;
+  const TimeNs t = sample.t_ns;
   const double lat_deg = fix.latitude_rad * 180.0 / std::numbers::pi;
   const double lon_deg = std::remainder(fix.longitude_rad * 180.0 / std::numbers::pi, 360.0);
   const double msl_m = fix.height_m - fix.geoid_separation_m;

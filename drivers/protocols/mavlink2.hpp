@@ -109,6 +109,16 @@ class Encoder final : public StreamEncoder {
   bool needs_navigation() const override {
     return options_.mavlink_baro || options_.mavlink_mag || options_.mavlink_hil_gps_rate_hz > 0;
   }
+  // What encode() puts on the wire of one sample, before the wire's
+  // rounding, for batch outputs (imuemu generate --baro-out / --gnss-out,
+  // issue 28): call once per sample, in sample order, instead of encode()
+  // (each steps the models exactly as encode() does, so the same samples
+  // give the same readings and fixes as the stream).
+  //  aiding_of: the barometer and magnetometer readings of the sample.
+  //  hil_gps_fix: the HIL_GPS fix due at this sample (nullopt: none due, no
+  //  HIL_GPS configured, no navigation fields or a non-finite fix).
+  const AidingReading& aiding_of(const ImuFrameInput& sample) { return aiding_reading(sample); }
+  std::optional<GnssFix> hil_gps_fix(const ImuFrameInput& sample);
 
  private:
   const AidingReading& aiding_reading(const ImuFrameInput& sample);

@@ -711,3 +711,123 @@ TEST_F(Cli, EmitNamesFramesDroppedWhileNoReaderHadThePtyOpen) {
 }
 
 }  // namespace
+
+// Issue 28: generate --gnss-out / --baro-out write the device's HIL_GPS fixes
+// and barometer readings as its encoder computes them. With the errors off
+// they are the trajectory itself: each fix is the smoothed trajectory
+// (--trajectory-out) at the fix's instant, on the 5 Hz grid, and each
+// pressure is the US Standard Atmosphere 1976 troposphere (written here from
+// the standard: p = p0 (1 - L H / T0)^(g0 M0 / (R* L)), H = r0 Z / (r0 + Z))
+// at the sample's height. The IMU file is the same bytes with or without
+// them. A flat scene, or a device that sends no GNSS / barometer, is refused
+// with no file written.
+namespace {
+std::string aiding_scene(const std::string& physics, const std::string& mavlink) {
+  return "[scene]\nname = \"aiding\"\nphysics = \"" + physics +
+         "\"\n[trajectory]\nsource = \"sample:flight\"\nduration_s = 20\nknot_interval_s = 1.0\n"
+         "[[imu]]\nname = \"nav\"\nrate_hz = 50\nprotocol = \"mavlink2\"\n"
+         "[imu.transport]\ntype = \"pty\"\nlink = \"/run/imuemu/ttyNAVTEST\"\n" +
+         mavlink + "[imu.error_model]\nseed = 4\n[imu.error_model.gyro]\narw_deg_rt_h = 0.3\n";
+}
+std::vector<std::vector<double>> csv_rows(const std::string& file) {
+  std::vector<std::vector<double>> rows;
+  std::ifstream in(file);
+  std::string line;
+  std::getline(in, line);  // header
+  while (std::getline(in, line)) {
+    std::vector<double> row;
+    std::stringstream ss(line);
+    std::string cell;
+    while (std::getline(ss, cell, ',')) row.push_back(cell.empty() ? std::nan("") : std::stod(cell));
+    rows.push_back(row);
+  }
+  return rows;
+}
+}  // namespace
+
+TEST_F(Cli, GenerateWritesTheDevicesGnssAndBaroFromTheSameTrajectory) {
+  write("s.toml", aiding_scene("ecef", "[imu.mavlink]\nbaro = true\nhil_gps_rate_hz = 5\n"));
+  const CliRun g = run("generate --quiet --scene-file " + path("s.toml") + " --out " + path("imu.csv") +
+                       " --trajectory-out " + path("k.csv") + " --gnss-out " + path("gnss.csv") + " --baro-out " +
+                       path("baro.csv"));
+  ASSERT_EQ(g.exit_code, 0) << g.output;
+  ASSERT_EQ(run("generate --quiet --scene-file " + path("s.toml") + " --out " + path("imu_only.csv")).exit_code, 0);
+  EXPECT_EQ(file_bytes(path("imu.csv")), file_bytes(path("imu_only.csv")));
+  EXPECT_EQ(text_lines(path("gnss.csv")).front(),
+            "time_ns,gps_time_ns,latitude_rad,longitude_rad,height_m,velocity_north_m_s,velocity_east_m_s,"
+            "velocity_down_m_s,fix_type,satellites,hdop,vdop");
+  EXPECT_EQ(text_lines(path("baro.csv")).front(), "time_ns,pressure_pa,temperature_k,pressure_altitude_m");
+  // The smoothed trajectory by time: time_s, x, y, z, qw..qz, vx, vy, vz, ...
+  std::map<std::int64_t, std::vector<double>> truth;
+  for (const auto& r : csv_rows(path("k.csv"))) truth[std::llround(r[0] * 1e9)] = r;
+  const auto gnss = csv_rows(path("gnss.csv"));
+  const auto baro = csv_rows(path("baro.csv"));
+  ASSERT_EQ(gnss.size(), 101u);  // 0..20 s at 5 Hz, both ends
+  ASSERT_EQ(baro.size(), 1001u);  // every sample at 50 Hz
+  for (std::size_t j = 0; j < gnss.size(); ++j) {
+    const auto& f = gnss[j];
+    const auto t_ns = static_cast<std::int64_t>(f[0]);
+    ASSERT_EQ(t_ns, static_cast<std::int64_t>(j) * 200'000'000) << j;
+    EXPECT_EQ(static_cast<std::int64_t>(f[1]), 2400LL * 604'800'000'000'000LL + t_ns);  // GPS week 2400 + t
+    const auto& k = truth.at(t_ns);
+    // lat, lon, h -> ECEF (WGS84, NIMA TR8350.2 eq. 4-14) = the trajectory's position.
+    const double a = 6378137.0, e2 = 6.69437999014e-3;
+    const double n = a / std::sqrt(1.0 - e2 * std::sin(f[2]) * std::sin(f[2]));
+    const double x = (n + f[4]) * std::cos(f[2]) * std::cos(f[3]), y = (n + f[4]) * std::cos(f[2]) * std::sin(f[3]),
+                 z = (n * (1.0 - e2) + f[4]) * std::sin(f[2]);
+    EXPECT_NEAR(x, k[1], 1e-6) << j;
+    EXPECT_NEAR(y, k[2], 1e-6) << j;
+    EXPECT_NEAR(z, k[3], 1e-6) << j;
+    // NED velocity -> ECEF (C_n^e) = the trajectory's velocity.
+    const double sl = std::sin(f[2]), cl = std::cos(f[2]), so = std::sin(f[3]), co = std::cos(f[3]);
+    const double vn = f[5], ve = f[6], vd = f[7];
+    EXPECT_NEAR(-sl * co * vn - so * ve - cl * co * vd, k[8], 1e-9) << j;
+    EXPECT_NEAR(-sl * so * vn + co * ve - cl * so * vd, k[9], 1e-9) << j;
+    EXPECT_NEAR(cl * vn - sl * vd, k[10], 1e-9) << j;
+    EXPECT_EQ(f[8], 3.0);
+  }
+  for (std::size_t i = 0; i < baro.size(); ++i) {
+    const auto& b = baro[i];
+    const auto t_ns = static_cast<std::int64_t>(b[0]);
+    ASSERT_EQ(t_ns, static_cast<std::int64_t>(i) * 20'000'000) << i;
+    const auto& k = truth.at(t_ns);
+    // Height above the ellipsoid of the trajectory's position (Bowring,
+    // converged), geoid undulation 0.
+    const double a = 6378137.0, e2 = 6.69437999014e-3;
+    const double p_xy = std::hypot(k[1], k[2]);
+    double lat = std::atan2(k[3], p_xy * (1.0 - e2)), h = 0.0;
+    for (int it = 0; it < 6; ++it) {
+      const double n = a / std::sqrt(1.0 - e2 * std::sin(lat) * std::sin(lat));
+      h = p_xy / std::cos(lat) - n;
+      lat = std::atan2(k[3], p_xy * (1.0 - e2 * n / (n + h)));
+    }
+    const double r0 = 6356766.0, H = r0 * h / (r0 + h);
+    const double T = 288.15 - 0.0065 * H;
+    const double p = 101325.0 * std::pow(T / 288.15, 9.80665 * 0.0289644 / (8.31432 * 0.0065));
+    EXPECT_NEAR(b[1], p, 1e-6 * p) << i;
+    EXPECT_NEAR(b[2], T, 1e-9 * T) << i;
+    EXPECT_NEAR(b[3], H, 1e-3) << i;
+  }
+}
+
+TEST_F(Cli, GenerateRefusesGnssAndBaroOutputsTheDeviceDoesNotSend) {
+  write("flat.toml", aiding_scene("flat", "[imu.mavlink]\nbaro = true\nhil_gps_rate_hz = 5\n"));
+  write("none.toml", aiding_scene("ecef", ""));
+  const CliRun flat = run("generate --quiet --scene-file " + path("flat.toml") + " --out " + path("imu.csv") +
+                          " --baro-out " + path("baro.csv"));
+  EXPECT_EQ(flat.exit_code, 4) << flat.output;
+  EXPECT_NE(flat.output.find("ecef scene"), std::string::npos) << flat.output;
+  const CliRun gnss = run("generate --quiet --scene-file " + path("none.toml") + " --out " + path("imu.csv") +
+                          " --gnss-out " + path("gnss.csv"));
+  EXPECT_EQ(gnss.exit_code, 4) << gnss.output;
+  EXPECT_NE(gnss.output.find("--gnss-out: the device sends no GNSS fix"), std::string::npos) << gnss.output;
+  const CliRun baro = run("generate --quiet --scene-file " + path("none.toml") + " --out " + path("imu.csv") +
+                          " --baro-out " + path("baro.csv"));
+  EXPECT_EQ(baro.exit_code, 4) << baro.output;
+  EXPECT_NE(baro.output.find("--baro-out: the device sends no barometer"), std::string::npos) << baro.output;
+  const CliRun no_scene = run("generate --quiet --in " + path("none.toml") + " --out " + path("imu.csv") +
+                              " --gnss-out " + path("gnss.csv"));
+  EXPECT_EQ(no_scene.exit_code, 2) << no_scene.output;
+  for (const auto& e : fs::directory_iterator(dir_))
+    EXPECT_TRUE(e.path().extension() == ".toml") << e.path();
+}
