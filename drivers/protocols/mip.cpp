@@ -34,6 +34,7 @@
 
 #include "drivers/protocols/gps_time.hpp"
 #include "drivers/protocols/mip_device.hpp"
+#include "drivers/protocols/mip_nav.hpp"
 #include "drivers/protocols/wire_bytes.hpp"
 
 namespace imuemu::drivers::mip {
@@ -150,14 +151,32 @@ std::uint16_t fletcher_checksum(std::span<const std::uint8_t> bytes) {
 }
 
 Encoder::Encoder(const StreamEncoderOptions& options) : options_(options) {
-  if (options_.mip_device.answers_commands) {
-    // The base rate the device reports (Get Base Rate): the scene's rate,
-    // which every decimation divides; 1000 Hz (the CV7's IMU rate) while the
-    // rate is not known (an encoder made only to check options).
-    const double r = options_.nominal_sample_rate_hz;
-    const auto base_rate_hz = static_cast<std::uint16_t>(r >= 1.0 ? std::min(std::lround(r), 65535L) : 1000L);
-    device_ = std::make_unique<Device>(options_.mip_device, sensor_fields(), base_rate_hz);
+  // The base rate the device reports (Get Base Rate): the scene's rate,
+  // which every decimation divides; 1000 Hz (the CV7's IMU rate) while the
+  // rate is not known (an encoder made only to check options).
+  const double r = options_.nominal_sample_rate_hz;
+  const auto base_rate_hz = static_cast<std::uint16_t>(r >= 1.0 ? std::min(std::lround(r), 65535L) : 1000L);
+  NavFields nav;
+  if (options_.mip_nav.any()) {
+    // Issue 28: the GNSS receiver's and the filter's sets, each at its own
+    // power-up decimation of the base rate.
+    const MipNavConfig& n = options_.mip_nav;
+    nav.gnss = gnss_fields(n);
+    nav.filter = filter_fields(n);
+    for (const std::uint8_t f : gnss_power_up_fields(n)) nav.gnss_power_up.push_back({f, decimation_of(n.gnss_rate_hz, base_rate_hz)});
+    for (const std::uint8_t f : filter_power_up_fields(n))
+      nav.filter_power_up.push_back({f, decimation_of(n.filter_rate_hz, base_rate_hz)});
+    nav_ = std::make_unique<NavEncoder>(options_, base_rate_hz);
+    auto fill = [](SetFormat& s, const std::vector<FieldRate>& f) {
+      s.send = !f.empty();
+      s.count = static_cast<std::uint8_t>(std::min(f.size(), kMaxFormatFields));
+      std::copy_n(f.begin(), s.count, s.fields.begin());
+    };
+    fill(nav_power_up_.gnss, nav.gnss_power_up);
+    fill(nav_power_up_.filter, nav.filter_power_up);
   }
+  if (options_.mip_device.answers_commands)
+    device_ = std::make_unique<Device>(options_.mip_device, sensor_fields(), base_rate_hz, std::move(nav));
 }
 
 Encoder::~Encoder() = default;
@@ -175,6 +194,8 @@ Encoder& Encoder::operator=(const Encoder& other) {
     Encoder fresh(other.options_);
     options_ = fresh.options_;
     device_ = std::move(fresh.device_);
+    nav_ = std::move(fresh.nav_);
+    nav_power_up_ = fresh.nav_power_up_;
     restarts_ = 0;
   }
   return *this;
@@ -247,16 +268,31 @@ void Encoder::encode_format(const ImuFrameInput& sample, std::span<const FieldRa
 }
 
 void Encoder::encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out) {
+  const StreamConfig* c = nullptr;
   if (device_) {
     // What the driver left the device doing (wait-free read of the io
-    // thread's last change): idle sends nothing; a format of its own sends
-    // its fields at their decimations; otherwise the power-up stream below.
+    // thread's last change).
     const EmitConfig& published = device_->emit_config();
     // After a restart fault the io thread has not taken in yet: the startup settings.
-    const StreamConfig& c = published.restarts_handled < restarts_ ? published.startup : published;
-    if (!c.send) return;
-    if (!c.scene_format) {
-      encode_format(sample, std::span<const FieldRate>(c.fields.data(), c.count), out);
+    c = published.restarts_handled < restarts_ ? &published.startup : &published;
+  }
+  encode_imu(sample, c, out);
+  if (nav_) {
+    // Issue 28: then the GNSS and filter packets due at this sample.
+    const StreamConfig& n = c != nullptr ? *c : nav_power_up_;
+    const std::span<const FieldRate> none;
+    nav_->encode(sample, n.gnss.send ? std::span<const FieldRate>(n.gnss.fields.data(), n.gnss.count) : none,
+                 n.filter.send ? std::span<const FieldRate>(n.filter.fields.data(), n.filter.count) : none, out);
+  }
+}
+
+void Encoder::encode_imu(const ImuFrameInput& sample, const StreamConfig* c, std::vector<std::uint8_t>& out) {
+  if (c != nullptr) {
+    // Idle (or the 0x80 stream off) sends nothing; a format of its own sends
+    // its fields at their decimations; otherwise the power-up stream below.
+    if (!c->send) return;
+    if (!c->scene_format) {
+      encode_format(sample, std::span<const FieldRate>(c->fields.data(), c->count), out);
       return;
     }
   }
@@ -313,7 +349,8 @@ std::size_t Encoder::max_bytes_per_sample() const {
   std::size_t payload = 2 * kVectorFieldBytes + kGpsFieldBytes;
   if (options_.include_deltas) payload += 2 * kVectorFieldBytes;
   if (options_.mip_overrange_status) payload += kOverrangeFieldBytes;
-  return kHeaderBytes + payload + kChecksumBytes;
+  return kHeaderBytes + payload + kChecksumBytes + max_gnss_packet_bytes(options_.mip_nav) +
+         max_filter_packet_bytes(options_.mip_nav);
 }
 
 void Decoder::feed(std::span<const std::uint8_t> bytes, const SampleCallback& on_sample) {

@@ -12,6 +12,7 @@
 #include <span>
 
 #include "drivers/protocol.hpp"
+#include "drivers/protocols/mip_device.hpp"
 #include "drivers/protocols/stream_protocols.hpp"
 
 namespace imuemu::drivers::mip {
@@ -49,6 +50,7 @@ inline constexpr std::uint16_t kGpsTimeValid = kTimeInitialized | kTowValid | kW
 std::uint16_t fletcher_checksum(std::span<const std::uint8_t> bytes);
 
 class Device;
+class NavEncoder;
 struct FieldRate;
 
 class Encoder final : public StreamEncoder {
@@ -72,6 +74,9 @@ class Encoder final : public StreamEncoder {
   // them with its coning and sculling compensation (MIP 3DM command
   // 0x0C,0x51) on: an INS integrates them without corrections of its own.
   bool compensated_increments() const override { return true; }
+  // The GNSS (0x81) and filter (0x82) sets take the trajectory's position,
+  // velocity and attitude (issue 28, mip_nav.hpp).
+  bool needs_navigation() const override { return options_.mip_nav.any(); }
 
   // Link faults (docs/faults.md): payload length byte and Fletcher
   // checksum [P 6.3, 6.4]. The IMU data set carries no packet counter and
@@ -87,8 +92,11 @@ class Encoder final : public StreamEncoder {
   // field with decimation d goes out on counters that are multiples of d).
   void encode_format(const ImuFrameInput& sample, std::span<const FieldRate> fields,
                      std::vector<std::uint8_t>& out);
+  void encode_imu(const ImuFrameInput& sample, const StreamConfig* c, std::vector<std::uint8_t>& out);
   StreamEncoderOptions options_;
   std::unique_ptr<Device> device_;
+  std::unique_ptr<NavEncoder> nav_;     // GNSS / filter sets (null when both are off)
+  StreamConfig nav_power_up_;           // their power-up formats, for an encoder without command side
   std::uint64_t restarts_ = 0;  // restart faults seen (emission thread)
 };
 

@@ -117,9 +117,16 @@ void CommandParser::feed(std::span<const std::uint8_t> bytes, std::chrono::stead
   }
 }
 
-Device::Device(const MipDeviceConfig& config, std::vector<std::uint8_t> sensor_fields, std::uint16_t base_rate_hz)
-    : config_(config), sensor_fields_(std::move(sensor_fields)), base_rate_hz_(base_rate_hz), published_(EmitConfig{}) {
+Device::Device(const MipDeviceConfig& config, std::vector<std::uint8_t> sensor_fields, std::uint16_t base_rate_hz,
+               NavFields nav)
+    : config_(config),
+      sensor_fields_(std::move(sensor_fields)),
+      base_rate_hz_(base_rate_hz),
+      nav_(std::move(nav)),
+      published_(EmitConfig{}) {
   for (const std::uint8_t f : sensor_fields_) defaults_.sensor_format.push_back({f, 1});
+  defaults_.gnss_format = nav_.gnss_power_up;
+  defaults_.filter_format = nav_.filter_power_up;
   current_ = saved_ = defaults_;
   baud_ = current_.baud;
   streaming_ = !config_.power_up_idle;
@@ -129,8 +136,12 @@ Device::Device(const MipDeviceConfig& config, std::vector<std::uint8_t> sensor_f
     descriptors_.push_back(static_cast<std::uint16_t>(kBaseCommandSet << 8 | d));
   for (const int d : {0x06, 0x08, 0x0A, 0x0B, 0x0E, 0x0F, 0x11, 0x30, 0x40})
     descriptors_.push_back(static_cast<std::uint16_t>(k3dmCommandSet << 8 | d));
+  if (has_gnss())  // [N] Get GNSS Base Rate, GNSS Message Format
+    for (const int d : {0x07, 0x09}) descriptors_.push_back(static_cast<std::uint16_t>(k3dmCommandSet << 8 | d));
   descriptors_.push_back(static_cast<std::uint16_t>(kFilterCommandSet << 8 | 0x01));
   for (const std::uint8_t f : sensor_fields_) descriptors_.push_back(static_cast<std::uint16_t>(kSensorDataSet << 8 | f));
+  for (const std::uint8_t f : nav_.gnss) descriptors_.push_back(static_cast<std::uint16_t>(kGnssSet << 8 | f));
+  for (const std::uint8_t f : nav_.filter) descriptors_.push_back(static_cast<std::uint16_t>(kFilterDataSet << 8 | f));
   publish();
 }
 
@@ -155,8 +166,11 @@ std::string Device::format_text() const {
     }
     return s.empty() ? std::string("none") : s;
   };
-  return "0x80 [" + list(current_.sensor_format) + "]" + (current_.sensor_stream ? "" : " (stream off)") +
-         " at base " + std::to_string(base_rate_hz_) + " Hz; 0x82 [" + list(current_.filter_format) + "]";
+  std::string s = "0x80 [" + list(current_.sensor_format) + "]" + (current_.sensor_stream ? "" : " (stream off)") +
+                  " at base " + std::to_string(base_rate_hz_) + " Hz; 0x82 [" + list(current_.filter_format) + "]";
+  if (!nav_.filter.empty() && !current_.filter_stream) s += " (stream off)";
+  if (has_gnss()) s += "; 0x81 [" + list(current_.gnss_format) + "]" + (current_.gnss_stream ? "" : " (stream off)");
+  return s;
 }
 
 void Device::publish() {
@@ -166,6 +180,15 @@ void Device::publish() {
     c.scene_format = s.sensor_format == defaults_.sensor_format;
     c.count = static_cast<std::uint8_t>(std::min(s.sensor_format.size(), kMaxFormatFields));
     for (std::size_t i = 0; i < c.count; ++i) c.fields[i] = s.sensor_format[i];
+    auto set_format = [&](const std::vector<FieldRate>& f, bool stream_on) {
+      SetFormat x;
+      x.send = streaming && stream_on && !f.empty();
+      x.count = static_cast<std::uint8_t>(std::min(f.size(), kMaxFormatFields));
+      for (std::size_t i = 0; i < x.count; ++i) x.fields[i] = f[i];
+      return x;
+    };
+    c.gnss = set_format(s.gnss_format, s.gnss_stream);
+    c.filter = set_format(s.filter_format, s.filter_stream);
     return c;
   };
   EmitConfig c;
@@ -360,7 +383,12 @@ void Device::apply_baud(std::uint32_t baud, ReplySink& replies) {
 AckCode Device::message_format(std::uint8_t set, std::uint8_t function, std::span<const std::uint8_t> list,
                                std::uint8_t reply_descriptor, bool reply_has_set,
                                std::vector<std::vector<std::uint8_t>>& out) {
-  std::vector<FieldRate> Settings::*member = set == kSensorDataSet ? &Settings::sensor_format : &Settings::filter_format;
+  std::vector<FieldRate> Settings::*member = set == kSensorDataSet ? &Settings::sensor_format
+                                            : set == kGnssSet       ? &Settings::gnss_format
+                                                                    : &Settings::filter_format;
+  const std::vector<std::uint8_t>& can_send = set == kSensorDataSet ? sensor_fields_
+                                              : set == kGnssSet       ? nav_.gnss
+                                                                      : nav_.filter;
   switch (function) {
     case kFunctionWrite: {
       if (list.empty() || list.size() != 1u + 3u * list[0]) return AckCode::invalid_parameter;
@@ -369,8 +397,7 @@ AckCode Device::message_format(std::uint8_t set, std::uint8_t function, std::spa
         const FieldRate r{list[1 + 3 * i], get_u16(list.data() + 2 + 3 * i)};
         // A field this device cannot send (in this set), decimation 0 or a
         // field twice: invalid parameter, nothing changed.
-        const bool known = set == kSensorDataSet &&
-                           std::find(sensor_fields_.begin(), sensor_fields_.end(), r.descriptor) != sensor_fields_.end();
+        const bool known = std::find(can_send.begin(), can_send.end(), r.descriptor) != can_send.end();
         const bool twice = std::any_of(format.begin(), format.end(),
                                        [&](const FieldRate& f) { return f.descriptor == r.descriptor; });
         if (!known || r.decimation == 0 || twice || format.size() >= kMaxFormatFields) return AckCode::invalid_parameter;
@@ -422,8 +449,20 @@ AckCode Device::three_dm_command(std::uint8_t descriptor, std::span<const std::u
       out.push_back(field(descriptor == 0x06 ? 0x83 : 0x8A, std::move(r)));
       return AckCode::ok;
     }
+    case 0x07:  // [N] Get GNSS Base Rate -> 0x84 (a device with a GNSS receiver)
+    case 0x09:  // [N] GNSS Message Format -> 0x81
+      if (!has_gnss()) return AckCode::unknown_command;
+      if (descriptor == 0x07) {
+        if (!data.empty()) return AckCode::invalid_parameter;
+        std::vector<std::uint8_t> r;
+        put_u16(r, base_rate_hz_);
+        out.push_back(field(0x84, std::move(r)));
+        return AckCode::ok;
+      }
+      if (data.empty()) return AckCode::invalid_parameter;
+      return message_format(kGnssSet, data[0], data.subspan(1), 0x81, false, out);
     case 0x0E: {  // Get Base Rate (descriptor set) -> 0x8E
-      if (data.size() != 1 || (data[0] != kSensorDataSet && data[0] != kFilterDataSet)) return AckCode::invalid_parameter;
+      if (data.size() != 1 || !known_set(data[0])) return AckCode::invalid_parameter;
       std::vector<std::uint8_t> r{data[0]};
       put_u16(r, base_rate_hz_);
       out.push_back(field(0x8E, std::move(r)));
@@ -435,27 +474,30 @@ AckCode Device::three_dm_command(std::uint8_t descriptor, std::span<const std::u
       return message_format(descriptor == 0x08 ? kSensorDataSet : kFilterDataSet, data[0], data.subspan(1),
                             descriptor == 0x08 ? 0x80 : 0x82, false, out);
     case 0x0F:  // Message Format (descriptor set) -> 0x8F
-      if (data.size() < 2 || (data[1] != kSensorDataSet && data[1] != kFilterDataSet)) return AckCode::invalid_parameter;
+      if (data.size() < 2 || !known_set(data[1])) return AckCode::invalid_parameter;
       return message_format(data[1], data[0], data.subspan(2), 0x8F, true, out);
     case 0x11: {  // Datastream Control: function, set (0: all), [enable]
       if (data.size() < 2) return AckCode::invalid_parameter;
       const std::uint8_t function = data[0], set = data[1];
-      if (set != 0 && set != kSensorDataSet && set != kFilterDataSet) return AckCode::invalid_parameter;
+      if (set != 0 && !known_set(set)) return AckCode::invalid_parameter;
       auto apply = [&](const Settings& from) {
         if (set == 0 || set == kSensorDataSet) current_.sensor_stream = from.sensor_stream;
         if (set == 0 || set == kFilterDataSet) current_.filter_stream = from.filter_stream;
+        if (set == 0 || set == kGnssSet) current_.gnss_stream = from.gnss_stream;
       };
       switch (function) {
         case kFunctionWrite: {
           if (data.size() != 3 || data[2] > 1) return AckCode::invalid_parameter;
           Settings s = current_;
-          s.sensor_stream = s.filter_stream = data[2] != 0;
+          s.sensor_stream = s.filter_stream = s.gnss_stream = data[2] != 0;
           apply(s);
           break;
         }
         case kFunctionRead: {
           if (data.size() != 2 || set == 0) return AckCode::invalid_parameter;
-          const bool on = set == kSensorDataSet ? current_.sensor_stream : current_.filter_stream;
+          const bool on = set == kSensorDataSet ? current_.sensor_stream
+                          : set == kGnssSet       ? current_.gnss_stream
+                                                  : current_.filter_stream;
           out.push_back(field(0x85, {set, static_cast<std::uint8_t>(on ? 1 : 0)}));
           return AckCode::ok;
         }
@@ -463,6 +505,7 @@ AckCode Device::three_dm_command(std::uint8_t descriptor, std::span<const std::u
           if (data.size() != 2) return AckCode::invalid_parameter;
           if (set == 0 || set == kSensorDataSet) saved_.sensor_stream = current_.sensor_stream;
           if (set == 0 || set == kFilterDataSet) saved_.filter_stream = current_.filter_stream;
+          if (set == 0 || set == kGnssSet) saved_.gnss_stream = current_.gnss_stream;
           return AckCode::ok;
         case kFunctionLoad:
           if (data.size() != 2) return AckCode::invalid_parameter;
@@ -518,7 +561,7 @@ AckCode Device::three_dm_command(std::uint8_t descriptor, std::span<const std::u
 
 AckCode Device::filter_command(std::uint8_t descriptor, std::span<const std::uint8_t> data) {
   switch (descriptor) {
-    case 0x01:  // Reset Filter: the emulated device streams no filter solution; nothing to restart
+    case 0x01:  // Reset Filter: the emulated filter is a function of time since power-up; nothing to restart
       return data.empty() ? AckCode::ok : AckCode::invalid_parameter;
     default:
       return AckCode::unknown_command;

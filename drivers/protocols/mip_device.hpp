@@ -27,6 +27,9 @@
 //      Baudrate 0x40 (function, u32 baud; read -> 0x87). Function selectors:
 //      1 use new, 2 read, 3 save as startup, 4 load saved, 5 load default.
 //  [F] Filter command set 0x0D: Reset Filter 0x01.
+//  [N] With a GNSS receiver (issue 28, mip_nav.hpp): Get GNSS Base Rate
+//      0x0C,0x07 (-> 0x84 u16 Hz), GNSS Message Format 0x0C,0x09 (-> 0x81),
+//      and set 0x81 in Get Base Rate, Message Format and Datastream Control.
 //
 // Threads: on_input() runs on the transport's io thread (parsing, replies,
 // settings); the encoder reads what it must stream (EmitConfig) on the
@@ -55,6 +58,7 @@ inline constexpr std::uint8_t kBaseCommandSet = 0x01;
 inline constexpr std::uint8_t k3dmCommandSet = 0x0C;
 inline constexpr std::uint8_t kFilterCommandSet = 0x0D;
 inline constexpr std::uint8_t kFilterDataSet = 0x82;
+inline constexpr std::uint8_t kGnssSet = 0x81;  // = mip_nav.hpp kGnssDataSet
 inline constexpr std::uint8_t kAckNackField = 0xF1;
 
 // [P] ACK/NACK error codes.
@@ -75,12 +79,28 @@ struct FieldRate {
 };
 inline constexpr std::size_t kMaxFormatFields = 8;
 
-// One 0x80 stream as the encoder sends it.
+// The GNSS (0x81) or filter (0x82) stream as the encoder sends it.
+struct SetFormat {
+  bool send = false;  // streaming, the set's stream enabled and a field in its format
+  std::uint8_t count = 0;
+  std::array<FieldRate, kMaxFormatFields> fields{};
+};
+
+// One 0x80 stream as the encoder sends it, and the 0x81 / 0x82 ones.
 struct StreamConfig {
   bool send = true;             // streaming (not idle) and the 0x80 stream enabled
   bool scene_format = true;     // the power-up format: the encoder's own field list at decimation 1
   std::uint8_t count = 0;       // otherwise these fields, in this order
   std::array<FieldRate, kMaxFormatFields> fields{};
+  SetFormat gnss, filter;
+};
+
+// The 0x81 / 0x82 fields a device can send and its power-up formats (issue
+// 28, mip_nav.hpp); all empty: a device without GNSS receiver and filter
+// output, which lists, accepts and answers exactly as before.
+struct NavFields {
+  std::vector<std::uint8_t> gnss, filter;
+  std::vector<FieldRate> gnss_power_up, filter_power_up;
 };
 
 // What the emission thread streams (set 0x80), as the io thread published it.
@@ -153,7 +173,9 @@ class Device final : public CommandResponder {
  public:
   // sensor_fields: the 0x80 fields the encoder can send, in its order (the
   // power-up format at decimation 1); base_rate_hz: the scene's rate.
-  Device(const MipDeviceConfig& config, std::vector<std::uint8_t> sensor_fields, std::uint16_t base_rate_hz);
+  // nav: the GNSS and filter fields (none: the device of issue 27).
+  Device(const MipDeviceConfig& config, std::vector<std::uint8_t> sensor_fields, std::uint16_t base_rate_hz,
+         NavFields nav = {});
 
   // --- io thread ---
   void on_input(std::span<const std::uint8_t> bytes, ReplySink& replies) override;
@@ -173,9 +195,11 @@ class Device final : public CommandResponder {
  private:
   struct Settings {
     std::vector<FieldRate> sensor_format;  // set 0x80
-    std::vector<FieldRate> filter_format;  // set 0x82 (the emulated device computes no filter fields)
+    std::vector<FieldRate> filter_format;  // set 0x82
+    std::vector<FieldRate> gnss_format;    // set 0x81
     bool sensor_stream = true;             // Datastream Control
     bool filter_stream = true;
+    bool gnss_stream = true;
     std::uint32_t baud = 115200;
   };
   // One command field: appends the reply fields (ACK/NACK first) to `out`.
@@ -199,10 +223,17 @@ class Device final : public CommandResponder {
   void take_restarts();
   void log(const std::string& line);
   std::string format_text() const;
+  bool has_gnss() const noexcept { return !nav_.gnss.empty(); }
+  // The data sets the Get Base Rate / Message Format / Datastream Control
+  // commands take: 0x80, 0x82, and 0x81 with a GNSS receiver.
+  bool known_set(std::uint8_t set) const noexcept {
+    return set == 0x80 || set == kFilterDataSet || (set == kGnssSet && has_gnss());
+  }
 
   MipDeviceConfig config_;
   std::vector<std::uint8_t> sensor_fields_;
   std::uint16_t base_rate_hz_;
+  NavFields nav_;
   std::vector<std::uint16_t> descriptors_;
   CommandParser parser_;
   Settings current_, saved_, defaults_;

@@ -196,6 +196,63 @@ std::vector<ProtocolOption> make_table() {
                       [](ProtocolOptions& p, std::int64_t v) { p.stream.mip_gps_minus_utc_s = static_cast<int>(v); }));
   t.push_back(boolean("mip", "overrange_status", true, "overrange status field (0x80, 0x18)",
                       [](ProtocolOptions& p, bool v) { p.stream.mip_overrange_status = v; }));
+  // Issue 28: the GNSS receiver (0x81) and navigation filter (0x82) of the
+  // device (mip_nav.hpp); both off by default.
+  t.push_back(integer("mip", "gnss_rate_hz", 0, kMaxGnssRateHz, "0",
+                      "GNSS data set 0x81 (LLH, NED velocity, fix info, GPS timestamp) at this rate, its receiver's "
+                      "epochs; 0: no GNSS receiver",
+                      [](ProtocolOptions& p, std::int64_t v) { p.stream.mip_nav.gnss_rate_hz = v; }));
+  t.push_back(integer("mip", "filter_rate_hz", 0, 1000, "0",
+                      "filter data set 0x82 (status, LLH, NED velocity, quaternion, GPS timestamp) at this rate "
+                      "(at most the device rate); 0: no filter data",
+                      [](ProtocolOptions& p, std::int64_t v) { p.stream.mip_nav.filter_rate_hz = v; }));
+  t.push_back(choice("mip", "filter_states", {"cv7", "gx5"},
+                     "filter state values (0x82,0x10): cv7 = 3DM-CV7/GQ7 (1 init, 3 AHRS, 4 full nav); gx5 = "
+                     "3DM-GX5-45 (1 init, 2 running valid)",
+                     [](ProtocolOptions& p, const std::string& v) {
+                       p.stream.mip_nav.filter_states = v == "gx5" ? MipFilterStates::gx5 : MipFilterStates::cv7;
+                     }));
+  t.push_back(number("mip", "filter_alignment_s", 0.0, 3600.0, false, "5.0",
+                     "time after power-up the filter initialises (attitude alignment) before it runs (s)",
+                     [](ProtocolOptions& p, double v) { p.stream.mip_nav.filter_alignment_s = v; }));
+  t.push_back(number("mip", "gnss_first_fix_s", 0.0, 3600.0, false, "30.0",
+                     "the receiver's first 3D fix after power-up (cold-start time to first fix, s)",
+                     [](ProtocolOptions& p, double v) { p.stream.mip_nav.gnss_first_fix_s = v; }));
+  t.push_back(number("mip", "gnss_outage_start_s", 0.0, 1e7, false, "0.0",
+                     "start of a GNSS outage (no fix) after power-up (s)",
+                     [](ProtocolOptions& p, double v) { p.stream.mip_nav.gnss_outage_start_s = v; }));
+  t.push_back(number("mip", "gnss_outage_duration_s", 0.0, 1e7, false, "0.0", "length of that outage (s); 0: none",
+                     [](ProtocolOptions& p, double v) { p.stream.mip_nav.gnss_outage_duration_s = v; }));
+  t.push_back(number("mip", "filter_roll_pitch_sigma_deg", 0.0, 90.0, false, "0.25",
+                     "filter roll and pitch error (deg, 1 sigma, white per epoch; GX5-45 datasheet 0.25)",
+                     [](ProtocolOptions& p, double v) { p.stream.mip_nav.filter_roll_pitch_sigma_deg = v; }));
+  t.push_back(number("mip", "filter_heading_sigma_deg", 0.0, 180.0, false, "0.8",
+                     "filter heading error (deg, 1 sigma; GX5-45 datasheet 0.8)",
+                     [](ProtocolOptions& p, double v) { p.stream.mip_nav.filter_heading_sigma_deg = v; }));
+  t.push_back(number("mip", "filter_horizontal_sigma_m", 0.0, aiding::kGnssMaxSigma_m, false, "2.5",
+                     "filter position error north and east each (m, 1 sigma; GX5-45 datasheet 2.5)",
+                     [](ProtocolOptions& p, double v) { p.stream.mip_nav.filter_horizontal_sigma_m = v; }));
+  t.push_back(number("mip", "filter_vertical_sigma_m", 0.0, aiding::kGnssMaxSigma_m, false, "5.0",
+                     "filter height error (m, 1 sigma; GX5-45 datasheet 5)",
+                     [](ProtocolOptions& p, double v) { p.stream.mip_nav.filter_vertical_sigma_m = v; }));
+  t.push_back(number("mip", "filter_velocity_sigma_m_s", 0.0, aiding::kGnssMaxVelocitySigma_m_s, false, "0.1",
+                     "filter velocity error per axis (m/s, 1 sigma; GX5-45 datasheet 0.1)",
+                     [](ProtocolOptions& p, double v) { p.stream.mip_nav.filter_velocity_sigma_m_s = v; }));
+  t.push_back(integer("mip", "gnss_satellites", 0, 255, "12", "0x81,0x0B satellites used, with a fix",
+                      [](ProtocolOptions& o, std::int64_t v) { o.stream.gnss.satellites = static_cast<int>(v); }));
+  t.push_back(number("mip", "gnss_horizontal_accuracy_m", 0.0, 1e4, false, "1.5",
+                     "0x81,0x03 horizontal accuracy (m)",
+                     [](ProtocolOptions& o, double v) { o.stream.gnss.horizontal_accuracy_m = v; }));
+  t.push_back(number("mip", "gnss_vertical_accuracy_m", 0.0, 1e4, false, "2.5", "0x81,0x03 vertical accuracy (m)",
+                     [](ProtocolOptions& o, double v) { o.stream.gnss.vertical_accuracy_m = v; }));
+  t.push_back(number("mip", "gnss_speed_accuracy_m_s", 0.0, 1e3, false, "0.05", "0x81,0x05 speed accuracy (m/s)",
+                     [](ProtocolOptions& o, double v) { o.stream.gnss.speed_accuracy_m_s = v; }));
+  t.push_back(number("mip", "gnss_geoid_separation_m", -200.0, 200.0, false, "0.0",
+                     "geoid above the ellipsoid (no geoid model is carried): 0x81,0x03 MSL height = ellipsoidal - this",
+                     [](ProtocolOptions& o, double v) { o.stream.gnss.geoid_separation_m = v; }));
+  // The receiver's position and velocity errors, seeded with the device's
+  // error-model seed (aiding_seed) as the filter's.
+  add_gnss_error_rows(t, "mip", "gnss_", "GNSS ", true);
 
   // ---- nmea and ubx: a GNSS receiver (drivers/gnss_fix.hpp, nmea.hpp,
   // ubx.hpp). The rows both take, then each one's own.

@@ -14,6 +14,7 @@
 // device's rate is the navigation rate, 1..10 Hz.
 #pragma once
 
+#include <cstdint>
 #include <memory>
 #include <optional>
 #include <string>
@@ -42,6 +43,42 @@ struct MipDeviceConfig {
   std::string device_options = "8g,300dps";
   // Reported in status and docs only: Get Device Information has no field for it.
   std::string hardware_revision = "1.0";
+};
+
+// Issue 28: the MIP device's GNSS data set 0x81 and its own navigation
+// filter, data set 0x82 (drivers/protocols/mip_nav.hpp, docs/mip-device.md).
+// Off by default (both rates 0): the device then lists, answers and streams
+// exactly what it did before. Times are seconds since the device powered up
+// (sample counter 0 of its stream).
+enum class MipFilterStates : std::uint8_t {
+  cv7,  // 3DM-CV7 / GQ7 ("prospect") filter states: 1 init, 2 vertical gyro, 3 AHRS, 4 full nav
+  gx5,  // 3DM-GX5-45 ("philo") filter states: 0 startup, 1 init, 2 running valid, 3 running error
+};
+struct MipNavConfig {
+  std::int64_t gnss_rate_hz = 0;    // 0x81 power-up rate (its receiver's epochs); 0: no GNSS receiver
+  std::int64_t filter_rate_hz = 0;  // 0x82 power-up rate; 0: no filter data
+  MipFilterStates filter_states = MipFilterStates::cv7;
+  // The filter initialises for this long after power-up (attitude
+  // alignment), then runs: AHRS, and full navigation while GNSS has a 3D fix.
+  double filter_alignment_s = 5.0;
+  // The receiver's first 3D fix after power-up (cold start time to first
+  // fix; u-blox M8/M9 and the GX5-45's receiver: 26-30 s cold).
+  double gnss_first_fix_s = 30.0;
+  // One GNSS outage on the timeline: no fix (0x81,0x0B fix type none, no
+  // satellites) in [start, start + duration); duration 0: none.
+  double gnss_outage_start_s = 0.0;
+  double gnss_outage_duration_s = 0.0;
+  // The filter solution's errors, 1 sigma, white per filter epoch, in the
+  // datasheet's terms (3DM-GX5-45 datasheet, "Navigation filter
+  // performance": attitude 0.25 deg roll/pitch, 0.8 deg heading, position
+  // 2.5 m horizontal / 5 m vertical, velocity 0.1 m/s RMS). Seeded with the
+  // device's error-model seed (aiding_seed).
+  double filter_roll_pitch_sigma_deg = 0.25;
+  double filter_heading_sigma_deg = 0.8;
+  double filter_horizontal_sigma_m = 2.5;
+  double filter_vertical_sigma_m = 5.0;
+  double filter_velocity_sigma_m_s = 0.1;
+  bool any() const { return gnss_rate_hz > 0 || filter_rate_hz > 0; }
 };
 
 struct StreamEncoderOptions {
@@ -120,6 +157,9 @@ struct StreamEncoderOptions {
   // Overrange status field (0x80,0x18): where the saturated bit goes.
   bool mip_overrange_status = true;
   MipDeviceConfig mip_device;
+  // GNSS (0x81) and filter (0x82) data sets; GNSS figures and position /
+  // velocity errors from `gnss` below (errors seeded with aiding_seed).
+  MipNavConfig mip_nav;
 
   // nmea and ubx (issue 28, drivers/gnss_fix.hpp): the receiver's time base
   // and the figures it reports; mavlink2 HIL_GPS: its satellites, DOPs,

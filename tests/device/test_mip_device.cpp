@@ -537,6 +537,135 @@ TEST(MipDevice, Px4MicrostrainStartUpReplayGetsEveryAckItWaitsFor) {
   EXPECT_EQ(d.command_counters().baud, 921600u);
 }
 
+// Issue 28: the same start-up with the device's filter data set on (scene
+// key mip.filter_rate_hz). PX4 reads the filter fields the device lists and
+// asks for each at base_rate / MS_FILT_RATE_HZ (250 Hz: 1000 / 250 = 4);
+// without them its configureFilterMessageFormat writes an empty format and
+// no filter data ever arrives. The field list is configureFilterMessageFormat's
+// order: LLH 0x01, attitude quaternion 0x03, NED velocity 0x02, LLH
+// uncertainty 0x08, velocity uncertainty 0x09, Euler uncertainty 0x0A,
+// filter status 0x10, shared GPS timestamp 0xD3 (the stored version with
+// configureGnssMessageFormat; PX4-Autopilot 606cd80986e16b31deb7e327eb7f01a1b219a108
+// asks for the same without 0xD3). Where the device lists no Get Base Rate
+// (0x0C,0x0E) PX4 falls back to Get Filter Base Rate (0x0C,0x0B: "Filter base
+// rate command is not supported" otherwise) and Filter Message Format
+// (0x0C,0x0A): both answered here too.
+TEST(MipDevice, Px4MicrostrainStartUpWithTheFilterSetConfiguresAndStreamsTheFilterData) {
+  drivers::StreamEncoderOptions o = options_1000hz();
+  o.mip_nav.filter_rate_hz = 100;  // the power-up rate; PX4 sets its own
+  drivers::mip::Encoder e(o);
+  drivers::CommandResponder& d = *e.command_responder();
+  EXPECT_EQ(ask(d, spec_packet(0x01, {{0x02, 0x02}})), spec_packet(0x01, {ack(0x02)}));
+  const Bytes desc = ask(d, spec_packet(0x01, {{0x02, 0x04}}));
+  for (const Bytes& needed : {Bytes{0x0C, 0x0E}, Bytes{0x0C, 0x0F}, Bytes{0x0C, 0x0B}, Bytes{0x0C, 0x0A},
+                              Bytes{0x82, 0x01}, Bytes{0x82, 0x03}, Bytes{0x82, 0x02}, Bytes{0x82, 0x08},
+                              Bytes{0x82, 0x09}, Bytes{0x82, 0x0A}, Bytes{0x82, 0x10}, Bytes{0x82, 0xD3}}) {
+    bool listed = false;  // the reply's u16 list, after the ACK (4 bytes) and the 0x82 field header (2)
+    for (std::size_t i = 10; i + 1 < desc.size() - 2; i += 2) listed = listed || (desc[i] == needed[0] && desc[i + 1] == needed[1]);
+    EXPECT_TRUE(listed) << int(needed[0]) << "," << int(needed[1]);
+  }
+  EXPECT_EQ(ask(d, spec_packet(0x0C, {{0x0B, 0x0F, 0x01, 0x80, 0x02, 0x04, 0x00, 0x02, 0x05, 0x00, 0x02}})),
+            spec_packet(0x0C, {ack(0x0F)}));
+  // configureFilterMessageFormat: the base rate, by either command.
+  EXPECT_EQ(ask(d, spec_packet(0x0C, {{0x03, 0x0E, 0x82}})),
+            spec_packet(0x0C, {ack(0x0E), {0x05, 0x8E, 0x82, 0x03, 0xE8}}));
+  EXPECT_EQ(ask(d, spec_packet(0x0C, {{0x02, 0x0B}})), spec_packet(0x0C, {ack(0x0B), {0x04, 0x8A, 0x03, 0xE8}}));
+  // Filter Message Format (0x0C,0x0A) then Message Format (0x0C,0x0F): 8 fields at decimation 4.
+  const Bytes list{0x08, 0x01, 0x00, 0x04, 0x03, 0x00, 0x04, 0x02, 0x00, 0x04, 0x08, 0x00, 0x04,
+                   0x09, 0x00, 0x04, 0x0A, 0x00, 0x04, 0x10, 0x00, 0x04, 0xD3, 0x00, 0x04};
+  Bytes cmd_a{static_cast<std::uint8_t>(3 + list.size()), 0x0A, 0x01};
+  cmd_a.insert(cmd_a.end(), list.begin(), list.end());
+  EXPECT_EQ(ask(d, spec_packet(0x0C, {cmd_a})), spec_packet(0x0C, {ack(0x0A)}));
+  Bytes cmd_f{static_cast<std::uint8_t>(4 + list.size()), 0x0F, 0x01, 0x82};
+  cmd_f.insert(cmd_f.end(), list.begin(), list.end());
+  EXPECT_EQ(ask(d, spec_packet(0x0C, {cmd_f})), spec_packet(0x0C, {ack(0x0F)}));
+  // Read back (0x0C,0x0F function 2 -> 0x8F: set, count, list).
+  Bytes readback{static_cast<std::uint8_t>(3 + list.size()), 0x8F, 0x82};
+  readback.insert(readback.end(), list.begin(), list.end());
+  EXPECT_EQ(ask(d, spec_packet(0x0C, {{0x04, 0x0F, 0x02, 0x82}})), spec_packet(0x0C, {ack(0x0F), readback}));
+  EXPECT_EQ(ask(d, spec_packet(0x0D, {{0x02, 0x01}})), spec_packet(0x0D, {ack(0x01)}));
+  EXPECT_EQ(ask(d, spec_packet(0x0C, {{0x05, 0x11, 0x01, 0x00, 0x01}})), spec_packet(0x0C, {ack(0x11)}));
+  EXPECT_EQ(ask(d, spec_packet(0x01, {{0x02, 0x06}})), spec_packet(0x01, {ack(0x06)}));
+  // One second: 500 IMU packets (accel + gyro) and 250 filter packets with the 8 fields in PX4's order.
+  std::size_t imu = 0, filter = 0;
+  for (std::uint64_t k = 0; k < 1000; ++k) {
+    drivers::ImuFrameInput s;
+    s.sample_counter = k;
+    s.t_ns = static_cast<TimeNs>(k) * 1'000'000;
+    Bytes out;
+    e.encode(s, out);
+    std::size_t garbage = 0, tail = 0;
+    for (const SeenPacket& p : split_packets(out, &garbage, &tail)) {
+      if (p.set == 0x80) {
+        ++imu;
+        EXPECT_EQ(p.fields, (std::vector<std::uint8_t>{0x04, 0x05}));
+      } else {
+        ASSERT_EQ(p.set, 0x82);
+        ++filter;
+        EXPECT_EQ(k % 4, 0u);
+        EXPECT_EQ(p.fields, (std::vector<std::uint8_t>{0x01, 0x03, 0x02, 0x08, 0x09, 0x0A, 0x10, 0xD3}));
+      }
+    }
+    EXPECT_EQ(garbage + tail, 0u);
+  }
+  EXPECT_EQ(imu, 500u);
+  EXPECT_EQ(filter, 250u);
+  EXPECT_EQ(d.command_counters().nacked, 0u);
+}
+
+// Issue 28: the GNSS set 0x81 by its own commands (Get GNSS Base Rate
+// 0x0C,0x07 -> 0x84; GNSS Message Format 0x0C,0x09 -> 0x81) and by the
+// descriptor-set ones; a field the receiver has not (0x81,0x04) is refused
+// with nothing changed.
+TEST(MipDevice, GnssSetFormatIsSetByItsOwnAndTheDescriptorSetCommands) {
+  drivers::StreamEncoderOptions o = options_1000hz();
+  o.mip_nav.gnss_rate_hz = 4;
+  drivers::mip::Encoder e(o);
+  drivers::CommandResponder& d = *e.command_responder();
+  EXPECT_EQ(ask(d, spec_packet(0x0C, {{0x02, 0x07}})), spec_packet(0x0C, {ack(0x07), {0x04, 0x84, 0x03, 0xE8}}));
+  // Power-up: LLH, NED velocity, fix info, GPS timestamp at 1000 / 4 = 250 = 0x00FA.
+  EXPECT_EQ(ask(d, spec_packet(0x0C, {{0x03, 0x09, 0x02}})),
+            spec_packet(0x0C, {ack(0x09), {0x0F, 0x81, 0x04, 0x03, 0x00, 0xFA, 0x05, 0x00, 0xFA, 0x0B, 0x00, 0xFA,
+                                          0xD3, 0x00, 0xFA}}));
+  EXPECT_EQ(ask(d, spec_packet(0x0C, {{0x07, 0x09, 0x01, 0x01, 0x04, 0x00, 0x64}})), spec_packet(0x0C, {ack(0x09, 0x03)}));
+  // Message Format 0x0F on set 0x81: fix info and GPS time 0x09 at 500 (2 Hz).
+  EXPECT_EQ(ask(d, spec_packet(0x0C, {{0x0B, 0x0F, 0x01, 0x81, 0x02, 0x0B, 0x01, 0xF4, 0x09, 0x01, 0xF4}})),
+            spec_packet(0x0C, {ack(0x0F)}));
+  std::size_t gnss = 0;
+  for (std::uint64_t k = 0; k < 2000; ++k) {
+    drivers::ImuFrameInput s;
+    s.sample_counter = k;
+    s.t_ns = static_cast<TimeNs>(k) * 1'000'000;
+    Bytes out;
+    e.encode(s, out);
+    for (const SeenPacket& p : split_packets(out)) {
+      if (p.set != 0x81) continue;
+      ++gnss;
+      EXPECT_EQ(k % 500, 0u);
+      EXPECT_EQ(p.fields, (std::vector<std::uint8_t>{0x0B, 0x09}));
+    }
+  }
+  EXPECT_EQ(gnss, 4u);
+  // Datastream Control off for 0x81 alone: the IMU goes on, GNSS stops.
+  EXPECT_EQ(ask(d, spec_packet(0x0C, {{0x05, 0x11, 0x01, 0x81, 0x00}})), spec_packet(0x0C, {ack(0x11)}));
+  EXPECT_EQ(ask(d, spec_packet(0x0C, {{0x04, 0x11, 0x02, 0x81}})), spec_packet(0x0C, {ack(0x11), {0x04, 0x85, 0x81, 0x00}}));
+  Bytes out;
+  drivers::ImuFrameInput s;
+  s.sample_counter = 2000;
+  e.encode(s, out);
+  const auto packets = split_packets(out);
+  ASSERT_EQ(packets.size(), 1u);
+  EXPECT_EQ(packets[0].set, 0x80);
+}
+
+// Without the GNSS receiver its commands stay unknown and set 0x81 invalid, as before issue 28.
+TEST(MipDevice, WithoutAGnssReceiverItsCommandsAreRefusedAsBefore) {
+  drivers::mip::Encoder e(options_1000hz());
+  drivers::CommandResponder& d = *e.command_responder();
+  EXPECT_EQ(ask(d, spec_packet(0x0C, {{0x02, 0x07}})), spec_packet(0x0C, {ack(0x07, 0x01)}));
+  EXPECT_EQ(ask(d, spec_packet(0x0C, {{0x03, 0x0E, 0x81}})), spec_packet(0x0C, {ack(0x0E, 0x03)}));
+}
+
 TEST(MipDevice, TheDefaultStreamIsTheOldEncodersOutputByteForByte) {
   // Without any command the device sends what the encoder sent before issue
   // 27 (the scenes' compared bytes): the same encoder with answering off.

@@ -130,6 +130,10 @@ std::map<std::string, OtherValue> companions_of(const ProtocolOption& o) {
     return {{"mag", {"true", "true"}}};
   if (o.protocol == "mavlink2" && o.key.rfind("gps_", 0) == 0) return {{"hil_gps_rate_hz", {"5", "5"}}};
   if (o.protocol == "mip" && o.key == "gps_minus_utc_s") return {{"time_base", {"utc", "\"utc\""}}};
+  // The MIP device's GNSS and filter figures act only with those sets on.
+  if (o.protocol == "mip" && (o.key.rfind("gnss_", 0) == 0 || o.key.rfind("filter_", 0) == 0) &&
+      o.key != "gnss_rate_hz" && o.key != "filter_rate_hz")
+    return {{"gnss_rate_hz", {"10", "10"}}, {"filter_rate_hz", {"50", "50"}}};
   // A GNSS receiver's error correlation time and seed act on an error term.
   if (is_gnss_protocol(o.protocol) && (o.key == "horizontal_gm_tau_s" || o.key == "seed"))
     return {{"horizontal_gm_sigma_m", {"2", "2.0"}}};
