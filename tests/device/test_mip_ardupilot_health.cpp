@@ -47,6 +47,11 @@
 #include "drivers/protocols/mip.hpp"
 #include "drivers/protocols/stream_protocols.hpp"
 
+// This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
+namespace imuemu {}
+namespace unity_device_test_mip_ardupilot_health {
+namespace imuemu { using namespace ::imuemu; }
+
 namespace {
 
 using namespace imuemu;
@@ -397,3 +402,4 @@ TEST(MipArduPilotHealth, FilterErrorsHaveTheDatasheetSigmasAndFollowTheSeed) {
 }
 
 }  // namespace
+}  // namespace unity_device_test_mip_ardupilot_health
