@@ -48,9 +48,14 @@ void set_level_attitude(const Kinematics& k, Physics physics, drivers::ImuFrameI
 // and attitude relative to NED from the sample's kinematics in an ecef scene
 // (Eq. 1.1 inverse, v^n = R_l^e^T v^e and R_s^n = R_l^e^T R_s^e with Eq. 1.5
 // at the sample's own position). A flat
-// scene's positions have no geodetic anchor: the fields stay unset.
+// scene's positions have no geodetic anchor: the position fields stay unset
+// (has_navigation false), and its attitude is already R_s^n (a VectorNav's
+// attitude outputs, issue 29).
 void set_navigation(const Kinematics& k, Physics physics, drivers::ImuFrameInput& f) {
-  if (physics != Physics::ecef) return;
+  if (physics != Physics::ecef) {
+    f.sensor_to_ned = k.attitude;
+    return;
+  }
   const earth::Geodetic g = earth::geodetic_from_ecef(k.position_m);
   f.has_navigation = true;
   f.latitude_rad = g.latitude_rad;

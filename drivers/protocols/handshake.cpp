@@ -10,6 +10,7 @@
 #include "drivers/protocols/mavlink2.hpp"
 #include "drivers/protocols/mavlink_device.hpp"
 #include "drivers/protocols/mip_device.hpp"
+#include "drivers/protocols/vectornav.hpp"
 #include "drivers/protocols/wire_bytes.hpp"
 
 namespace imuemu::drivers::handshake {
@@ -291,11 +292,78 @@ class MavlinkClient final : public Client {
   std::string params_text_;
 };
 
+
+// [VN] VectorNav user manuals, "Serial ASCII": what the VectorNav SDK's
+// connect and PX4's vectornav init() read (model, hardware revision, serial
+// number, firmware), then the async output and binary output registers, all
+// reads: the device keeps streaming what it was configured with, which
+// `listen` then decodes. 8-bit checksums, as libvnc sends them.
+class VectorNavClient final : public Client {
+ public:
+  std::size_t step_count() const override { return kSteps.size(); }
+  std::string step_name(std::size_t step) const override { return kSteps[step].name; }
+  std::vector<std::uint8_t> request(std::size_t step) override {
+    const std::string body = std::string("VNRRG,") + kSteps[step].reg;
+    char sum[8];
+    std::snprintf(sum, sizeof sum, "*%02X\r\n", static_cast<unsigned>(vectornav::checksum8(body)));
+    const std::string s = "$" + body + sum;
+    line_.clear();
+    return {s.begin(), s.end()};
+  }
+  bool feed(std::size_t step, std::span<const std::uint8_t> bytes, StepResult& result) override {
+    const std::string want = std::string("$VNRRG,") + kSteps[step].reg + ",";
+    for (const std::uint8_t b : bytes) {
+      if (b == '$') line_.assign(1, '$');
+      else if (!line_.empty() && b != '\r' && b != '\n' && line_.size() < 256) line_.push_back(static_cast<char>(b));
+      if ((b != '\n' && b != '\r') || line_.empty()) continue;
+      const std::string line = line_;
+      line_.clear();
+      const std::size_t star = line.find('*');
+      if (star == std::string::npos) continue;
+      // [VN] the reply's checksum: two hex digits (8-bit XOR) or four (CRC-16).
+      const std::string_view body(line.data() + 1, star - 1);
+      const std::string sum = line.substr(star + 1);
+      unsigned value = 0;
+      if (std::sscanf(sum.c_str(), "%x", &value) != 1) continue;
+      const bool ok = (sum.size() == 2 && value == vectornav::checksum8(body)) ||
+                      (sum.size() == 4 && value == vectornav::crc16(std::span<const std::uint8_t>(
+                                                        reinterpret_cast<const std::uint8_t*>(body.data()), body.size())));
+      if (!ok) continue;
+      if (line.rfind("$VNERR,", 0) == 0) {
+        result.answered = true;
+        result.reply = "VNERR " + std::string(body.substr(6));
+        return true;
+      }
+      if (line.rfind(want, 0) == 0) {
+        result.answered = result.accepted = true;
+        result.reply = line.substr(want.size(), star - want.size());
+        return true;
+      }
+    }
+    return false;
+  }
+
+ private:
+  struct Step {
+    const char* name;
+    const char* reg;
+  };
+  static constexpr std::array<Step, 8> kSteps{{{"Model number (register 1)", "01"},
+                                               {"Hardware revision (register 2)", "02"},
+                                               {"Serial number (register 3)", "03"},
+                                               {"Firmware version (register 4)", "04"},
+                                               {"Async data output type (register 6)", "06"},
+                                               {"Binary output 1 (register 75)", "75"},
+                                               {"Binary output 2 (register 76)", "76"},
+                                               {"Binary output 3 (register 77)", "77"}}};
+  std::string line_;
+};
 }  // namespace
 
 std::unique_ptr<Client> make_client(const std::string& protocol) {
   if (protocol == "mip") return std::make_unique<MipClient>();
   if (protocol == "mavlink2") return std::make_unique<MavlinkClient>();
+  if (protocol == "vectornav") return std::make_unique<VectorNavClient>();
   return nullptr;
 }
 

@@ -18,6 +18,9 @@
 //    0019ddbe, ParameterManager / Vehicle): its HEARTBEAT (MAV_TYPE_GCS),
 //    REQUEST_MESSAGE (MAV_CMD 512) for AUTOPILOT_VERSION (148), and
 //    PARAM_REQUEST_LIST, then the device's PARAM_VALUEs until param_count.
+//  - vectornav: the registers the VectorNav SDK's connect and PX4's
+//    src/drivers/ins/vectornav init() read (1-4), then 6 and 75-77, all
+//    read (VectorNavClient in handshake.cpp).
 // Frames are built here from the protocol documents ([DCP] MicroStrain's
 // MIP Data Communications Protocol manuals; [G] the MAVLink developer guide,
 // [X] common.xml); the replies are read with the same framing rules.

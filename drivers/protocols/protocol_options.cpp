@@ -298,6 +298,37 @@ std::vector<ProtocolOption> make_table() {
                       "NAV-POSLLH, NAV-STATUS, NAV-DOP, NAV-SOL, NAV-VELNED and NAV-TIMEGPS beside NAV-PVT",
                       [](ProtocolOptions& o, bool v) { o.stream.ubx_legacy_nav = v; }));
 
+  // ---- vectornav (vectornav.hpp, vectornav_device.hpp, issue 29)
+  t.push_back(choice("vectornav", "model", {"vn100", "vn200", "vn300"},
+                     "VN-100 (AHRS, 800 Hz IMU rate), VN-200 (GNSS/INS, 800 Hz) or VN-300 (dual-GNSS INS, 400 Hz): "
+                     "the rate divisors' base and the binary groups the device has",
+                     [](ProtocolOptions& o, const std::string& v) {
+                       o.stream.vectornav.model = v == "vn300"   ? VectorNavModel::vn300
+                                                  : v == "vn200" ? VectorNavModel::vn200
+                                                                 : VectorNavModel::vn100;
+                     }));
+  t.push_back(boolean("vectornav", "answers_commands", true, "answer $VN commands (registers, async control)",
+                      [](ProtocolOptions& o, bool v) { o.stream.vectornav.answers_commands = v; }));
+  t.push_back(integer("vectornav", "port", 1, 2, "1", "which of the device's serial ports this output is",
+                      [](ProtocolOptions& o, std::int64_t v) { o.stream.vectornav.port = static_cast<std::uint8_t>(v); }));
+  t.push_back(integer("vectornav", "hardware_revision", 0, 4294967295LL, "2", "register 2",
+                      [](ProtocolOptions& o, std::int64_t v) {
+                        o.stream.vectornav.hardware_revision = static_cast<std::uint32_t>(v);
+                      }));
+  t.push_back(integer("vectornav", "serial_number", 0, 4294967295LL, "100012345", "register 3",
+                      [](ProtocolOptions& o, std::int64_t v) {
+                        o.stream.vectornav.serial_number = static_cast<std::uint32_t>(v);
+                      }));
+  t.push_back(integer("vectornav", "power_up_ador", -1, 30, "-1",
+                      "register 6 at power-up: the async ASCII output (0 off, 1 YPR, 2 QTN, 8 QMR, 10 MAG, 11 ACC, "
+                      "12 GYR, 13 MAR, 14 YMR, 19 IMU, 22 INS, 30 DTV); -1: YMR, INS on a VN-200 / VN-300",
+                      [](ProtocolOptions& o, std::int64_t v) { o.stream.vectornav.power_up_ador = static_cast<int>(v); }));
+  t.push_back(integer("vectornav", "power_up_adof_hz", 1, 200, "40",
+                      "register 7 at power-up: the async ASCII output rate (1, 2, 4, 5, 10, 20, 25, 40, 50, 100 or 200 Hz)",
+                      [](ProtocolOptions& o, std::int64_t v) {
+                        o.stream.vectornav.power_up_adof_hz = static_cast<std::uint16_t>(v);
+                      }));
+
   // ---- dronecan (dronecan.hpp)
   t.push_back(integer("dronecan", "node_id", 1, 127, "42", "source node id, unique per CAN interface",
                       [](ProtocolOptions& p, std::int64_t v) { p.can.dronecan.node_id = static_cast<std::uint8_t>(v); }));

@@ -1,5 +1,6 @@
 #include "drivers/protocols/stream_protocols.hpp"
 
+#include <algorithm>
 #include <cmath>
 #include <stdexcept>
 #include <utility>
@@ -9,6 +10,7 @@
 #include "drivers/protocols/native.hpp"
 #include "drivers/protocols/nmea.hpp"
 #include "drivers/protocols/ubx.hpp"
+#include "drivers/protocols/vectornav.hpp"
 
 namespace imuemu::drivers {
 
@@ -37,6 +39,36 @@ void check_options(const std::string& protocol, const StreamEncoderOptions& o) {
         throw std::invalid_argument(std::string("stream protocol 'mip': device ") + key + " '" + *value +
                                     "' is longer than the 16 characters of its Get Device Information field");
     }
+  }
+  if (protocol == "vectornav") {
+    const VectorNavDeviceConfig& v = o.vectornav;
+    // The identity registers are comma-separated ASCII fields of one sentence.
+    auto field_text = [](const std::string& key, const std::string& value, std::size_t max) {
+      const bool printable = std::all_of(value.begin(), value.end(), [](char c) {
+        return c >= ' ' && c <= '~' && c != ',' && c != '*' && c != '$';
+      });
+      if (value.size() > max || !printable)
+        throw std::invalid_argument("stream protocol 'vectornav': " + key + " '" + value + "' must be at most " +
+                                    std::to_string(max) + " printable characters without , * or $");
+    };
+    field_text("model_number", v.model_number, 24);
+    field_text("firmware_version", v.firmware_version, 24);
+    field_text("user_tag", v.user_tag, 20);
+    if (v.port != 1 && v.port != 2)
+      throw std::invalid_argument("stream protocol 'vectornav': port must be 1 or 2 (the device's serial ports)");
+    const bool rate_ok = std::find(vectornav::kAdofRates.begin(), vectornav::kAdofRates.end(), v.power_up_adof_hz) !=
+                         vectornav::kAdofRates.end();
+    if (!rate_ok)
+      throw std::invalid_argument("stream protocol 'vectornav': power_up_adof_hz " + std::to_string(v.power_up_adof_hz) +
+                                  " is not one of register 7's rates (1, 2, 4, 5, 10, 20, 25, 40, 50, 100, 200)");
+    if (v.power_up_ador > 255 ||
+        (v.power_up_ador > 0 && vectornav::ador_header(static_cast<std::uint8_t>(v.power_up_ador)) == nullptr) ||
+        (v.power_up_ador == vectornav::kAdorIns && v.model == VectorNavModel::vn100))
+      throw std::invalid_argument("stream protocol 'vectornav': power_up_ador " + std::to_string(v.power_up_ador) +
+                                  " is not an async output this model sends");
+    for (const double g : v.mag_reference_ned_gauss)
+      if (!std::isfinite(g) || std::fabs(g) > 10.0)
+        throw std::invalid_argument("stream protocol 'vectornav': the magnetic reference must be finite, within 10 gauss");
   }
   if (is_gnss_protocol(protocol)) {
     if (o.nmea_talker != "GP" && o.nmea_talker != "GN")
@@ -71,7 +103,7 @@ void check_options(const std::string& protocol, const StreamEncoderOptions& o) {
 
 }  // namespace
 
-std::vector<std::string> stream_protocol_names() { return {"native", "mavlink2", "mip", "nmea", "ubx"}; }
+std::vector<std::string> stream_protocol_names() { return {"native", "mavlink2", "mip", "nmea", "ubx", "vectornav"}; }
 
 bool is_gnss_protocol(const std::string& protocol) { return protocol == "nmea" || protocol == "ubx"; }
 
@@ -83,6 +115,7 @@ std::unique_ptr<StreamEncoder> make_stream_encoder(const std::string& protocol,
   if (protocol == "mip") return std::make_unique<mip::Encoder>(options);
   if (protocol == "nmea") return std::make_unique<nmea::Encoder>(options);
   if (protocol == "ubx") return std::make_unique<ubx::Encoder>(options);
+  if (protocol == "vectornav") return std::make_unique<vectornav::Encoder>(options);
   throw std::invalid_argument("unknown stream protocol '" + protocol + "' (expected one of: " + joined_names() +
                               ")");
 }
@@ -95,6 +128,7 @@ std::unique_ptr<StreamDecoder> make_stream_decoder(const std::string& protocol,
   if (protocol == "mip") return std::make_unique<mip::Decoder>(options);
   if (protocol == "nmea") return std::make_unique<nmea::Decoder>();
   if (protocol == "ubx") return std::make_unique<ubx::Decoder>();
+  if (protocol == "vectornav") return std::make_unique<vectornav::Decoder>();
   throw std::invalid_argument("unknown stream protocol '" + protocol + "' (expected one of: " + joined_names() +
                               ")");
 }

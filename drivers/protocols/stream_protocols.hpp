@@ -10,6 +10,8 @@
 //   "nmea"     a GNSS receiver: NMEA 0183 RMC, VTG, GGA, GSA, ZDA per epoch
 //   "ubx"      a GNSS receiver: u-blox UBX NAV-PVT (+ POSLLH, STATUS, DOP,
 //              SOL, VELNED, TIMEGPS) per epoch
+//   "vectornav" VectorNav VN-100 / VN-200 / VN-300: binary output packets
+//              and async ASCII sentences as its registers set them
 // The GNSS receivers send one navigation epoch per device sample: the
 // device's rate is the navigation rate, 1..10 Hz.
 #pragma once
@@ -43,6 +45,31 @@ struct MipDeviceConfig {
   std::string device_options = "8g,300dps";
   // Reported in status and docs only: Get Device Information has no field for it.
   std::string hardware_revision = "1.0";
+};
+
+// The VectorNav device (drivers/protocols/vectornav_device.hpp,
+// docs/vectornav-device.md, issue 29): scene keys [imu.vectornav]. The model
+// decides the IMU rate the rate divisors divide (VN-100 / VN-200: 800 Hz,
+// VN-300: 400 Hz) and the binary groups it has (GNSS and INS: VN-200 and
+// VN-300). The identity registers (1-4) report the strings below; empty:
+// the model's preset ("VN-100T-CR", ... and firmware "2.1.0.0").
+enum class VectorNavModel : std::uint8_t { vn100, vn200, vn300 };
+struct VectorNavDeviceConfig {
+  bool answers_commands = true;       // false: input read and discarded
+  VectorNavModel model = VectorNavModel::vn100;
+  std::string model_number;           // register 1 (at most 24 characters)
+  std::uint32_t hardware_revision = 2;  // register 2
+  std::uint32_t serial_number = 100012345;  // register 3
+  std::string firmware_version;       // register 4 ("2.1.0.0")
+  std::string user_tag;               // register 0 at power-up (at most 20 characters)
+  std::uint8_t port = 1;              // which of the device's two serial ports the pty / UART is (1 or 2)
+  // Register 6 / 7 at power-up: the async ASCII output (0: off; default
+  // VNYMR (14) for a VN-100, VNINS (22) for the INS models) at this rate (Hz).
+  int power_up_ador = -1;             // -1: the model's default
+  std::uint16_t power_up_adof_hz = 40;
+  // The magnetic field the magnetometer measures, in NED (gauss): a fixed
+  // reference (register 21's role), not a field model.
+  double mag_reference_ned_gauss[3] = {0.21, 0.0, 0.43};
 };
 
 // Issue 28: the MIP device's GNSS data set 0x81 and its own navigation
@@ -160,6 +187,12 @@ struct StreamEncoderOptions {
   // GNSS (0x81) and filter (0x82) data sets; GNSS figures and position /
   // velocity errors from `gnss` below (errors seeded with aiding_seed).
   MipNavConfig mip_nav;
+
+  // vectornav (issue 29): the device's model, identity and power-up
+  // outputs. GPS time and the GNSS fields (VN-200 / VN-300) come from `gnss`
+  // below (time base, satellites, DOPs, accuracies; its position is the
+  // trajectory's, without errors).
+  VectorNavDeviceConfig vectornav;
 
   // nmea and ubx (issue 28, drivers/gnss_fix.hpp): the receiver's time base
   // and the figures it reports; mavlink2 HIL_GPS: its satellites, DOPs,

@@ -53,6 +53,7 @@
 #include "drivers/protocols/mip.hpp"
 #include "drivers/protocols/mip_device.hpp"
 #include "drivers/protocols/stream_protocols.hpp"
+#include "drivers/protocols/vectornav.hpp"
 #include "drivers/pty_transport.hpp"
 #include "drivers/queued_writer.hpp"
 
@@ -993,6 +994,59 @@ TEST(MipDevice, MavlinkAnswersSerialisedOnTheEmissionThreadAllocateNothing) {
   const drivers::CommandCounters c = r->command_counters();
   EXPECT_EQ(c.received, 100u);
   EXPECT_EQ(c.answered, 100u);
+}
+
+// The VectorNav device (tests/device/test_vectornav_device.cpp): its encoder
+// builds three binary outputs and an ASCII sentence per sample and hands its
+// latest measurements to the command side, while register writes change
+// what it streams between samples - allocating nothing. Here because this
+// file owns the room's allocation counter.
+TEST(MipDevice, VectorNavEmissionWithCommandsBetweenSamplesAllocatesNothing) {
+  drivers::StreamEncoderOptions o;
+  o.nominal_sample_rate_hz = 400.0;
+  o.vectornav.model = drivers::VectorNavModel::vn300;
+  drivers::vectornav::Encoder enc(o);
+  drivers::CommandResponder* r = enc.command_responder();
+  ASSERT_NE(r, nullptr);
+  struct CountingSink final : drivers::ReplySink {
+    std::size_t replies = 0;
+    bool reply(std::span<const std::uint8_t>) override { return ++replies, true; }
+    void change_baud_after_replies(std::uint32_t) override {}
+  } sink;
+  auto send = [&](const std::string& body) {
+    char sum[8];
+    std::uint8_t x = 0;
+    for (const char c : body) x ^= static_cast<std::uint8_t>(c);
+    std::snprintf(sum, sizeof sum, "*%02X\r\n", x);
+    const std::string cmd = "$" + body + sum;
+    r->on_input(std::span<const std::uint8_t>(reinterpret_cast<const std::uint8_t*>(cmd.data()), cmd.size()), sink);
+  };
+  send("VNWRG,05,921600");
+  send("VNWRG,75,1,2,01,0721");
+  send("VNWRG,76,1,8,31,0001,0106,0613");
+  send("VNWRG,77,1,80,49,0003,26B8,0018");
+  Bytes out;
+  out.reserve(enc.max_bytes_per_sample());
+  drivers::ImuFrameInput s;
+  s.period_ns = 2'500'000;
+  s.has_navigation = true;
+  s.latitude_rad = 0.8;
+  std::uint64_t allocations = 0;
+  for (std::uint64_t k = 0; k < 400; ++k) {
+    if (k % 10 == 0) send("VNRRG,08");
+    if (k % 100 == 50) send(k % 200 == 50 ? "VNWRG,06,19" : "VNWRG,06,14");
+    s.sample_counter = k;
+    s.t_ns = static_cast<TimeNs>(k) * s.period_ns;
+    out.clear();
+    const std::uint64_t before = g_emission_allocations.load();
+    t_counting = true;
+    enc.encode(s, out);
+    t_counting = false;
+    allocations += g_emission_allocations.load() - before;
+  }
+  EXPECT_EQ(allocations, 0u);
+  EXPECT_EQ(sink.replies, 4u + 40u + 4u);
+  EXPECT_EQ(r->command_counters().nacked, 0u);
 }
 
 TEST(MipDevice, OnAPtyABaudChangeIsRecordedAfterTheAck) {
