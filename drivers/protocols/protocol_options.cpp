@@ -307,18 +307,6 @@ std::vector<ProtocolOption> make_table() {
                                                   : v == "vn200" ? VectorNavModel::vn200
                                                                  : VectorNavModel::vn100;
                      }));
-  t.push_back(boolean("vectornav", "answers_commands", true, "answer $VN commands (registers, async control)",
-                      [](ProtocolOptions& o, bool v) { o.stream.vectornav.answers_commands = v; }));
-  t.push_back(integer("vectornav", "port", 1, 2, "1", "which of the device's serial ports this output is",
-                      [](ProtocolOptions& o, std::int64_t v) { o.stream.vectornav.port = static_cast<std::uint8_t>(v); }));
-  t.push_back(integer("vectornav", "hardware_revision", 0, 4294967295LL, "2", "register 2",
-                      [](ProtocolOptions& o, std::int64_t v) {
-                        o.stream.vectornav.hardware_revision = static_cast<std::uint32_t>(v);
-                      }));
-  t.push_back(integer("vectornav", "serial_number", 0, 4294967295LL, "100012345", "register 3",
-                      [](ProtocolOptions& o, std::int64_t v) {
-                        o.stream.vectornav.serial_number = static_cast<std::uint32_t>(v);
-                      }));
   t.push_back(integer("vectornav", "power_up_ador", -1, 30, "-1",
                       "register 6 at power-up: the async ASCII output (0 off, 1 YPR, 2 QTN, 8 QMR, 10 MAG, 11 ACC, "
                       "12 GYR, 13 MAR, 14 YMR, 19 IMU, 22 INS, 30 DTV); -1: YMR, INS on a VN-200 / VN-300",
