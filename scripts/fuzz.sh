@@ -1,14 +1,19 @@
 #!/usr/bin/env bash
 # Builds the libFuzzer targets (in the clang ASan+UBSan tree, build/asan) and
 # runs each for a bounded time from the seed corpora in tests/fuzz/corpus
-# (copied, so the repository is never modified), two at a time (one per core).
+# (copied, so the repository is never modified), FUZZ_JOBS at a time (default
+# 2, one per core; scripts/test.sh runs them one at a time beside the ASan tests).
 # Runs every target; exits non-zero if any crashed, naming each and its input.
 #   scripts/fuzz.sh [SECONDS_PER_TARGET]   (default 30)
 set -euo pipefail
 cd "$(dirname "$0")/.."
 seconds=${1:-${FUZZ_SECONDS:-30}}
 targets=(trajectory_csv imu_csv decimal_time pose_line pose_datagram live_path mavlink_senders error_model fault_table scene control_request)
-IMUEMU_BUILD_QUIET=${IMUEMU_BUILD_QUIET:-1} bash scripts/build.sh asan "${targets[@]/#/fuzz_}"
+# FUZZ_BUILT=1: the caller built them (scripts/test.sh: the whole ASan tree),
+# so no cmake runs in build/asan while its tests read it.
+if [[ ${FUZZ_BUILT:-0} != 1 ]]; then
+  IMUEMU_BUILD_QUIET=${IMUEMU_BUILD_QUIET:-1} bash scripts/build.sh asan "${targets[@]/#/fuzz_}"
+fi
 work=$(mktemp -d)
 trap 'rm -rf "$work"' EXIT
 root=$PWD
@@ -24,7 +29,7 @@ run_target() {
 pids=() failed=()
 for target in "${targets[@]}"; do
   run_target "$target" & pids+=("$!:$target")
-  if ((${#pids[@]} == 2)); then
+  if ((${#pids[@]} >= ${FUZZ_JOBS:-2})); then
     entry=${pids[0]}; pids=("${pids[@]:1}")
     wait "${entry%%:*}" || failed+=("${entry#*:}")
   fi

@@ -81,19 +81,29 @@ wait "$asan_build" || { asan_built=0; fail "asan build (build/asan/build.log)"; 
 stage "release: loopback runs (all at once, idle machine)"
 ctest --test-dir build/release --output-on-failure -L loopback -j 10 || fail "loopback runs"
 if ((asan_built)); then
-  stage "asan: test"
+  # The libFuzzer targets run beside the ASan tests, one at a time, for
+  # FUZZ_SECONDS of wall time each (30 s, as issue 25 asks; 11 targets: about
+  # 330 s, as long as the ASan tests). Measured at 1597 s: the ASan tests left
+  # about 125 of their stage's 644 CPU-s idle (most wait on real time), and the
+  # whole run needed about 2960 CPU-s, so on 2 cores no order of the stages
+  # fitted 1500 s while fuzz had a stage of its own (190 s). Beside the tests, a
+  # target shares a core: it gets its 30 s, but fewer executions in them than
+  # alone. Longer campaigns: scripts/fuzz.sh 600.
+  stage "asan: test + fuzz beside (${FUZZ_SECONDS:-30} s per target, one at a time)"
+  FUZZ_JOBS=1 FUZZ_BUILT=1 bash scripts/fuzz.sh "${FUZZ_SECONDS:-30}" > build/asan/fuzz.log 2>&1 &
+  fuzz_run=$!
   ctest --test-dir build/asan --output-on-failure -j "$(nproc)" -LE "hil|loopback|heavy|memory" || fail "asan tests"
+  echo "asan tests ended $((SECONDS - stage_start)) s into the stage; waiting for the fuzz targets"
+  fuzz_ok=1
+  wait "$fuzz_run" || fuzz_ok=0
+  cat build/asan/fuzz.log
+  ((fuzz_ok)) || fail "fuzz"
 else
   echo "=== asan: build failed (above); its tests and the fuzz targets did not run"
   stage_summary
   verdict
   exit 1
 fi
-# The libFuzzer targets, bounded in time (FUZZ_SECONDS per target, two at a
-# time): 30 s each, as issue 25 asks (11 targets: 188 s on 2 cores); longer
-# campaigns: scripts/fuzz.sh 600.
-stage "fuzz (${FUZZ_SECONDS:-30} s per target, two at a time)"
-bash scripts/fuzz.sh "${FUZZ_SECONDS:-30}" || fail "fuzz"
 stage_summary
 verdict
 exit $status
