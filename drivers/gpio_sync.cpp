@@ -324,6 +324,9 @@ GpioSyncCounters GpioSyncOutput::counters() const {
   c.max_trailing_edge_delay_ns = max_delay_ns_.load(std::memory_order_relaxed);
   c.helper_faults = helper_faults_.load(std::memory_order_relaxed);
   c.down = down_.load(std::memory_order_acquire);
+  for (const Output* output : {sync_.get(), pps_.get()}) {
+    if (output != nullptr && output->active.load(std::memory_order_acquire) != 0) ++c.pulses_in_progress;
+  }
   return c;
 }
 

@@ -67,6 +67,11 @@ struct GpioSyncCounters {
   std::uint64_t skipped_pulses = 0;  // due while the previous pulse on the same line had not ended
   std::uint64_t set_errors = 0;      // failed line writes
   TimeNs max_trailing_edge_delay_ns = 0;  // worst lateness of a trailing edge after its due time
+  // Lines between their leading edge and the trailing-edge thread's end of the
+  // pulse. The line goes inactive a moment before the line is free for the
+  // next pulse, so a caller that must not have its next pulse skipped waits
+  // for this to be 0, not for the line's level.
+  std::uint64_t pulses_in_progress = 0;
   // The trailing-edge thread ended with an exception (caught there, never
   // leaving the thread): counted, logged, and the sync output is down; later
   // pulses are not raised (counted skipped_pulses).

@@ -5,9 +5,8 @@
 #include <memory>
 #include <sstream>
 
-#include "core/attitude.hpp"
-#include "core/earth.hpp"
 #include "core/time_arith.hpp"
+#include "daemon/device/frame_navigation.hpp"
 #include "drivers/gnss_fix.hpp"
 #include "drivers/protocols/mavlink2.hpp"
 #include "io/fault_log.hpp"
@@ -113,15 +112,7 @@ class AidingFiles {
     f.sample_counter = scene::grid_index(t0_ns, s.imu.t_ns, rate_hz_);
     f.t_ns = s.imu.t_ns;
     f.period_ns = kNsPerSecond / rate_hz_;
-    const Kinematics& k = s.kinematics;
-    const earth::Geodetic g = earth::geodetic_from_ecef(k.position_m);
-    f.has_navigation = true;
-    f.latitude_rad = g.latitude_rad;
-    f.longitude_rad = g.longitude_rad;
-    f.height_m = g.height_m;
-    const Mat3 R_n_e = attitude::ned_to_ecef(g.latitude_rad, g.longitude_rad);
-    f.velocity_ned_m_s = R_n_e.transpose() * k.velocity_m_s;
-    f.sensor_to_ned = R_n_e.transpose() * k.attitude;
+    device::set_frame_navigation(s.kinematics, Physics::ecef, f);  // the fixes of an ecef scene
     if (mavlink_) {
       // encode()'s order: the sample's readings, then HIL_GPS.
       const drivers::mavlink2::Encoder::AidingReading& r = mavlink_->aiding_of(f);

@@ -13,6 +13,7 @@
 #include "core/attitude.hpp"
 #include "core/earth.hpp"
 #include "core/stream.hpp"
+#include "daemon/device/frame_navigation.hpp"
 #include "daemon/engine/engine_state.hpp"
 
 namespace imuemu::emission {
@@ -42,28 +43,6 @@ void set_level_attitude(const Kinematics& k, Physics physics, drivers::ImuFrameI
   f.has_level_attitude = true;
   f.pitch_rad = hpr.pitch_rad;
   f.roll_rad = hpr.roll_rad;
-}
-
-// The sensor's (a GNSS device: its antenna's) WGS84 position, NED velocity
-// and attitude relative to NED from the sample's kinematics in an ecef scene
-// (Eq. 1.1 inverse, v^n = R_l^e^T v^e and R_s^n = R_l^e^T R_s^e with Eq. 1.5
-// at the sample's own position). A flat
-// scene's positions have no geodetic anchor: the position fields stay unset
-// (has_navigation false), and its attitude is already R_s^n (a VectorNav's
-// attitude outputs, issue 29).
-void set_navigation(const Kinematics& k, Physics physics, drivers::ImuFrameInput& f) {
-  if (physics != Physics::ecef) {
-    f.sensor_to_ned = k.attitude;
-    return;
-  }
-  const earth::Geodetic g = earth::geodetic_from_ecef(k.position_m);
-  f.has_navigation = true;
-  f.latitude_rad = g.latitude_rad;
-  f.longitude_rad = g.longitude_rad;
-  f.height_m = g.height_m;
-  const Mat3 R_n_e = attitude::ned_to_ecef(g.latitude_rad, g.longitude_rad);
-  f.velocity_ned_m_s = R_n_e.transpose() * k.velocity_m_s;
-  f.sensor_to_ned = R_n_e.transpose() * k.attitude;  // R_s^n = (R_n^e)^T R_s^e
 }
 
 }  // namespace
@@ -160,7 +139,7 @@ void EmissionEngine::Impl::produce(DeviceState& d, bool time_gated) {
       f.delta_velocity_m_s = m.delta_velocity_m_s;
       if (!e.exact()) f.status |= drivers::kStatusExtrapolated;
       if (d.needs.level_attitude) set_level_attitude(e.kinematics, d.options.pipeline.scene.physics, f);
-      if (d.needs.navigation) set_navigation(e.kinematics, d.options.pipeline.scene.physics, f);
+      if (d.needs.navigation) device::set_frame_navigation(e.kinematics, d.options.pipeline.scene.physics, f);
       d.previous.emplace(k, e.kinematics);
       slot.pulse_t_ns = f.t_ns;
       // Issue 18: the faults act on the signal chain's output (the sensor

@@ -120,31 +120,14 @@ Device::Device(const StreamEncoderOptions& options)
   DeviceParam rate{"IMU_RATE_HZ", static_cast<float>(options.nominal_sample_rate_hz)};
   DeviceParam id{"IMU_SENSOR_ID", static_cast<float>(options.mavlink_sensor_id)};
   params_ = {rate, id};
-  format_text_ = std::string(options.mavlink_hil_sensor ? "HIL_SENSOR" : "HIGHRES_IMU") + " every sample";
+  // Always streaming: MAVLink has no idle mode; no baud rate of its own.
+  status_.set_mode_and_format("streaming", std::string(options.mavlink_hil_sensor ? "HIL_SENSOR" : "HIGHRES_IMU") +
+                                                " every sample");
 }
 
-CommandCounters Device::command_counters() const {
-  CommandCounters c;
-  c.received = received_.load(std::memory_order_relaxed);
-  c.answered = answered_.load(std::memory_order_relaxed);
-  c.nacked = nacked_.load(std::memory_order_relaxed);
-  c.not_command_bytes = not_command_.load(std::memory_order_relaxed);
-  c.replies_dropped = replies_dropped_.load(std::memory_order_relaxed);
-  c.mode = "streaming";
-  const std::lock_guard<std::mutex> lock(status_mutex_);
-  c.format = format_text_;
-  return c;
-}
+CommandCounters Device::command_counters() const { return status_.counters(); }
 
-void Device::set_log(std::function<void(std::string_view)> log) {
-  const std::lock_guard<std::mutex> lock(status_mutex_);
-  log_ = std::move(log);
-}
-
-void Device::log(const std::string& line) {
-  const std::lock_guard<std::mutex> lock(status_mutex_);
-  if (log_) log_("mavlink device: " + line);
-}
+void Device::set_log(std::function<void(std::string_view)> log) { status_.set_log(std::move(log)); }
 
 void Device::on_input(std::span<const std::uint8_t> bytes, ReplySink& replies) {
   (void)replies;  // see the header: replies are serialised by the encoder
@@ -154,7 +137,7 @@ void Device::on_input(std::span<const std::uint8_t> bytes, ReplySink& replies) {
 void Device::on_input_at(std::span<const std::uint8_t> bytes, std::chrono::steady_clock::time_point now) {
   const std::uint64_t skipped_before = parser_.skipped_bytes();
   parser_.feed(bytes, now, [&](const InboundPacket& p) { handle(p); });
-  not_command_.fetch_add(parser_.skipped_bytes() - skipped_before, std::memory_order_relaxed);
+  status_.not_command_bytes.fetch_add(parser_.skipped_bytes() - skipped_before, std::memory_order_relaxed);
 }
 
 bool Device::addressed_to_us(std::uint8_t target_system, std::uint8_t target_component) const noexcept {
@@ -165,7 +148,7 @@ bool Device::addressed_to_us(std::uint8_t target_system, std::uint8_t target_com
 
 bool Device::queue(const ReplyItem& item) {
   if (ring_.push(item)) return true;
-  replies_dropped_.fetch_add(1, std::memory_order_relaxed);
+  status_.replies_dropped.fetch_add(1, std::memory_order_relaxed);
   return false;
 }
 
@@ -208,16 +191,16 @@ void Device::handle(const InboundPacket& p) {
       }
       const std::uint16_t cmd = wire::get_le<std::uint16_t>(d + 28);
       if (!addressed_to_us(d[30], d[31])) {
-        not_command_.fetch_add(p.frame_bytes, std::memory_order_relaxed);
+        status_.not_command_bytes.fetch_add(p.frame_bytes, std::memory_order_relaxed);
         return;
       }
-      received_.fetch_add(1, std::memory_order_relaxed);
+      status_.received.fetch_add(1, std::memory_order_relaxed);
       command(cmd, param, d[30], d[31], p);
       return;
     }
     case kParamRequestList.id: {
       if (!addressed_to_us(d[0], d[1])) break;
-      received_.fetch_add(1, std::memory_order_relaxed);
+      status_.received.fetch_add(1, std::memory_order_relaxed);
       bool all = true;
       for (std::size_t i = 0; i < params_.size(); ++i) {
         ReplyItem v;
@@ -225,34 +208,34 @@ void Device::handle(const InboundPacket& p) {
         v.param_index = static_cast<std::uint16_t>(i);
         all = queue(v) && all;
       }
-      if (all) answered_.fetch_add(1, std::memory_order_relaxed);
+      if (all) status_.answered.fetch_add(1, std::memory_order_relaxed);
       return;
     }
     case kParamRequestRead.id: {
       // param_index i16, target system, target component, param_id[16].
       if (!addressed_to_us(d[2], d[3])) break;
-      received_.fetch_add(1, std::memory_order_relaxed);
+      status_.received.fetch_add(1, std::memory_order_relaxed);
       const auto index = wire::get_le<std::int16_t>(d);
       const int i = index < 0 ? param_by_id(std::span<const std::uint8_t>(d + 4, 16)) : index;
       if (i < 0 || i >= static_cast<int>(params_.size())) {
         // [P]: no such parameter - the protocol has no reply for it (the
         // requester times out); counted as refused.
-        nacked_.fetch_add(1, std::memory_order_relaxed);
+        status_.nacked.fetch_add(1, std::memory_order_relaxed);
         log("PARAM_REQUEST_READ of an unknown parameter: no reply (parameter protocol)");
         return;
       }
       ReplyItem v;
       v.kind = ReplyItem::Kind::param_value;
       v.param_index = static_cast<std::uint16_t>(i);
-      if (queue(v)) answered_.fetch_add(1, std::memory_order_relaxed);
+      if (queue(v)) status_.answered.fetch_add(1, std::memory_order_relaxed);
       return;
     }
     case kParamSet.id: {
       // param_value f32, target system, target component, param_id[16], type.
       if (!addressed_to_us(d[4], d[5])) break;
-      received_.fetch_add(1, std::memory_order_relaxed);
+      status_.received.fetch_add(1, std::memory_order_relaxed);
       const int i = param_by_id(std::span<const std::uint8_t>(d + 6, 16));
-      nacked_.fetch_add(1, std::memory_order_relaxed);
+      status_.nacked.fetch_add(1, std::memory_order_relaxed);
       if (i < 0) {
         log("PARAM_SET of an unknown parameter: ignored");
         return;
@@ -271,7 +254,7 @@ void Device::handle(const InboundPacket& p) {
   }
   // A peer's HEARTBEAT, or a request for another component: not a command
   // to this device.
-  not_command_.fetch_add(p.frame_bytes, std::memory_order_relaxed);
+  status_.not_command_bytes.fetch_add(p.frame_bytes, std::memory_order_relaxed);
 }
 
 void Device::command(std::uint16_t cmd, const float* param, std::uint8_t target_system,
@@ -279,7 +262,7 @@ void Device::command(std::uint16_t cmd, const float* param, std::uint8_t target_
   (void)target_system;
   (void)target_component;
   const auto refuse = [&](std::uint8_t result, const std::string& why) {
-    nacked_.fetch_add(1, std::memory_order_relaxed);
+    status_.nacked.fetch_add(1, std::memory_order_relaxed);
     log("command " + std::to_string(cmd) + " refused (MAV_RESULT " + std::to_string(result) + "): " + why);
     ack(cmd, result, p);
   };
@@ -296,7 +279,7 @@ void Device::command(std::uint16_t cmd, const float* param, std::uint8_t target_
     m.result = kResultAccepted;
     m.target_system = p.system_id;
     m.target_component = p.component_id;
-    if (queue(m)) answered_.fetch_add(1, std::memory_order_relaxed);
+    if (queue(m)) status_.answered.fetch_add(1, std::memory_order_relaxed);
     return;
   }
   if (cmd == kCmdSetMessageInterval) {
@@ -325,14 +308,12 @@ void Device::command(std::uint16_t cmd, const float* param, std::uint8_t target_
       decimation = static_cast<std::uint32_t>(std::max(1.0, d));
     }
     decimation_.store(decimation, std::memory_order_release);
-    {
-      const std::lock_guard<std::mutex> lock(status_mutex_);
-      const std::string name = options_.mavlink_hil_sensor ? "HIL_SENSOR" : "HIGHRES_IMU";
-      format_text_ = decimation == 0 ? name + " off" : name + " every " + std::to_string(decimation) + " samples";
-    }
-    log("SET_MESSAGE_INTERVAL: " + format_text_);
+    const std::string name = options_.mavlink_hil_sensor ? "HIL_SENSOR" : "HIGHRES_IMU";
+    const std::string format = decimation == 0 ? name + " off" : name + " every " + std::to_string(decimation) + " samples";
+    status_.set_format(format);
+    log("SET_MESSAGE_INTERVAL: " + format);
     ack(cmd, kResultAccepted, p);
-    answered_.fetch_add(1, std::memory_order_relaxed);
+    status_.answered.fetch_add(1, std::memory_order_relaxed);
     return;
   }
   refuse(kResultUnsupported, "not supported by this device");

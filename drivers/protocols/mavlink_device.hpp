@@ -32,6 +32,7 @@
 
 #include "drivers/protocol.hpp"
 #include "drivers/protocols/mavlink2.hpp"
+#include "drivers/protocols/responder_status.hpp"
 
 namespace imuemu::drivers::mavlink2 {
 
@@ -151,7 +152,7 @@ class Device final : public CommandResponder {
   bool addressed_to_us(std::uint8_t target_system, std::uint8_t target_component) const noexcept;
   bool queue(const ReplyItem& item);
   void ack(std::uint16_t cmd, std::uint8_t result, const InboundPacket& p);
-  void log(const std::string& line);
+  void log(const std::string& line) const { status_.log(line); }
   int param_by_id(std::span<const std::uint8_t> id16) const;
 
   StreamEncoderOptions options_;
@@ -161,10 +162,7 @@ class Device final : public CommandResponder {
   boost::lockfree::spsc_queue<ReplyItem, boost::lockfree::capacity<kRingSlots>> ring_;
   std::atomic<std::uint32_t> decimation_{1};
   std::atomic<TimeNs> period_ns_{0};
-  std::atomic<std::uint64_t> received_{0}, answered_{0}, nacked_{0}, not_command_{0}, replies_dropped_{0};
-  mutable std::mutex status_mutex_;
-  std::string format_text_;
-  std::function<void(std::string_view)> log_;
+  ResponderStatus status_{"mavlink device: "};
 };
 
 }  // namespace imuemu::drivers::mavlink2

@@ -128,7 +128,7 @@ Device::Device(const MipDeviceConfig& config, std::vector<std::uint8_t> sensor_f
   defaults_.gnss_format = nav_.gnss_power_up;
   defaults_.filter_format = nav_.filter_power_up;
   current_ = saved_ = defaults_;
-  baud_ = current_.baud;
+  status_.set_baud(current_.baud);
   streaming_ = !config_.power_up_idle;
   // What Get Device Descriptors reports: the commands answered below and the
   // data fields the device can stream.
@@ -145,15 +145,7 @@ Device::Device(const MipDeviceConfig& config, std::vector<std::uint8_t> sensor_f
   publish();
 }
 
-void Device::set_log(std::function<void(std::string_view)> log) {
-  const std::lock_guard<std::mutex> lock(status_mutex_);
-  log_ = std::move(log);
-}
-
-void Device::log(const std::string& line) {
-  const std::lock_guard<std::mutex> lock(status_mutex_);
-  if (log_) log_("mip device: " + line);
-}
+void Device::set_log(std::function<void(std::string_view)> log) { status_.set_log(std::move(log)); }
 
 std::string Device::format_text() const {
   auto list = [&](const std::vector<FieldRate>& f) {
@@ -196,24 +188,12 @@ void Device::publish() {
   c.startup = stream_of(saved_, !config_.power_up_idle);
   c.restarts_handled = restarts_handled_;
   published_.publish(c);
-  const std::lock_guard<std::mutex> lock(status_mutex_);
-  mode_text_ = streaming_ ? "streaming" : "idle";
-  format_text_ = format_text();
+  status_.set_mode_and_format(streaming_ ? "streaming" : "idle", format_text());
 }
 
 CommandCounters Device::command_counters() const {
   // (A restart not yet taken in by the io thread shows at its next input.)
-  CommandCounters c;
-  c.received = received_.load(std::memory_order_relaxed);
-  c.answered = answered_.load(std::memory_order_relaxed);
-  c.nacked = nacked_.load(std::memory_order_relaxed);
-  c.not_command_bytes = not_command_.load(std::memory_order_relaxed);
-  c.replies_dropped = replies_dropped_.load(std::memory_order_relaxed);
-  const std::lock_guard<std::mutex> lock(status_mutex_);
-  c.mode = mode_text_;
-  c.format = format_text_;
-  c.baud = baud_;
-  return c;
+  return status_.counters();
 }
 
 void Device::take_restarts() {
@@ -258,12 +238,12 @@ void Device::on_input(std::span<const std::uint8_t> bytes, ReplySink& replies) {
     }
     std::vector<std::vector<std::uint8_t>> out;
     for (at = 0; at < payload.size(); at += payload[at]) {
-      received_.fetch_add(1, std::memory_order_relaxed);
+      status_.received.fetch_add(1, std::memory_order_relaxed);
       handle(set, payload[at + 1], payload.subspan(at + 2, payload[at] - 2u), out, replies);
     }
-    if (!replies.reply(make_packet(set, out))) replies_dropped_.fetch_add(1, std::memory_order_relaxed);
+    if (!replies.reply(make_packet(set, out))) status_.replies_dropped.fetch_add(1, std::memory_order_relaxed);
   });
-  not_command_.store(parser_.not_command_bytes(), std::memory_order_relaxed);
+  status_.not_command_bytes.store(parser_.not_command_bytes(), std::memory_order_relaxed);
 }
 
 void Device::handle(std::uint8_t set, std::uint8_t descriptor, std::span<const std::uint8_t> data,
@@ -279,10 +259,10 @@ void Device::handle(std::uint8_t set, std::uint8_t descriptor, std::span<const s
   }
   out.push_back(field(kAckNackField, {descriptor, static_cast<std::uint8_t>(code)}));
   if (code == AckCode::ok) {
-    answered_.fetch_add(1, std::memory_order_relaxed);
+    status_.answered.fetch_add(1, std::memory_order_relaxed);
     for (auto& f : reply_data) out.push_back(std::move(f));
   } else {
-    nacked_.fetch_add(1, std::memory_order_relaxed);
+    status_.nacked.fetch_add(1, std::memory_order_relaxed);
   }
 }
 
@@ -374,8 +354,7 @@ void Device::apply_baud(std::uint32_t baud, ReplySink& replies) {
   // reply queued so far, including this one, has left).
   replies.change_baud_after_replies(baud);
   {
-    const std::lock_guard<std::mutex> lock(status_mutex_);
-    baud_ = baud;
+    status_.set_baud(baud);
   }
   log("baud " + std::to_string(baud) + " after this reply");
 }

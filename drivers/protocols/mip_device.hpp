@@ -50,6 +50,7 @@
 #include <vector>
 
 #include "drivers/protocol.hpp"
+#include "drivers/protocols/responder_status.hpp"
 #include "drivers/protocols/stream_protocols.hpp"
 
 namespace imuemu::drivers::mip {
@@ -221,7 +222,7 @@ class Device final : public CommandResponder {
   // A restart the emission thread noted: settings back to the saved startup
   // ones, mode to the power-up mode (io thread, before any command).
   void take_restarts();
-  void log(const std::string& line);
+  void log(const std::string& line) const { status_.log(line); }
   std::string format_text() const;
   bool has_gnss() const noexcept { return !nav_.gnss.empty(); }
   // The data sets the Get Base Rate / Message Format / Datastream Control
@@ -242,11 +243,7 @@ class Device final : public CommandResponder {
 
   std::atomic<std::uint64_t> restarts_{0};
   std::uint64_t restarts_handled_ = 0;
-  std::atomic<std::uint64_t> received_{0}, answered_{0}, nacked_{0}, not_command_{0}, replies_dropped_{0};
-  mutable std::mutex status_mutex_;  // mode/format/baud text and the log sink (never the emission thread)
-  std::string mode_text_, format_text_;
-  std::uint32_t baud_ = 115200;
-  std::function<void(std::string_view)> log_;
+  ResponderStatus status_{"mip device: "};
 };
 
 }  // namespace imuemu::drivers::mip

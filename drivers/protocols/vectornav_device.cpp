@@ -96,33 +96,12 @@ Device::Device(const VectorNavDeviceConfig& config, const ModelTraits& traits)
     p.adof_hz = power_up.adof_hz;
   }
   current_ = saved_ = defaults_;
-  baud_ = own_port().baud;
   publish();
 }
 
-void Device::set_log(std::function<void(std::string_view)> log) {
-  const std::lock_guard<std::mutex> lock(status_mutex_);
-  log_ = std::move(log);
-}
+void Device::set_log(std::function<void(std::string_view)> log) { status_.set_log(std::move(log)); }
 
-void Device::log(const std::string& line) {
-  const std::lock_guard<std::mutex> lock(status_mutex_);
-  if (log_) log_("vectornav: " + line);
-}
-
-CommandCounters Device::command_counters() const {
-  CommandCounters c;
-  c.received = received_.load(std::memory_order_relaxed);
-  c.answered = answered_.load(std::memory_order_relaxed);
-  c.nacked = nacked_.load(std::memory_order_relaxed);
-  c.not_command_bytes = not_command_.load(std::memory_order_relaxed);
-  c.replies_dropped = replies_dropped_.load(std::memory_order_relaxed);
-  const std::lock_guard<std::mutex> lock(status_mutex_);
-  c.mode = mode_text_;
-  c.format = format_text_;
-  c.baud = baud_;
-  return c;
-}
+CommandCounters Device::command_counters() const { return status_.counters(); }
 
 std::string Device::format_text() const {
   std::string s;
@@ -152,10 +131,8 @@ void Device::publish() {
   fill(e.startup, saved_, true);
   e.restarts_handled = restarts_handled_;
   published_.publish(e);
-  const std::lock_guard<std::mutex> lock(status_mutex_);
-  mode_text_ = async_enabled_ ? "streaming" : "paused ($VNASY,0)";
-  format_text_ = format_text();
-  baud_ = own_port().baud;
+  status_.set_mode_and_format(async_enabled_ ? "streaming" : "paused ($VNASY,0)", format_text());
+  status_.set_baud(own_port().baud);
 }
 
 void Device::take_restarts() {
@@ -193,7 +170,7 @@ void Device::on_input(std::span<const std::uint8_t> bytes, ReplySink& replies) {
       pending_.clear();
     }
   }
-  if (stray != 0) not_command_.fetch_add(stray, std::memory_order_relaxed);
+  if (stray != 0) status_.not_command_bytes.fetch_add(stray, std::memory_order_relaxed);
 }
 
 void Device::reply_text(const std::string& body, ReplySink& replies) {
@@ -204,7 +181,7 @@ void Device::reply_text(const std::string& body, ReplySink& replies) {
   const std::size_t n = finish_sentence(buf, body.size() + 1, sizeof buf, current_.protocol_control[4] == 2);
   if (n == 0) return;
   if (!replies.reply(std::span<const std::uint8_t>(reinterpret_cast<const std::uint8_t*>(buf), n)))
-    replies_dropped_.fetch_add(1, std::memory_order_relaxed);
+    status_.replies_dropped.fetch_add(1, std::memory_order_relaxed);
 }
 
 void Device::sentence(std::string_view text, ReplySink& replies) {
@@ -212,10 +189,10 @@ void Device::sentence(std::string_view text, ReplySink& replies) {
   const std::size_t star = text.find('*');
   const std::string_view body = text.substr(1, star == std::string_view::npos ? std::string_view::npos : star - 1);
   if (body.size() < 5 || body.substr(0, 2) != "VN") {
-    not_command_.fetch_add(text.size(), std::memory_order_relaxed);  // not addressed to a VectorNav device
+    status_.not_command_bytes.fetch_add(text.size(), std::memory_order_relaxed);  // not addressed to a VectorNav device
     return;
   }
-  received_.fetch_add(1, std::memory_order_relaxed);
+  status_.received.fetch_add(1, std::memory_order_relaxed);
   Outcome o;
   bool checksum_ok = true;
   if (star != std::string_view::npos) {
@@ -232,7 +209,7 @@ void Device::sentence(std::string_view text, ReplySink& replies) {
   else o = command(split(body));
 
   if (o.error) {
-    nacked_.fetch_add(1, std::memory_order_relaxed);
+    status_.nacked.fetch_add(1, std::memory_order_relaxed);
     const std::uint32_t error_mode = current_.protocol_control[6];
     if (error_mode == 0) return;  // [R] register 30 error mode 0: errors ignored, no reply
     char b[16];
@@ -244,9 +221,9 @@ void Device::sentence(std::string_view text, ReplySink& replies) {
     }
     return;
   }
-  answered_.fetch_add(1, std::memory_order_relaxed);
+  status_.answered.fetch_add(1, std::memory_order_relaxed);
   if (!o.binary.empty()) {
-    if (!replies.reply(o.binary)) replies_dropped_.fetch_add(1, std::memory_order_relaxed);
+    if (!replies.reply(o.binary)) status_.replies_dropped.fetch_add(1, std::memory_order_relaxed);
   } else {
     reply_text(o.body, replies);
   }
@@ -255,8 +232,7 @@ void Device::sentence(std::string_view text, ReplySink& replies) {
     // applies it once every reply queued so far has gone).
     replies.change_baud_after_replies(*o.baud_after);
     log("baud " + std::to_string(*o.baud_after) + " after this reply");
-    const std::lock_guard<std::mutex> lock(status_mutex_);
-    baud_ = *o.baud_after;
+    status_.set_baud(*o.baud_after);
   }
 }
 

@@ -44,6 +44,7 @@
 
 #include "drivers/protocol.hpp"
 #include "drivers/protocols/mip_device.hpp"  // mip::TripleBuffer
+#include "drivers/protocols/responder_status.hpp"
 #include "drivers/protocols/stream_protocols.hpp"
 #include "drivers/protocols/vectornav.hpp"
 
@@ -100,7 +101,7 @@ class Device final : public CommandResponder {
   void reply_text(const std::string& body, ReplySink& replies);
   void publish();
   void take_restarts();
-  void log(const std::string& line);
+  void log(const std::string& line) const { status_.log(line); }
   std::string format_text() const;
   PortSettings& own_port() { return current_.ports[static_cast<std::size_t>(config_.port - 1)]; }
   const PortSettings& own_port() const { return current_.ports[static_cast<std::size_t>(config_.port - 1)]; }
@@ -116,11 +117,7 @@ class Device final : public CommandResponder {
 
   std::atomic<std::uint64_t> restarts_{0};
   std::uint64_t restarts_handled_ = 0;
-  std::atomic<std::uint64_t> received_{0}, answered_{0}, nacked_{0}, not_command_{0}, replies_dropped_{0};
-  mutable std::mutex status_mutex_;  // status text and the log sink (never the emission thread)
-  std::string mode_text_, format_text_;
-  std::uint32_t baud_ = 115200;
-  std::function<void(std::string_view)> log_;
+  ResponderStatus status_{"vectornav: "};
 };
 
 }  // namespace imuemu::drivers::vectornav

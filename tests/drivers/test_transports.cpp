@@ -1139,7 +1139,10 @@ TEST(GpioSync, OnePpsOnTheFirstSampleAtOrAfterEachWholeTrajectorySecond) {
       const std::size_t before = pps.rising_edges();
       gpio.pulse(k + 1, c.t_ms[k] * 1'000'000);
       if (pps.rising_edges() > before) got.push_back(c.t_ms[k]);
-      ASSERT_TRUE(wait_until([&] { return !pps.active(); }, 2s));  // each edge a separate pulse, however loaded the machine
+      // Each edge a separate pulse, however loaded the machine: wait until the
+      // output is free again, not only until the line is low (the helper
+      // lowers the line a moment before it frees the output).
+      ASSERT_TRUE(wait_until([&] { return !pps.active() && gpio.counters().pulses_in_progress == 0; }, 2s));
     }
     EXPECT_EQ(got, c.pps_at_ms);
     EXPECT_EQ(gpio.counters().pps_pulses, c.pps_at_ms.size());
@@ -1156,9 +1159,9 @@ TEST(GpioSync, APulseDueWhileTheLastIsStillOnIsSkippedNotMerged) {
     imuemu::drivers::GpioSyncOutput gpio(options, line.writer(), nullptr);
     for (std::uint64_t k = 0; k < 6; ++k) gpio.pulse(k, static_cast<std::int64_t>(k) * 1'000'000);  // 1 starts, 5 skipped
     EXPECT_TRUE(line.active());
-    ASSERT_TRUE(wait_until([&] { return !line.active(); }, 2s));
+    ASSERT_TRUE(wait_until([&] { return !line.active() && gpio.counters().pulses_in_progress == 0; }, 2s));
     gpio.pulse(6, 6'000'000);  // the line is free again: a new pulse
-    ASSERT_TRUE(wait_until([&] { return !line.active(); }, 2s));
+    ASSERT_TRUE(wait_until([&] { return !line.active() && gpio.counters().pulses_in_progress == 0; }, 2s));
     const auto c = gpio.counters();
     EXPECT_EQ(c.pulses, 2u);
     EXPECT_EQ(c.skipped_pulses, 5u);
