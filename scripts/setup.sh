@@ -27,6 +27,8 @@ test_packages=(
   git ca-certificates
   # tests, benchmarks, and libFuzzer (clang's runtime) for the parsers
   libgtest-dev libgmock-dev libbenchmark-dev clang libclang-rt-14-dev
+  # lld links the ASan tree (scripts/build.sh asan)
+  lld
   # plots and the Python test peers (run under Debian's /usr/bin/python3)
   python3 python3-numpy python3-matplotlib
   # hardware-in-the-loop fixtures (tests/hil): user-mode Linux with vcan; QEMU

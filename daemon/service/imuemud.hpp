@@ -46,4 +46,9 @@ inline constexpr int kExitBadScene = 3;
 inline constexpr int kExitLinkRefused = 4;
 inline constexpr int kExitEmissionFailed = 5;  // an engine thread failed while running (issue 13 C1)
 
+// imuemud as a function (imuemud_app.cpp): parses argv, runs the service or
+// --check-config, returns the exit code above. version_text: what --version
+// prints after "imuemud ".
+int run_imuemud(int argc, char** argv, const char* version_text);
+
 }  // namespace imuemu::service
