@@ -1,6 +1,6 @@
 """Allan deviation plots of `imuemu allan --json`, and a synthetic IMU record.
 
-usage:
+usage (installed as /usr/share/imuemu/plot_allan.py):
   /usr/bin/python3 scripts/plot_allan.py ALLAN.json OUT.png
       (what `imuemu allan FILE --png OUT.png` runs) one log-log panel per axis:
       the overlapping Allan deviation, its confidence band, the fitted model
@@ -52,10 +52,16 @@ TERM_STYLE = {
 
 
 def plot(json_path, png_path):
-    import matplotlib
+    try:
+        import matplotlib
 
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
+        matplotlib.use("Agg")
+        import matplotlib.pyplot as plt
+    except ImportError as e:
+        # One line a user can act on instead of a traceback: the plot is the
+        # only part of `imuemu allan` that needs more than imuemu itself.
+        sys.exit(f"imuemu allan --png: the plot needs Python's matplotlib ({e}); "
+                 "install it with `apt install python3-matplotlib`, or leave out --png")
 
     with open(json_path) as f:
         data = json.load(f)

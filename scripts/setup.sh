@@ -39,6 +39,10 @@ test_packages=(
   # setserial raises the guest UART's baud_base for the 921600-baud change
   user-mode-linux kmod iproute2 qemu-system-x86 busybox-static cpio xz-utils
   linux-headers-amd64 can-utils gpiod python3-can systemd procps setserial
+  # the Debian package (debian/, tests/package/package_check.sh): built with
+  # debhelper (imuemu-scene(5) by pandoc), checked by lintian, man pages
+  # rendered by man-db, installed with apt into an overlay of this system
+  debhelper dpkg-dev pandoc lintian man-db apt
   # GNSS receiver acceptance (tests/cli/test_gnss_gpsd.cpp): Debian's gpsd reads
   # imuemu's NMEA and UBX ptys
   gpsd gpsd-clients

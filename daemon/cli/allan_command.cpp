@@ -28,12 +28,9 @@
 #include "daemon/cli/cli_options.hpp"
 #include "daemon/cli/commands.hpp"
 #include "io/decimal_time.hpp"
+#include "io/installed_paths.hpp"
 #include "io/sample_writers.hpp"
 #include "io/trajectory_csv.hpp"
-
-#ifndef IMUEMU_PLOT_ALLAN_SCRIPT
-#define IMUEMU_PLOT_ALLAN_SCRIPT "scripts/plot_allan.py"
-#endif
 
 extern char** environ;
 
@@ -585,6 +582,13 @@ void print_table(std::ostream& out, const AllanInput& in, const std::vector<alla
   }
 }
 
+// The plotting script beside the program, as installed: PREFIX/bin/imuemu and
+// PREFIX/share/imuemu/plot_allan.py (/usr for the Debian package). A build tree
+// has the same layout (build/<flavour>/daemon/imuemu and
+// build/<flavour>/share/imuemu/, copied there by daemon/CMakeLists.txt), so
+// no source-tree path is compiled in.
+std::string default_plot_script() { return (io::installed_data_dir() / "plot_allan.py").string(); }
+
 // /usr/bin/python3 SCRIPT JSON PNG, waited for.
 void run_plot(const std::string& script, const std::string& json_text, const std::string& png_path) {
   char tmpl[] = "/tmp/imuemu-allan-XXXXXX.json";
@@ -796,7 +800,7 @@ int run_allan(const AllanArgs& args, std::ostream& out, std::ostream& err) {
   out.flush();
   if (!args.png_path.empty()) {
     try {
-      run_plot(args.plot_script.empty() ? std::string(IMUEMU_PLOT_ALLAN_SCRIPT) : args.plot_script, j.dump(),
+      run_plot(args.plot_script.empty() ? default_plot_script() : args.plot_script, j.dump(),
                args.png_path);
     } catch (const std::exception& e) {
       err << "imuemu allan: --png: " << e.what() << "\n";
@@ -815,8 +819,8 @@ void add_allan_command(CLI::App& app, int& exit_code) {
   c->add_option("FILE", a->path, "IMU CSV (time_ns, gyro rad/s, accel m/s^2) or an `imuemu listen --out` capture")
       ->required();
   c->add_flag("--json", a->json, "JSON on stdout instead of the table");
-  c->add_option("--png", a->png_path, "Also write a log-log plot (estimate, CI band, fitted terms) via /usr/bin/python3 scripts/plot_allan.py");
-  c->add_option("--plot-script", a->plot_script, "The plotting script (default: the source tree's scripts/plot_allan.py)");
+  c->add_option("--png", a->png_path, "Also write a log-log plot (estimate, CI band, fitted terms) via /usr/bin/python3 and the plotting script (needs python3-matplotlib)");
+  c->add_option("--plot-script", a->plot_script, "The plotting script (default: share/imuemu/plot_allan.py beside the program's bin/, /usr/share/imuemu/plot_allan.py when installed)");
   c->add_option("--axes", a->axes, "Which axes: all, gyro or accel")->capture_default_str()
       ->check(CLI::IsMember({"all", "gyro", "accel"}));
   c->add_option("--rate", a->rate_hz, "Nominal sample rate in Hz (needed when the capture has no sample times)")

@@ -7,6 +7,10 @@
 
 #include "io/pose_source.hpp"
 
+namespace CLI {
+class App;
+}
+
 namespace imuemu::cli {
 
 // Exit codes (documented in README.md).
@@ -112,6 +116,15 @@ extern const char* const kSensorOptionHelp;
 // `imuemu sensors`: the presets, their terms with the discrete sigma at
 // rate_hz, and their sources.
 int sensors(double rate_hz);
+
+// `imuemu protocol-options`: every [imu.<protocol>] key (type, allowed
+// values, default, meaning); markdown: the reference block of
+// docs/scene-format.md.
+int protocol_options(bool markdown);
+
+// `imuemu completion`: the bash completion script of `app` (every command
+// path with its subcommands and options).
+std::string bash_completion_script(const CLI::App& app);
 
 // The README's main job: sample flight -> generate -> verify, in out_dir.
 int demo(const std::string& out_dir, std::int64_t rate_hz);

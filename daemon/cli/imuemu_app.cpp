@@ -4,6 +4,7 @@
 // already instantiate CLI11 (issue 25: one CLI11 instantiation fewer per flavour).
 #include "daemon/cli/imuemu_app.hpp"
 
+#include <iostream>
 #include <CLI/CLI.hpp>
 
 #include "daemon/cli/allan_command.hpp"
@@ -22,7 +23,8 @@ int imuemu::cli::run_imuemu(int argc, char** argv, const char* version_text) {
   using namespace imuemu::cli;
   CLI::App app{
       "imuemu: turns a pose trajectory into what a real IMU would give - ideal or with its sensor errors, "
-      "filters, vibration and faults - as files, or live on a device's wire (imuemu COMMAND --help)"};
+      "filters, vibration and faults - as files, or live on a device's wire (imuemu COMMAND --help; man imuemu; "
+      "the docs/*.md the help names are under /usr/share/doc/imuemu when installed)"};
   app.set_version_flag("--version", std::string("imuemu ") + version_text);
   app.require_subcommand(1);
 
@@ -121,6 +123,12 @@ int imuemu::cli::run_imuemu(int argc, char** argv, const char* version_text) {
   st->add_option("--sensor", str.sensor, kSensorOptionHelp)->capture_default_str();
   st->add_option("--seed", str.seed, "Noise seed of the sensor model (integer >= 0; default: the model's)")->check(CLI::NonNegativeNumber);
 
+  bool popts_markdown = false;
+  auto* popts = app.add_subcommand(
+      "protocol-options",
+      "List every protocol option: the scene's [imu.PROTOCOL] keys and emit's --PROTOCOL-KEY options, with type, "
+      "allowed values, default and meaning");
+  popts->add_flag("--markdown", popts_markdown, "As the Markdown reference block of docs/scene-format.md");
   double sensors_rate_hz = 400.0;
   auto* sens = app.add_subcommand("sensors", "List the sensor-model presets: terms, discrete sigma at a rate, datasheet sources");
   sens->add_option("--rate", sensors_rate_hz, "Rate (Hz) for the discrete values")->capture_default_str()->check(finite_in(0.0, 1e6, true));
@@ -142,6 +150,10 @@ int imuemu::cli::run_imuemu(int argc, char** argv, const char* version_text) {
   add_fault_command(app, exit_code);
   add_allan_command(app, exit_code);
   add_send_command(app, exit_code);
+  auto* completion = app.add_subcommand(
+      "completion",
+      "Print the bash completion script for imuemu's commands and options (the package installs it as "
+      "/usr/share/bash-completion/completions/imuemu)");
 
   try {
     app.parse(argc, argv);
@@ -167,6 +179,11 @@ int imuemu::cli::run_imuemu(int argc, char** argv, const char* version_text) {
   if (*d) return demo(demo_dir, demo_rate);
   if (*st) return stream(str);
   if (*sens) return sensors(sensors_rate_hz);
+  if (*popts) return protocol_options(popts_markdown);
+  if (*completion) {
+    std::cout << bash_completion_script(app);
+    return kOk;
+  }
   if (*ports_command) return ports();
   return exit_code;
 }

@@ -28,6 +28,7 @@
 #include "core/time_arith.hpp"
 #include "drivers/protocols/protocol_options.hpp"
 #include "drivers/transport.hpp"
+#include "io/installed_paths.hpp"
 
 namespace imuemu::scene {
 namespace {
@@ -286,9 +287,18 @@ void parse_trajectory_section(const Table& t, const SceneConfig& scene, Trajecto
     if (p.empty()) t.fail_at("source", "'" + s + "': " + usage);
     out.file_path = (p.is_absolute() ? p : t.ctx().base_dir / p).lexically_normal().string();
     std::error_code ec;
+    // A relative path not beside the scene is looked for among the installed
+    // example scenes' data too (PREFIX/share/imuemu/config), so an example
+    // copied to /etc/imuemu, as the unit reads it, still finds its data.
+    const std::string examples_path = (io::installed_data_dir() / "config" / p).lexically_normal().string();
+    if (!p.is_absolute() && !std::filesystem::is_regular_file(out.file_path, ec) &&
+        std::filesystem::is_regular_file(examples_path, ec))
+      out.file_path = examples_path;
     if (!std::filesystem::is_regular_file(out.file_path, ec))
       t.fail_at("source", "trajectory file '" + out.file_path + "' does not exist or is not a regular file" +
-                              (p.is_absolute() ? "" : " (relative paths are taken from the scene file's directory)"));
+                              (p.is_absolute() ? ""
+                                               : " (relative paths are taken from the scene file's directory, then from the "
+                                                 "installed examples' " + examples_path + ")"));
   } else if (s.rfind("udp:", 0) == 0) {
     out.kind = SourceKind::udp;
     parse_endpoint(t, s.substr(4), out);

@@ -212,17 +212,21 @@ bool FaultLogWriter::write_whole(const std::string& line) {
       // Only whole lines: what went out of this one is taken back; the file
       // stays open and the next line is tried (the recording resumes when
       // there is room again).
-      if (start >= 0) (void)::ftruncate(fd_, start);
-      drop(1, "a line of " + std::to_string(line.size()) + " bytes does not fit: " + reason_of(error));
+      // ftruncate's result is checked: glibc declares it warn_unused_result,
+      // which a (void) cast does not silence (the Debian package's
+      // _FORTIFY_SOURCE build made that an error).
+      const bool taken_back = start < 0 || ::ftruncate(fd_, start) == 0;
+      drop(1, "a line of " + std::to_string(line.size()) + " bytes does not fit: " + reason_of(error) +
+                  (taken_back ? "" : "; its written part could not be taken back"));
       return false;
     }
     // The reader went away (EPIPE: SIGPIPE is ignored) or the file failed:
     // closed, and opened again later (a FIFO's next reader, a remounted disk).
-    if (start >= 0 && done > 0) (void)::ftruncate(fd_, start);
+    const bool taken_back = start < 0 || done == 0 || ::ftruncate(fd_, start) == 0;
     close_fd();
     next_open_ = Clock::now() + kRetryOpen;
     drop(1, (error == EPIPE ? "the reader went away: " : "writing failed: ") + reason_of(error) +
-                "; the log is opened again every second");
+                (taken_back ? "" : "; a partial line stays in the file") + "; the log is opened again every second");
     return false;
   }
   return true;

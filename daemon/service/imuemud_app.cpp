@@ -134,7 +134,7 @@ int check_config(const std::string& path, bool json, const sc::RunnerOptions& ru
 }  // namespace
 
 int imuemu::service::run_imuemud(int argc, char** argv, const char* version_text) {
-  CLI::App app{"imuemud: the imuemu IMU emulator service (man imuemud, or docs/daemon.md in the source)"};
+  CLI::App app{"imuemud: the imuemu IMU emulator service (man imuemud; docs/daemon.md, under /usr/share/doc/imuemu when installed)"};
   app.set_version_flag("--version", std::string("imuemud ") + version_text);
   std::string scene_path, check_path, socket_override, pty_link_dir, stats_json, log_level = "info";
   std::optional<double> run_seconds;
