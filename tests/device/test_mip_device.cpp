@@ -1075,7 +1075,7 @@ TEST(MipDevice, SbgEmissionWithCommandsBetweenSamplesAllocatesNothing) {
     send(drivers::sbg::kCmdOutputConf, Bytes{0, log, cls, static_cast<std::uint8_t>(mode & 0xFF),
                                              static_cast<std::uint8_t>(mode >> 8)});
   };
-  for (const std::uint8_t log : {1, 2, 4, 6, 7, 8, 13, 14}) output_conf(log, 0, 1);
+  for (const int log : {1, 2, 4, 6, 7, 8, 13, 14}) output_conf(static_cast<std::uint8_t>(log), 0, 1);
   output_conf(3, 0, 1001);
   output_conf(44, 0, 1001);
   output_conf(0, 1, 20001);

@@ -155,7 +155,8 @@ void put_u16(Bytes& b, std::uint16_t u) {
   b.push_back(static_cast<std::uint8_t>(u >> 8));
 }
 
-// A request through sbgECom's API helpers: path\0 query\0 [body\0].
+// A request through sbgECom's API helpers: path\0 query\0 for a GET,
+// path\0 query\0 body\0 for a POST (a NULL body is sent as "").
 Bytes api_request(const std::string& path, std::optional<std::string> body) {
   Bytes p(path.begin(), path.end());
   p.push_back(0);
@@ -449,7 +450,8 @@ TEST(SbgLogs, StatusFlagsOutOfRangeAndSaturatedSamples) {
   s.gyro_rad_s = Vec3(9.0, 0, 0);  // beyond 450 deg/s
   Bytes out;
   b.enc->encode(s, out);
-  const Frame* imu = first(spec_frames(out), 0, 3);
+  std::vector<Frame> f = spec_frames(out);
+  const Frame* imu = first(f, 0, 3);
   ASSERT_NE(imu, nullptr);
   EXPECT_EQ(u16(imu->payload, 4) & 0x300, 0x100);  // gyros out of range
   s.sample_counter = 1;
@@ -457,7 +459,8 @@ TEST(SbgLogs, StatusFlagsOutOfRangeAndSaturatedSamples) {
   s.status = drivers::kStatusSaturated;
   out.clear();
   b.enc->encode(s, out);
-  imu = first(spec_frames(out), 0, 3);
+  f = spec_frames(out);
+  imu = first(f, 0, 3);
   ASSERT_NE(imu, nullptr);
   EXPECT_EQ(u16(imu->payload, 4) & 0x300, 0);
 }
@@ -721,7 +724,7 @@ TEST(SbgClients, Px4StartUpGetsInfoPostsSettingsAndSaves) {
   EXPECT_EQ(u16(r[0].payload, 0), 200);  // sbgEComCmdApiReplySuccessful
   const std::string reply(r[0].payload.begin() + 2, r[0].payload.end() - 1);
   EXPECT_EQ(reply.find("\"needReboot\":true"), std::string::npos);  // so no reboot is posted
-  r = b.send(spec_frame(47, 0x10, api_request("/api/v1/settings/save", std::nullopt)));
+  r = b.send(spec_frame(47, 0x10, api_request("/api/v1/settings/save", std::string())));
   ASSERT_EQ(r.size(), 1u);
   EXPECT_EQ(u16(r[0].payload, 0), 200);
   // A fault restart brings the saved settings back: they are what was posted.
