@@ -548,7 +548,7 @@ TEST(SbgDevice, OutputConfGetSetAndRefusalsChangeNothing) {
     EXPECT_EQ(r[0].payload[1], 0x10);
     return static_cast<int>(u16(r[0].payload, 2));
   };
-  EXPECT_EQ(get(44, 0), 1);   // factory: IMU_SHORT at 200 Hz
+  EXPECT_EQ(get(44, 0), 4);   // factory: IMU_SHORT at 50 Hz
   EXPECT_EQ(set(0, 44, 0, 20), 0);
   EXPECT_EQ(get(44, 0), 20);
   EXPECT_EQ(set(0, 44, 0, 7), 9);       // not a mode: SBG_INVALID_PARAMETER
@@ -588,14 +588,14 @@ TEST(SbgDevice, SettingsActionSavesRebootsAndRestores) {
     return r.size() == 1 && r[0].msg == 0 ? static_cast<int>(u16(r[0].payload, 2)) : -1;
   };
   EXPECT_EQ(action(0), 0);  // reboot without saving: the change is lost
-  EXPECT_EQ(mode_of(6), 4);
+  EXPECT_EQ(mode_of(6), 8);
   b.send(spec_frame(30, 0x10, p));
   EXPECT_EQ(action(1), 0);  // save and reboot: kept
   EXPECT_EQ(mode_of(6), 40);
   EXPECT_EQ(action(3), 9);  // no such action
   EXPECT_EQ(mode_of(6), 40);
   EXPECT_EQ(action(2), 0);  // factory settings
-  EXPECT_EQ(mode_of(6), 4);
+  EXPECT_EQ(mode_of(6), 8);
 }
 
 TEST(SbgDevice, RestApiAnswersInfoOutputsAndErrors) {
@@ -632,12 +632,12 @@ TEST(SbgDevice, RestApiAnswersInfoOutputsAndErrors) {
   std::tie(code, body) = call(true, "/api/v1/settings", "{\"output\":{\"comA\":{\"messages\":{\"ekfEuler\":\"20ms\",}}}");
   EXPECT_EQ(code, 400);
   std::tie(code, body) = call(false, "/api/v1/settings/output/comA/messages", std::nullopt);
-  EXPECT_NE(body.find("\"ekfEuler\":\"20ms\""), std::string::npos) << body;  // the factory's 50 Hz
+  EXPECT_NE(body.find("\"ekfEuler\":\"40ms\""), std::string::npos) << body;  // the factory's 25 Hz
   std::tie(code, body) =
-      call(true, "/api/v1/settings", "{\"output\":{\"comA\":{\"messages\":{\"ekfEuler\":\"40ms\"}}},\"aiding\":{\"x\":1}}");
+      call(true, "/api/v1/settings", "{\"output\":{\"comA\":{\"messages\":{\"ekfEuler\":\"10ms\"}}},\"aiding\":{\"x\":1}}");
   EXPECT_EQ(code, 200);
   std::tie(code, body) = call(false, "/api/v1/settings/output/comA/messages/ekfEuler", std::nullopt);
-  EXPECT_EQ(body, "\"40ms\"");
+  EXPECT_EQ(body, "\"10ms\"");
   // Malformed API payload (no NUL after the path): an ACK with an error.
   const Bytes raw{'/', 'a'};
   const std::vector<Frame> r = b.send(spec_frame(48, 0x10, raw));
@@ -754,7 +754,7 @@ TEST(SbgClients, SbgEComExampleAndEllipseLegacySequences) {
   EXPECT_EQ(u16(r[0].payload, 0), 200);
   std::vector<Frame> f = spec_frames(b.stream(200));
   EXPECT_EQ(count(f, 0, 44), 10);  // 10 Hz for one second
-  EXPECT_EQ(count(f, 0, 6), 50);   // the factory EKF_EULER
+  EXPECT_EQ(count(f, 0, 6), 25);   // the factory EKF_EULER
 
   // ellipseLegacy: CMD_INFO, then IMU_DATA and EKF_EULER at mode 8 (25 Hz).
   Bench legacy;
@@ -777,9 +777,11 @@ TEST(SbgClients, SbgEComExampleAndEllipseLegacySequences) {
 
 TEST(SbgDecoder, DecodesImuLogsAndResynchronises) {
   Bench b;
-  Bytes p{0, 3, 0};
-  put_u16(p, 1);
-  b.send(spec_frame(30, 0x10, p));
+  for (const std::uint8_t msg : {std::uint8_t{3}, std::uint8_t{44}}) {
+    Bytes p{0, msg, 0};
+    put_u16(p, 1);
+    b.send(spec_frame(30, 0x10, p));
+  }
   Bytes wire = b.stream(20);
   const std::size_t frames = spec_frames(wire).size();
   // A stray byte inside the first IMU_SHORT frame (FF 5A 2C 00).
