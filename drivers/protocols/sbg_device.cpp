@@ -196,6 +196,21 @@ int output_named(std::string_view name) {
   return -1;
 }
 
+// The REST rate of an output's mode: FAST_IMU_DATA's 1 kHz loop (20001) is
+// "1ms" there; nullptr when the REST API has no name for the mode.
+const char* rest_rate_of(int output, std::uint16_t mode) {
+  if (output == kOutFastImu && mode == kModeHighFreqLoop) return "1ms";
+  return rest_rate_name(mode);
+}
+// The mode a REST rate sets for an output; -1 if the output cannot take it
+// (FAST_IMU_DATA: "1ms" or "disabled" only).
+int rest_mode_of(int output, std::string_view rate) {
+  const int mode = rest_rate_mode(rate);
+  if (output != kOutFastImu) return mode;
+  if (mode == kMode1Ms) return kModeHighFreqLoop;
+  return mode == kModeDisabled ? mode : -1;
+}
+
 }  // namespace
 
 std::string product_code_of(const SbgDeviceConfig& config) {
@@ -469,7 +484,7 @@ std::pair<std::uint16_t, std::string> Device::rest(bool post, std::string_view p
       if (key.size() != 4 || key[0] != "output" || key[2] != "messages") return true;
       const int port = port_index(std::string_view(key[1]));
       const int output = output_named(key[3]);
-      const int mode = rest_rate_mode(value);
+      const int mode = output < 0 ? -1 : rest_mode_of(output, value);
       if (port < 0 || output < 0 || !model_has(config_.model, output) || mode < 0) return false;
       next.ports[static_cast<std::size_t>(port)].modes[static_cast<std::size_t>(output)] = static_cast<std::uint16_t>(mode);
       return true;
@@ -510,7 +525,7 @@ std::pair<std::uint16_t, std::string> Device::rest_messages(bool post, int port,
     std::string s = "{";
     for (int i = 0; i < kOutputCount; ++i) {
       if (!model_has(config_.model, i)) continue;
-      const char* rate = rest_rate_name(c.modes[static_cast<std::size_t>(i)]);
+      const char* rate = rest_rate_of(i, c.modes[static_cast<std::size_t>(i)]);
       s += std::string(s.size() > 1 ? "," : "") + "\"" + output_info(i).rest_name + "\":\"" +
            (rate != nullptr ? rate : "disabled") + "\"";
     }
@@ -522,21 +537,21 @@ std::pair<std::uint16_t, std::string> Device::rest_messages(bool post, int port,
     return {404, json_error(404, "Not Found", "no output message '" + std::string(name) + "' on this model")};
   std::uint16_t& mode = c.modes[static_cast<std::size_t>(output)];
   if (!post) {
-    const char* rate = rest_rate_name(mode);
+    const char* rate = rest_rate_of(output, mode);
     return {200, "\"" + std::string(rate != nullptr ? rate : "disabled") + "\""};
   }
   std::string_view v = body;
   while (!v.empty() && (v.front() == ' ' || v.front() == '\n')) v.remove_prefix(1);
   while (!v.empty() && (v.back() == ' ' || v.back() == '\n')) v.remove_suffix(1);
-  const int wanted = v.size() >= 2 && v.front() == '"' && v.back() == '"' ? rest_rate_mode(v.substr(1, v.size() - 2)) : -1;
-  if (wanted < 0 || (output == kOutFastImu && wanted != kModeDisabled))
+  const int wanted = v.size() >= 2 && v.front() == '"' && v.back() == '"' ? rest_mode_of(output, v.substr(1, v.size() - 2)) : -1;
+  if (wanted < 0)
     return {400, json_error(400, "Bad Request",
                             "'" + std::string(body) + "' is not a rate of " + std::string(name) +
                                 " (\"disabled\", \"newData\", \"1ms\" .. \"1000ms\")")};
   if (mode != wanted) {
     mode = static_cast<std::uint16_t>(wanted);
     publish();
-    log(std::string("output ") + output_info(output).rest_name + " " + rest_rate_name(mode) + ": " + format_text());
+    log(std::string("output ") + output_info(output).rest_name + " " + rest_rate_of(output, mode) + ": " + format_text());
   }
   return {200, "{\"needReboot\":false}"};
 }

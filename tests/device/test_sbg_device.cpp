@@ -638,6 +638,14 @@ TEST(SbgDevice, RestApiAnswersInfoOutputsAndErrors) {
   EXPECT_EQ(code, 200);
   std::tie(code, body) = call(false, "/api/v1/settings/output/comA/messages/ekfEuler", std::nullopt);
   EXPECT_EQ(body, "\"10ms\"");
+  // FAST_IMU_DATA runs in the 1 kHz loop: "1ms" over REST is OUTPUT_CONF's 20001.
+  EXPECT_EQ(call(true, "/api/v1/settings/output/comA/messages/imuFast", "\"100ms\"").first, 400);
+  EXPECT_EQ(call(true, "/api/v1/settings/output/comA/messages/imuFast", "\"1ms\"").first, 200);
+  std::vector<Frame> conf = b.send(spec_frame(30, 0x10, Bytes{0, 0, 1}));
+  ASSERT_EQ(conf.size(), 1u);
+  ASSERT_EQ(conf[0].payload.size(), 5u);
+  EXPECT_EQ(u16(conf[0].payload, 3), 20001);
+  EXPECT_EQ(call(false, "/api/v1/settings/output/comA/messages/imuFast", std::nullopt).second, "\"1ms\"");
   // Malformed API payload (no NUL after the path): an ACK with an error.
   const Bytes raw{'/', 'a'};
   const std::vector<Frame> r = b.send(spec_frame(48, 0x10, raw));
