@@ -11,6 +11,7 @@
 #include "drivers/protocols/mavlink_device.hpp"
 #include "drivers/protocols/mip_device.hpp"
 #include "drivers/protocols/vectornav.hpp"
+#include "drivers/protocols/sbg.hpp"
 #include "drivers/protocols/wire_bytes.hpp"
 
 namespace imuemu::drivers::handshake {
@@ -358,12 +359,103 @@ class VectorNavClient final : public Client {
                                                {"Binary output 3 (register 77)", "77"}}};
   std::string line_;
 };
+
+// [SBG] sbgECom (sbg.hpp [L]): what sbgEComExample asks first (API_GET
+// /api/v1/info, class 0x10 id 48: status code + JSON), then what
+// ellipseLegacy, PX4's sbgecom and ArduPilot ask (CMD_INFO, id 4), then
+// the output configuration of IMU_SHORT on port A (OUTPUT_CONF get): all
+// reads, the device keeps streaming what it was configured with.
+class SbgClient final : public Client {
+ public:
+  std::size_t step_count() const override { return 3; }
+  std::string step_name(std::size_t step) const override {
+    static constexpr std::array<const char*, 3> kNames{
+        "GET /api/v1/info (CMD_0, 48)", "Device info (CMD_INFO, 4)", "Output conf of IMU_SHORT, port A (OUTPUT_CONF, 30)"};
+    return kNames[step];
+  }
+  std::vector<std::uint8_t> request(std::size_t step) override {
+    pending_.clear();
+    std::vector<std::uint8_t> payload;
+    std::uint8_t id = sbg::kCmdApiGet;
+    if (step == 0) {
+      const std::string path = "/api/v1/info";
+      payload.assign(path.begin(), path.end());
+      payload.push_back(0);
+      payload.push_back(0);  // empty query
+    } else if (step == 1) {
+      id = sbg::kCmdInfo;
+    } else {
+      id = sbg::kCmdOutputConf;
+      payload = {sbg::kPortA, sbg::kLogImuShort, sbg::kClassLog0};
+    }
+    std::vector<std::uint8_t> out;
+    sbg::append_frame(id, sbg::kClassCmd0, payload, out);
+    return out;
+  }
+  bool feed(std::size_t step, std::span<const std::uint8_t> bytes, StepResult& result) override {
+    pending_.insert(pending_.end(), bytes.begin(), bytes.end());
+    const std::uint8_t want = step == 0 ? sbg::kCmdApiGet : step == 1 ? sbg::kCmdInfo : sbg::kCmdOutputConf;
+    std::size_t pos = 0;
+    bool done = false;
+    while (!done && pos + sbg::kFrameOverheadBytes <= pending_.size()) {
+      const std::uint8_t* f = pending_.data() + pos;
+      if (f[0] != sbg::kSync1 || f[1] != sbg::kSync2) {
+        ++pos;
+        continue;
+      }
+      const std::size_t len = wire::get_le<std::uint16_t>(f + 4);
+      if (len > sbg::kMaxPayloadBytes) {
+        ++pos;
+        continue;
+      }
+      if (pos + len + sbg::kFrameOverheadBytes > pending_.size()) break;
+      if (f[8 + len] != sbg::kEtx ||
+          sbg::crc16(std::span<const std::uint8_t>(f + 2, len + 4)) != wire::get_le<std::uint16_t>(f + 6 + len)) {
+        ++pos;
+        continue;
+      }
+      const std::uint8_t* p = f + 6;
+      if (f[3] == sbg::kClassCmd0 && f[2] == sbg::kCmdAck && len >= 4 && p[0] == want) {
+        result.answered = true;
+        result.reply = "ACK error " + std::to_string(wire::get_le<std::uint16_t>(p + 2));
+        done = true;
+      } else if (f[3] == sbg::kClassCmd0 && f[2] == want) {
+        result.answered = true;
+        if (want == sbg::kCmdApiGet && len >= 3) {
+          const auto code = wire::get_le<std::uint16_t>(p);
+          result.accepted = code == 200;
+          result.reply = std::to_string(code) + " " + std::string(reinterpret_cast<const char*>(p + 2), len - 3);
+        } else if (want == sbg::kCmdInfo && len >= 52) {
+          result.accepted = true;
+          char text[96];
+          std::snprintf(text, sizeof text, "%.32s, serial %u", reinterpret_cast<const char*>(p),
+                        static_cast<unsigned>(wire::get_le<std::uint32_t>(p + 32)));
+          result.reply = text;
+        } else if (want == sbg::kCmdOutputConf && len >= 5) {
+          result.accepted = true;
+          result.reply = "mode " + std::to_string(wire::get_le<std::uint16_t>(p + 3));
+        } else {
+          result.reply = "short reply (" + std::to_string(len) + " bytes)";
+        }
+        done = true;
+      }
+      pos += len + sbg::kFrameOverheadBytes;
+    }
+    pending_.erase(pending_.begin(), pending_.begin() + static_cast<std::ptrdiff_t>(pos));
+    if (pending_.size() > 2 * (sbg::kMaxPayloadBytes + sbg::kFrameOverheadBytes)) pending_.clear();
+    return done;
+  }
+
+ private:
+  std::vector<std::uint8_t> pending_;
+};
 }  // namespace
 
 std::unique_ptr<Client> make_client(const std::string& protocol) {
   if (protocol == "mip") return std::make_unique<MipClient>();
   if (protocol == "mavlink2") return std::make_unique<MavlinkClient>();
   if (protocol == "vectornav") return std::make_unique<VectorNavClient>();
+  if (protocol == "sbg") return std::make_unique<SbgClient>();
   return nullptr;
 }
 

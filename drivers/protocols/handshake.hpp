@@ -21,6 +21,8 @@
 //  - vectornav: the registers the VectorNav SDK's connect and PX4's
 //    src/drivers/ins/vectornav init() read (1-4), then 6 and 75-77, all
 //    read (VectorNavClient in handshake.cpp).
+//  - sbg: sbgEComExample's GET /api/v1/info, the CMD_INFO of ellipseLegacy,
+//    PX4 and ArduPilot, and an OUTPUT_CONF read (SbgClient in handshake.cpp).
 // Frames are built here from the protocol documents ([DCP] MicroStrain's
 // MIP Data Communications Protocol manuals; [G] the MAVLink developer guide,
 // [X] common.xml); the replies are read with the same framing rules.

@@ -317,6 +317,20 @@ std::vector<ProtocolOption> make_table() {
                         o.stream.vectornav.power_up_adof_hz = static_cast<std::uint16_t>(v);
                       }));
 
+  // ---- sbg (sbg.hpp, sbg_device.hpp, issue 29)
+  t.push_back(choice("sbg", "model", {"ellipse_n", "ellipse_d", "ellipse_a"},
+                     "ELLIPSE-N (INS, one GNSS antenna), ELLIPSE-D (INS, dual antenna) or ELLIPSE-A (AHRS: no GNSS, "
+                     "EKF_NAV or GPS1 logs): the logs the device has and its product code",
+                     [](ProtocolOptions& o, const std::string& v) {
+                       o.stream.sbg.model = v == "ellipse_a"   ? SbgModel::ellipse_a
+                                            : v == "ellipse_d" ? SbgModel::ellipse_d
+                                                               : SbgModel::ellipse_n;
+                     }));
+  t.push_back(boolean("sbg", "outputs_at_power_up", true,
+                      "send the factory logs from power-up (STATUS, UTC_TIME, IMU_SHORT, MAG, EKF_EULER, EKF_QUAT; "
+                      "EKF_NAV, GPS1_VEL, GPS1_POS on an INS); false: nothing until the driver configures outputs",
+                      [](ProtocolOptions& o, bool v) { o.stream.sbg.outputs_at_power_up = v; }));
+
   // ---- dronecan (dronecan.hpp)
   t.push_back(integer("dronecan", "node_id", 1, 127, "42", "source node id, unique per CAN interface",
                       [](ProtocolOptions& p, std::int64_t v) { p.can.dronecan.node_id = static_cast<std::uint8_t>(v); }));

@@ -11,6 +11,7 @@
 #include "drivers/protocols/nmea.hpp"
 #include "drivers/protocols/ubx.hpp"
 #include "drivers/protocols/vectornav.hpp"
+#include "drivers/protocols/sbg.hpp"
 
 namespace imuemu::drivers {
 
@@ -70,6 +71,18 @@ void check_options(const std::string& protocol, const StreamEncoderOptions& o) {
       if (!std::isfinite(g) || std::fabs(g) > 10.0)
         throw std::invalid_argument("stream protocol 'vectornav': the magnetic reference must be finite, within 10 gauss");
   }
+  if (protocol == "sbg") {
+    const SbgDeviceConfig& c = o.sbg;
+    // [I] the product code is a 32-byte NUL-terminated field (and a JSON string).
+    const bool printable = std::all_of(c.product_code.begin(), c.product_code.end(),
+                                       [](char ch) { return ch > ' ' && ch <= '~' && ch != '"' && ch != '\\'; });
+    if (c.product_code.size() > 31 || !printable)
+      throw std::invalid_argument("stream protocol 'sbg': product_code '" + c.product_code +
+                                  "' must be at most 31 printable characters without spaces, \" or \\");
+    for (const double g : c.mag_reference_ned_gauss)
+      if (!std::isfinite(g) || std::fabs(g) > 10.0)
+        throw std::invalid_argument("stream protocol 'sbg': the magnetic reference must be finite, within 10 gauss");
+  }
   if (is_gnss_protocol(protocol)) {
     if (o.nmea_talker != "GP" && o.nmea_talker != "GN")
       throw std::invalid_argument("stream protocol '" + protocol + "': talker '" + o.nmea_talker +
@@ -103,7 +116,7 @@ void check_options(const std::string& protocol, const StreamEncoderOptions& o) {
 
 }  // namespace
 
-std::vector<std::string> stream_protocol_names() { return {"native", "mavlink2", "mip", "nmea", "ubx", "vectornav"}; }
+std::vector<std::string> stream_protocol_names() { return {"native", "mavlink2", "mip", "nmea", "ubx", "vectornav", "sbg"}; }
 
 bool is_gnss_protocol(const std::string& protocol) { return protocol == "nmea" || protocol == "ubx"; }
 
@@ -116,6 +129,7 @@ std::unique_ptr<StreamEncoder> make_stream_encoder(const std::string& protocol,
   if (protocol == "nmea") return std::make_unique<nmea::Encoder>(options);
   if (protocol == "ubx") return std::make_unique<ubx::Encoder>(options);
   if (protocol == "vectornav") return std::make_unique<vectornav::Encoder>(options);
+  if (protocol == "sbg") return std::make_unique<sbg::Encoder>(options);
   throw std::invalid_argument("unknown stream protocol '" + protocol + "' (expected one of: " + joined_names() +
                               ")");
 }
@@ -129,6 +143,7 @@ std::unique_ptr<StreamDecoder> make_stream_decoder(const std::string& protocol,
   if (protocol == "nmea") return std::make_unique<nmea::Decoder>();
   if (protocol == "ubx") return std::make_unique<ubx::Decoder>();
   if (protocol == "vectornav") return std::make_unique<vectornav::Decoder>();
+  if (protocol == "sbg") return std::make_unique<sbg::Decoder>();
   throw std::invalid_argument("unknown stream protocol '" + protocol + "' (expected one of: " + joined_names() +
                               ")");
 }

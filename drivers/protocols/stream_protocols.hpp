@@ -12,6 +12,8 @@
 //              SOL, VELNED, TIMEGPS) per epoch
 //   "vectornav" VectorNav VN-100 / VN-200 / VN-300: binary output packets
 //              and async ASCII sentences as its registers set them
+//   "sbg"      SBG Systems ELLIPSE-A / -N / -D: sbgECom binary logs as its
+//              output configuration (OUTPUT_CONF, REST API) sets them
 // The GNSS receivers send one navigation epoch per device sample: the
 // device's rate is the navigation rate, 1..10 Hz.
 #pragma once
@@ -69,6 +71,24 @@ struct VectorNavDeviceConfig {
   std::uint16_t power_up_adof_hz = 40;
   // The magnetic field the magnetometer measures, in NED (gauss): a fixed
   // reference (register 21's role), not a field model.
+  double mag_reference_ned_gauss[3] = {0.21, 0.0, 0.43};
+};
+
+// The SBG Systems sbgECom device (drivers/protocols/sbg_device.hpp,
+// docs/sbg-device.md, issue 29): scene keys [imu.sbg]. The model decides
+// which logs it has (ELLIPSE-A: an AHRS, no GNSS or EKF_NAV; ELLIPSE-N / -D:
+// INS with GNSS) and its preset identity (product code, firmware 3.x).
+enum class SbgModel : std::uint8_t { ellipse_a, ellipse_n, ellipse_d };
+struct SbgDeviceConfig {
+  bool answers_commands = true;       // false: input read and discarded
+  SbgModel model = SbgModel::ellipse_n;
+  std::string product_code;           // CMD_INFO / GET /api/v1/info (at most 31 characters); empty: the model's
+  std::uint32_t serial_number = 45000123;
+  // The logs sent after power-up (factory output configuration, docs/sbg-device.md);
+  // false: none until the driver configures them.
+  bool outputs_at_power_up = true;
+  // The magnetic field the magnetometer measures, in NED (gauss), as
+  // VectorNavDeviceConfig's: a fixed reference, not a field model.
   double mag_reference_ned_gauss[3] = {0.21, 0.0, 0.43};
 };
 
@@ -193,6 +213,10 @@ struct StreamEncoderOptions {
   // below (time base, satellites, DOPs, accuracies; its position is the
   // trajectory's, without errors).
   VectorNavDeviceConfig vectornav;
+
+  // sbg (issue 29): the SBG device's model, identity and power-up outputs.
+  // GPS1_POS / GPS1_VEL / UTC_TIME (ELLIPSE-N / -D) come from `gnss` below.
+  SbgDeviceConfig sbg;
 
   // nmea and ubx (issue 28, drivers/gnss_fix.hpp): the receiver's time base
   // and the figures it reports; mavlink2 HIL_GPS: its satellites, DOPs,

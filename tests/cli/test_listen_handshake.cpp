@@ -245,5 +245,16 @@ TEST(ListenHandshake, TheRealMavlinkComponentAnswersAsAGroundStationExpects) {
   EXPECT_NE(out.find("2 parameter(s): IMU_RATE_HZ = 100 [0], IMU_SENSOR_ID = "), std::string::npos) << out;
 }
 
+TEST(ListenHandshake, TheRealSbgDeviceAnswersTheRestApiAndCmdInfo) {
+  const std::string out = run_handshake_against_emit("sbg");
+  EXPECT_NE(out.find("handshake: 3 steps, 3 answered, 3 accepted"), std::string::npos) << out;
+  // docs/sbg-device.md: an ELLIPSE-N by default, firmware 3.2.2406-stable; IMU_SHORT at 50 Hz (mode 4).
+  EXPECT_NE(out.find("200 {\"productCode\":\"ELLIPSE-N-G4A3-B1\",\"serialNumber\":\"045000123\""), std::string::npos)
+      << out;
+  EXPECT_NE(out.find("\"fmwVersion\":\"3.2.2406-stable\""), std::string::npos) << out;
+  EXPECT_NE(out.find("ELLIPSE-N-G4A3-B1, serial 45000123"), std::string::npos) << out;
+  EXPECT_NE(out.find("mode 4"), std::string::npos) << out;
+}
+
 }  // namespace
 }  // namespace unity_cli_test_listen_handshake

@@ -54,6 +54,7 @@
 #include "drivers/protocols/mip_device.hpp"
 #include "drivers/protocols/stream_protocols.hpp"
 #include "drivers/protocols/vectornav.hpp"
+#include "drivers/protocols/sbg.hpp"
 #include "drivers/pty_transport.hpp"
 #include "drivers/queued_writer.hpp"
 
@@ -1046,6 +1047,68 @@ TEST(MipDevice, VectorNavEmissionWithCommandsBetweenSamplesAllocatesNothing) {
   }
   EXPECT_EQ(allocations, 0u);
   EXPECT_EQ(sink.replies, 4u + 40u + 4u);
+  EXPECT_EQ(r->command_counters().nacked, 0u);
+}
+
+// The SBG device (tests/device/test_sbg_device.cpp): every log on at once
+// (IMU at 1 kHz, the navigation logs at the 200 Hz main loop) while
+// OUTPUT_CONF and REST API commands change what it streams between samples
+// - allocating nothing on the emission thread.
+TEST(MipDevice, SbgEmissionWithCommandsBetweenSamplesAllocatesNothing) {
+  drivers::StreamEncoderOptions o;
+  o.nominal_sample_rate_hz = 1000.0;
+  o.sbg.model = drivers::SbgModel::ellipse_n;
+  drivers::sbg::Encoder enc(o);
+  drivers::CommandResponder* r = enc.command_responder();
+  ASSERT_NE(r, nullptr);
+  struct CountingSink final : drivers::ReplySink {
+    std::size_t replies = 0;
+    bool reply(std::span<const std::uint8_t>) override { return ++replies, true; }
+    void change_baud_after_replies(std::uint32_t) override {}
+  } sink;
+  auto send = [&](std::uint8_t msg, const Bytes& payload) {
+    Bytes frame;
+    drivers::sbg::append_frame(msg, drivers::sbg::kClassCmd0, payload, frame);
+    r->on_input(frame, sink);
+  };
+  auto output_conf = [&](std::uint8_t log, std::uint8_t cls, std::uint16_t mode) {
+    send(drivers::sbg::kCmdOutputConf, Bytes{0, log, cls, static_cast<std::uint8_t>(mode & 0xFF),
+                                             static_cast<std::uint8_t>(mode >> 8)});
+  };
+  for (const int log : {1, 2, 4, 6, 7, 8, 13, 14}) output_conf(static_cast<std::uint8_t>(log), 0, 1);
+  output_conf(3, 0, 1001);
+  output_conf(44, 0, 1001);
+  output_conf(0, 1, 20001);
+  Bytes out;
+  out.reserve(enc.max_bytes_per_sample());
+  drivers::ImuFrameInput s;
+  s.period_ns = 1'000'000;
+  s.has_navigation = true;
+  s.latitude_rad = 0.7;
+  std::uint64_t allocations = 0;
+  for (std::uint64_t k = 0; k < 1000; ++k) {
+    if (k % 100 == 0) send(drivers::sbg::kCmdInfo, Bytes{});
+    if (k % 250 == 125) {
+      const std::string path = "/api/v1/settings/output/comA/messages/ekfEuler";
+      const std::string body = k % 500 == 125 ? "\"100ms\"" : "\"5ms\"";
+      Bytes p(path.begin(), path.end());
+      p.push_back(0);
+      p.push_back(0);
+      p.insert(p.end(), body.begin(), body.end());
+      p.push_back(0);
+      send(drivers::sbg::kCmdApiPost, p);
+    }
+    s.sample_counter = k;
+    s.t_ns = static_cast<TimeNs>(k) * s.period_ns;
+    out.clear();
+    const std::uint64_t before = g_emission_allocations.load();
+    t_counting = true;
+    enc.encode(s, out);
+    t_counting = false;
+    allocations += g_emission_allocations.load() - before;
+  }
+  EXPECT_EQ(allocations, 0u);
+  EXPECT_EQ(sink.replies, 11u + 10u + 4u);
   EXPECT_EQ(r->command_counters().nacked, 0u);
 }
 
