@@ -21,6 +21,9 @@
 //  - vectornav: the registers the VectorNav SDK's connect and PX4's
 //    src/drivers/ins/vectornav init() read (1-4), then 6 and 75-77, all
 //    read (VectorNavClient in handshake.cpp).
+//  - xsens: xspublic's (Xsens' ROS driver) connect and configure sequence:
+//    GotoConfig, ReqDID, ReqProductCode, ReqHardwareVersion, ReqFWRev,
+//    SetOutputConfiguration, GotoMeasurement (XsensClient in handshake.cpp).
 // Frames are built here from the protocol documents ([DCP] MicroStrain's
 // MIP Data Communications Protocol manuals; [G] the MAVLink developer guide,
 // [X] common.xml); the replies are read with the same framing rules.

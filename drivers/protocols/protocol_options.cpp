@@ -317,6 +317,21 @@ std::vector<ProtocolOption> make_table() {
                         o.stream.vectornav.power_up_adof_hz = static_cast<std::uint16_t>(v);
                       }));
 
+  // ---- xsens (xsens.hpp, xsens_device.hpp, issue 29)
+  t.push_back(choice("xsens", "model", {"mti630", "mti3", "mti7", "mti680g", "mti-g-710"},
+                     "MTi-630 (AHRS, 400 Hz), MTi-3 (AHRS, 100 Hz), MTi-7 (GNSS/INS, 100 Hz), MTi-680G (RTK GNSS/INS, "
+                     "400 Hz) or MTi-G-710 (GNSS/INS, 400 Hz): the identity presets (device id, product code, "
+                     "firmware), the maximum rate the output rates divide and the outputs the device has",
+                     [](ProtocolOptions& o, const std::string& v) {
+                       o.stream.xsens.model = v == "mti3"        ? XsensModel::mti3
+                                              : v == "mti7"      ? XsensModel::mti7
+                                              : v == "mti680g"   ? XsensModel::mti680g
+                                              : v == "mti-g-710" ? XsensModel::mti_g710
+                                                                 : XsensModel::mti630;
+                     }));
+  // (Only the keys that change the stream, as for vectornav: the identity
+  // and the power-up baud rate are XsensDeviceConfig's, set in code.)
+
   // ---- dronecan (dronecan.hpp)
   t.push_back(integer("dronecan", "node_id", 1, 127, "42", "source node id, unique per CAN interface",
                       [](ProtocolOptions& p, std::int64_t v) { p.can.dronecan.node_id = static_cast<std::uint8_t>(v); }));
