@@ -440,7 +440,11 @@ class XsensClient final : public Client {
         std::snprintf(text, sizeof text, "device id %0*llX", d.size() == 8 ? 10 : 8, static_cast<unsigned long long>(id));
         return text;
       }
-      case xsens::mid::kReqProductCode: return "product code " + std::string(d.begin(), d.end());
+      case xsens::mid::kReqProductCode: {
+        std::string code(d.begin(), d.end());
+        code = code.substr(0, code.find(' '));  // [L] padded with spaces to 20
+        return "product code " + code;
+      }
       case xsens::mid::kReqHardwareVersion:
         if (d.size() < 2) return "hardware version (short)";
         std::snprintf(text, sizeof text, "hardware %u.%u", static_cast<unsigned>(d[0]), static_cast<unsigned>(d[1]));

@@ -61,6 +61,7 @@ inline constexpr std::size_t kMaxPayloadBytes = 2048;  // [L 2.2] the longest da
 // [L] message identifiers used here (a request's acknowledgement is MID + 1).
 namespace mid {
 inline constexpr std::uint8_t kReqDid = 0x00, kDeviceId = 0x01;
+inline constexpr std::uint8_t kInitBus = 0x02, kInitBusResults = 0x03;
 inline constexpr std::uint8_t kReqConfiguration = 0x0C, kConfiguration = 0x0D;
 inline constexpr std::uint8_t kRestoreFactoryDef = 0x0E;
 inline constexpr std::uint8_t kGotoMeasurement = 0x10;

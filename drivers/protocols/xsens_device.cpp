@@ -249,9 +249,19 @@ Device::Outcome Device::command(std::uint8_t m, std::span<const std::uint8_t> da
       if (identity_.device_id_64bit) put<std::uint64_t>(o.data, identity_.device_id);
       else put<std::uint32_t>(o.data, static_cast<std::uint32_t>(identity_.device_id));
       return o;
-    case mid::kReqProductCode:
-      o.data.assign(identity_.product_code.begin(), identity_.product_code.end());
+    case mid::kInitBus:
+      // [L] InitBus: InitBusResults with the id of each device on the bus (this one).
+      if (identity_.device_id_64bit) put<std::uint64_t>(o.data, identity_.device_id);
+      else put<std::uint32_t>(o.data, static_cast<std::uint32_t>(identity_.device_id));
       return o;
+    case mid::kReqProductCode: {
+      // [L] ProductCode: 20 ASCII characters, padded with spaces (xspublic's
+      // MtDevice::productCode reads 20 bytes and cuts at the first space).
+      std::string padded = identity_.product_code;
+      padded.resize(20, ' ');
+      o.data.assign(padded.begin(), padded.end());
+      return o;
+    }
     case mid::kReqHardwareVersion:
       o.data = {identity_.hardware_major, identity_.hardware_minor};
       return o;

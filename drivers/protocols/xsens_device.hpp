@@ -8,7 +8,8 @@
 //      output configuration sets it. GotoConfig (0x30) / GotoMeasurement
 //      (0x10) switch them (acknowledged with MID + 1).
 //  [C] Requests answered in both states: ReqDID (0x00 -> DeviceID, 4 bytes,
-//      8 for the MTi-600 series' 64-bit ids), ReqProductCode (0x1C -> ASCII),
+//      8 for the MTi-600 series' 64-bit ids), ReqProductCode (0x1C -> 20 ASCII characters, space-padded),
+//      InitBus (0x02 -> InitBusResults, the device id),
 //      ReqHardwareVersion (0x1E -> major, minor), ReqFWRev (0x12 -> major,
 //      minor, revision, build number u32, svn revision u32), Reset (0x40 ->
 //      ResetAck, then WakeUp and measurement with the kept settings),

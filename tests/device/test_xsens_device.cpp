@@ -374,7 +374,9 @@ TEST(XsensDevice, IdentityRequestsAnswerTheModelsPresets) {
     r = ask(d, spec_message(0x1C));
     ASSERT_EQ(r.size(), 1u);
     EXPECT_EQ(r[0].mid, 0x1D);
-    EXPECT_EQ(std::string(r[0].data.begin(), r[0].data.end()), c.product);
+    std::string padded = c.product;
+    padded.resize(20, ' ');
+    EXPECT_EQ(std::string(r[0].data.begin(), r[0].data.end()), padded) << "[L] 20 characters, space-padded";
     r = ask(d, spec_message(0x12));
     ASSERT_EQ(r.size(), 1u);
     EXPECT_EQ(r[0].mid, 0x13);
