@@ -82,6 +82,7 @@ inline constexpr std::uint8_t kFilterProfile = 0x64;
 inline constexpr std::uint8_t kGnssLeverArm = 0x68;
 inline constexpr std::uint8_t kGnssPlatform = 0x76;
 inline constexpr std::uint8_t kLocationId = 0x84;
+inline constexpr std::uint8_t kStringOutputType = 0x8E;  // Req (no data) / Set (u16)
 inline constexpr std::uint8_t kOutputConfiguration = 0xC0;  // Req (no data) / Set (id, rate pairs)
 inline constexpr std::uint8_t kAlignmentRotation = 0xEC;   // Req (parameter) / Set (parameter, q)
 }  // namespace mid

@@ -220,7 +220,7 @@ Device::Outcome Device::command(std::uint8_t m, std::span<const std::uint8_t> da
   const bool config_only = m == mid::kBaudrate || m == mid::kOutputConfiguration || m == mid::kAlignmentRotation ||
                            m == mid::kRestoreFactoryDef || m == mid::kReqConfiguration || m == mid::kOptionFlags ||
                            m == mid::kLocationId || m == mid::kFilterProfile || m == mid::kAvailableFilterProfiles ||
-                           m == mid::kGnssPlatform || m == mid::kGnssLeverArm;
+                           m == mid::kGnssPlatform || m == mid::kGnssLeverArm || m == mid::kStringOutputType;
   if (config_only && measurement_) return refuse(ErrorCode::invalid_message);
   switch (m) {
     case mid::kWakeUpAck:
@@ -408,6 +408,14 @@ Device::Outcome Device::command(std::uint8_t m, std::span<const std::uint8_t> da
       o.data.insert(o.data.end(), padded.begin(), padded.end());
       return o;
     }
+    case mid::kStringOutputType:
+      // [L] StringOutputType (NMEA sentences beside MTData2): none is
+      // emulated, so 0 is the one value taken.
+      if (data.empty()) {
+        put<std::uint16_t>(o.data, 0);
+        return o;
+      }
+      return data.size() == 2 && wire::get_be<std::uint16_t>(data.data()) == 0 ? o : refuse(ErrorCode::invalid_parameter);
     case mid::kGnssPlatform:
       if (!traits_.gnss) return refuse(ErrorCode::invalid_message);
       if (data.empty()) {

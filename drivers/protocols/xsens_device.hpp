@@ -24,7 +24,8 @@
 //      RestoreFactoryDef (0x0E), ReqConfiguration (0x0C -> the 118-byte
 //      legacy configuration), ReqOptionFlags (0x48), ReqLocationId (0x84),
 //      ReqFilterProfile (0x64), ReqAvailableFilterProfiles (0x62),
-//      ReqGnssPlatform (0x76), ReqGnssLeverArm (0x68).
+//      ReqGnssPlatform (0x76), ReqGnssLeverArm (0x68), Req/SetStringOutputType
+//      (0x8E: 0, no NMEA output).
 //      Anything else, and a request whose data do not parse: Error (0x42)
 //      with the code of [L] "Error codes"; a refused command changes nothing.
 //  Settings are kept as the device keeps them (non-volatile: a Reset or a

@@ -768,6 +768,39 @@ TEST(XsensDevice, XspublicConnectAndConfigureGetsEveryAckAndTheFirstMtData2Decod
   }
 }
 
+// What xspublic's openPort / XsDevice construction asks beyond the scan
+// (xsdevice_def.cpp: InitBus, ReqConfiguration read by
+// XsDeviceConfiguration_readFromMessage: device id at 0 (+ the high word at
+// 4 for a 64-bit id), product code at 32, device count at 96, the device's
+// id at 98 and firmware at 112; mtdevice.cpp: ReqStringOutputType).
+TEST(XsensDevice, XspublicOpenPortRequestsAreAnsweredInTheLayoutItReads) {
+  drivers::xsens::Encoder e(options(drivers::XsensModel::mti680g));
+  drivers::CommandResponder& d = *e.command_responder();
+  ask(d, spec_message(0x30));
+  auto r = ask(d, spec_message(0x02));
+  ASSERT_EQ(r.size(), 1u);
+  EXPECT_EQ(r[0].mid, 0x03);
+  EXPECT_EQ(r[0].data, (Bytes{0x00, 0x00, 0x00, 0x00, 0x80, 0x00, 0x1A, 0x2E}));
+  r = ask(d, spec_message(0x0C));
+  ASSERT_EQ(r.size(), 1u);
+  ASSERT_EQ(r[0].mid, 0x0D);
+  ASSERT_EQ(r[0].data.size(), 118u);
+  const Bytes& c = r[0].data;
+  EXPECT_EQ(be32(&c[0]), 0x80001A2Eu);
+  EXPECT_EQ(be32(&c[4]), 0u);
+  EXPECT_EQ(std::string(c.begin() + 32, c.begin() + 46), "MTi-680G-8A1G6");
+  EXPECT_EQ(be16(&c[96]), 1u);
+  EXPECT_EQ(be32(&c[98]), 0x80001A2Eu);
+  EXPECT_EQ(Bytes(c.begin() + 112, c.begin() + 115), (Bytes{1, 12, 0}));
+  r = ask(d, spec_message(0x8E));
+  ASSERT_EQ(r.size(), 1u);
+  EXPECT_EQ(r[0].mid, 0x8F);
+  EXPECT_EQ(r[0].data, (Bytes{0x00, 0x00}));
+  r = ask(d, spec_message(0x8E, {0x00, 0x05}));
+  EXPECT_EQ(r.at(0).mid, 0x42) << "NMEA string outputs are not emulated";
+  EXPECT_EQ(d.command_counters().nacked, 1u);
+}
+
 TEST(XsensDevice, TheLinkBudgetBoundsTheWidestConfiguration) {
   for (const drivers::XsensModel model : {drivers::XsensModel::mti630, drivers::XsensModel::mti680g}) {
     drivers::xsens::Encoder e(options(model));
