@@ -6,6 +6,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <functional>
 #include <limits>
 
 #include "core/aiding/atmosphere.hpp"
@@ -631,18 +632,23 @@ void Encoder::encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out
 }
 
 std::size_t Encoder::max_bytes_per_sample() const {
-  // Every identifier the model sends in its widest format, once, plus a WakeUp.
-  std::size_t payload = 0;
+  // The largest MTData2 any configuration makes: the kMaxOutputItems widest
+  // distinct identifiers (with their format bits) this model sends (an
+  // applied configuration has no duplicates), plus a WakeUp.
+  std::vector<std::size_t> sizes;
   for (const std::uint16_t base :
        {xdi::kTemperature, xdi::kUtcTime, xdi::kPacketCounter, xdi::kSampleTimeFine, xdi::kQuaternion,
         xdi::kRotationMatrix, xdi::kEulerAngles, xdi::kBaroPressure, xdi::kDeltaV, xdi::kAcceleration,
         xdi::kFreeAcceleration, xdi::kAltitudeEllipsoid, xdi::kLatLon, xdi::kGnssPvtData, xdi::kRateOfTurn,
-        xdi::kDeltaQ, xdi::kMagneticField, xdi::kVelocityXyz, xdi::kStatusWord}) {
-    const std::size_t widest = std::max(data_bytes(base), data_bytes(static_cast<std::uint16_t>(base | 0x3)));
-    payload += 3 + widest;
-  }
-  // Duplicates of one quantity in several formats are allowed up to kMaxOutputItems.
-  return 7 + payload * 2 + 5;
+        xdi::kDeltaQ, xdi::kMagneticField, xdi::kVelocityXyz, xdi::kStatusWord})
+    for (std::uint16_t format = 0; format <= xdi::kFormatMask; ++format) {
+      const auto id = static_cast<std::uint16_t>(base | format);
+      if (data_bytes(id) != 0 && model_sends(traits_, id)) sizes.push_back(3 + data_bytes(id));
+    }
+  std::sort(sizes.begin(), sizes.end(), std::greater<>());
+  std::size_t payload = 0;
+  for (std::size_t i = 0; i < sizes.size() && i < kMaxOutputItems; ++i) payload += sizes[i];
+  return 7 + payload + 5;  // preamble, bus id, MID, extended length (3), checksum; WakeUp
 }
 
 StreamFrameLayout Encoder::frame_layout(std::span<const std::uint8_t> frame) const {

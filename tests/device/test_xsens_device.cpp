@@ -556,6 +556,42 @@ TEST(XsensDevice, SaturatedAndNonFiniteValuesGoOutClampedAndFlagged) {
   EXPECT_NE(status & 0x3u, 0u) << "self test and filter valid";
 }
 
+TEST(XsensDevice, EveryPrecisionRoundTripsOverItsRange) {
+  drivers::xsens::Encoder e(options(drivers::XsensModel::mti630));
+  drivers::CommandResponder& d = *e.command_responder();
+  ask(d, spec_message(0x30));
+  ask(d, spec_message(0xC0, config_data({{0x4020, 400}, {0x4021, 400}, {0x4022, 400}, {0x4023, 400}, {0xE020, 400}})));
+  ask(d, spec_message(0x10));
+  std::uint64_t k = 0;
+  // Values across each format's range (fp12.20: +-2048, fp16.32: +-32768).
+  for (double v = -32767.0; v <= 32767.0; v += 1234.5678) {
+    drivers::ImuFrameInput s = sample_at(k++);
+    s.accel_m_s2 = Vec3(v / 16.0 + 1e-7, -v / 16.0, -v);  // S: (v/16, v/16, v)
+    Bytes out;
+    e.encode(s, out);
+    const Split sp = spec_split(out);
+    ASSERT_EQ(sp.messages.size(), 1u);
+    const SpecItems it = spec_items(sp.messages[0].data);
+    ASSERT_TRUE(it.tiled);
+    const Vec3 want(v / 16.0 + 1e-7, v / 16.0, v);
+    for (int i = 0; i < 3; ++i) {
+      EXPECT_NEAR(it.reals(0x4020)[i], want[i], std::fabs(want[i]) * 6e-8 + 1e-12) << "float32";
+      if (std::fabs(want[i]) < 2048.0) {
+        EXPECT_NEAR(it.reals(0x4021)[i], want[i], 0.5 / 1048576 + 1e-12) << "fp12.20";
+      } else {
+        EXPECT_EQ(std::fabs(it.reals(0x4021)[i]), std::copysign(2048.0 - 1.0 / 1048576, 1.0) + (want[i] < 0 ? 1.0 / 1048576 : 0.0))
+            << "fp12.20 clamped to int32's range";
+      }
+      EXPECT_NEAR(it.reals(0x4022)[i], want[i], 0.5 / 4294967296.0 + 1e-12) << "fp16.32";
+      EXPECT_EQ(it.reals(0x4023)[i], want[i]) << "float64";
+    }
+    // Only fp12.20's z beyond 2048 clips: the clipping bits say so.
+    const std::uint32_t status = be32(it.at(0xE020).data());
+    EXPECT_EQ((status >> 19) & 1u, std::fabs(v) > 2048.0 ? 1u : 0u) << v;
+  }
+  EXPECT_GT(k, 50u);
+}
+
 TEST(XsensDevice, ResetAcknowledgesThenWakesUpMeasuringWithTheKeptSettingsAndNewBaud) {
   drivers::xsens::Encoder e(options(drivers::XsensModel::mti630));
   drivers::CommandResponder& d = *e.command_responder();
@@ -802,22 +838,32 @@ TEST(XsensDevice, XspublicOpenPortRequestsAreAnsweredInTheLayoutItReads) {
 }
 
 TEST(XsensDevice, TheLinkBudgetBoundsTheWidestConfiguration) {
-  for (const drivers::XsensModel model : {drivers::XsensModel::mti630, drivers::XsensModel::mti680g}) {
-    drivers::xsens::Encoder e(options(model));
-    drivers::CommandResponder& d = *e.command_responder();
-    ask(d, spec_message(0x30));
-    std::vector<std::pair<std::uint16_t, std::uint16_t>> all;
-    for (const int id : {0x0813, 0x1010, 0x1020, 0x1060, 0x2013, 0x2023, 0x2033, 0x3010, 0x4013, 0x4023,
-                                   0x4033, 0x5023, 0x5043, 0x7010, 0x8023, 0x8033, 0xC023, 0xD013, 0xE020})
-      all.emplace_back(static_cast<std::uint16_t>(id), 400);
-    ask(d, spec_message(0xC0, config_data(all)));
-    ask(d, spec_message(0x10));
-    Bytes out;
-    e.encode(sample_at(0), out);
-    EXPECT_GT(out.size(), 300u);
-    EXPECT_LE(out.size(), e.max_bytes_per_sample());
-    EXPECT_EQ(spec_split(out).messages.size(), 1u);
-  }
+  // 32 items (the most a configuration holds): every frame of the five
+  // framed quantities and the other quantities in float64, the fixed-size
+  // ones, and three fp16.32 duplicates.
+  std::vector<std::pair<std::uint16_t, std::uint16_t>> all;
+  for (const int base : {0x2010, 0x2020, 0x2030, 0x4030, 0xD010})
+    for (const int frame : {0x0, 0x4, 0x8}) all.emplace_back(static_cast<std::uint16_t>(base | frame | 0x3), 400);
+  for (const int id : {0x8033, 0x4013, 0x4023, 0x8023, 0xC023, 0x5043, 0x5023, 0x0813, 0x7010, 0x1010, 0x1020, 0x1060,
+                       0x3010, 0xE020, 0x2022, 0x2012, 0x4032})
+    all.emplace_back(static_cast<std::uint16_t>(id), 400);
+  ASSERT_EQ(all.size(), 32u);
+  drivers::xsens::Encoder e(options(drivers::XsensModel::mti680g));
+  drivers::CommandResponder& d = *e.command_responder();
+  ask(d, spec_message(0x30));
+  const auto r = ask(d, spec_message(0xC0, config_data(all)));
+  ASSERT_EQ(r.size(), 1u);
+  ASSERT_EQ(r[0].mid, 0xC1);
+  EXPECT_EQ(r[0].data.size(), 4u * 32u) << "all applied";
+  ask(d, spec_message(0x10));
+  Bytes out;
+  e.encode(sample_at(0), out);
+  ASSERT_EQ(spec_split(out).messages.size(), 1u);
+  EXPECT_EQ(out[3], 0xFF) << "extended length";
+  EXPECT_GT(out.size(), 700u);
+  EXPECT_LE(out.size(), e.max_bytes_per_sample());
+  // The bound (the 32 widest distinct identifiers) is not a loose guess.
+  EXPECT_LT(e.max_bytes_per_sample(), out.size() + out.size() / 2);
 }
 
 }  // namespace
