@@ -46,6 +46,7 @@
 #include <map>
 #include <optional>
 #include <span>
+#include <stdexcept>
 #include <string>
 #include <vector>
 
@@ -387,6 +388,31 @@ TEST(XsensDevice, IdentityRequestsAnswerTheModelsPresets) {
     EXPECT_EQ(r[0].mid, 0x1F);
     EXPECT_EQ(r[0].data.size(), 2u);
   }
+}
+
+TEST(XsensDevice, ConfiguredIdentityIsReportedAndBadIdentitiesAreRefusedUpFront) {
+  drivers::StreamEncoderOptions o = options(drivers::XsensModel::mti3);
+  o.xsens.device_id = 0x03805555;
+  o.xsens.product_code = "MTi-3-8A7G6-X";
+  o.xsens.firmware_version = "1.8.4";
+  o.xsens.firmware_build = 7;
+  o.xsens.firmware_svn = 99;
+  const auto e = drivers::make_stream_encoder("xsens", o);
+  drivers::CommandResponder& d = *e->command_responder();
+  EXPECT_EQ(ask(d, spec_message(0x00)).at(0).data, (Bytes{0x03, 0x80, 0x55, 0x55}));
+  const Bytes pc = ask(d, spec_message(0x1C)).at(0).data;
+  EXPECT_EQ(std::string(pc.begin(), pc.begin() + 13), "MTi-3-8A7G6-X");
+  EXPECT_EQ(ask(d, spec_message(0x12)).at(0).data, (Bytes{1, 8, 4, 0, 0, 0, 7, 0, 0, 0, 99}));
+  for (const auto& bad : std::vector<std::pair<std::string, std::string>>{
+           {"product_code", "MTi 3"}, {"product_code", "MTi-3-8A7G6-0123456789"}, {"firmware_version", "1.8"},
+           {"firmware_version", "1.8.400"}}) {
+    drivers::StreamEncoderOptions b = options(drivers::XsensModel::mti3);
+    (bad.first == "product_code" ? b.xsens.product_code : b.xsens.firmware_version) = bad.second;
+    EXPECT_THROW((void)drivers::make_stream_encoder("xsens", b), std::invalid_argument) << bad.second;
+  }
+  drivers::StreamEncoderOptions b = options(drivers::XsensModel::mti3);
+  b.xsens.baud = 12345;
+  EXPECT_THROW((void)drivers::make_stream_encoder("xsens", b), std::invalid_argument);
 }
 
 TEST(XsensDevice, ConfigOnlyCommandsInMeasurementAndUnknownMessagesAreRefusedAndChangeNothing) {
