@@ -263,7 +263,7 @@ int emit(const EmitArgs& a) {
       can_encoder = drivers::make_can_encoder(a.protocol, protocol_options.can);
     } else {
       if (!member(drivers::stream_protocol_names(), a.protocol))
-        throw std::invalid_argument("--protocol " + a.protocol + ": expected native, mavlink2, mip, nmea, ubx, vectornav, sbg, dronecan or j1939");
+        throw std::invalid_argument("--protocol " + a.protocol + ": expected native, mavlink2, mip, nmea, ubx, vectornav, sbg, xsens, dronecan or j1939");
       stream_encoder = drivers::make_stream_encoder(a.protocol, protocol_options.stream);
       // A GNSS receiver's epochs are the device's grid from the first pose:
       // on the top of each GPS second only when the first pose is on one.

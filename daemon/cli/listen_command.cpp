@@ -281,7 +281,7 @@ void validate(const ListenArgs& args) {
   if (args.every == 0) throw std::invalid_argument("--every: expected >= 1");
   if (args.handshake && !drivers::handshake::make_client(args.protocol))
     throw std::invalid_argument("--handshake: " + args.protocol +
-                                " has no start-up commands to send (the handshake knows mip, mavlink2, vectornav and sbg)");
+                                " has no start-up commands to send (the handshake knows mip, mavlink2, vectornav, sbg and xsens)");
   if (args.handshake_timeout_ms < 1 || args.handshake_timeout_ms > 60000)
     throw std::invalid_argument("--handshake-timeout-ms: expected 1..60000");
 }
@@ -597,7 +597,8 @@ void add_listen_command(CLI::App& app, int& exit_code) {
   c->add_option("--count", a.count, "Stop after this many samples (0: no limit)");
   c->add_flag("--handshake", a.handshake,
               "Act as the driver first: send the start-up sequence a common driver sends (mip: mip_sdk's; mavlink2: a "
-              "ground station's; vectornav: the SDK's and PX4's register reads; sbg: sbgEComExample's GET /api/v1/info and CMD_INFO) and report each reply, then listen");
+              "ground station's; vectornav: the SDK's and PX4's register reads; sbg: sbgEComExample's GET /api/v1/info and CMD_INFO; "
+              "xsens: xspublic's GotoConfig ... GotoMeasurement) and report each reply, then listen");
   c->add_option("--handshake-timeout-ms", a.handshake_timeout_ms, "--handshake: how long to wait for each reply")
       ->capture_default_str()
       ->check(CLI::Range(1, 60000));

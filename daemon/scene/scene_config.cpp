@@ -483,7 +483,7 @@ void parse_mounting(const Table& t, Mounting& out) {
   }
 }
 
-const std::vector<std::string> kProtocols = {"native", "mavlink2", "mip", "nmea", "ubx", "vectornav", "sbg", "dronecan", "j1939"};
+const std::vector<std::string> kProtocols = {"native", "mavlink2", "mip", "nmea", "ubx", "vectornav", "sbg", "xsens", "dronecan", "j1939"};
 // The option table each protocol takes (named as the protocol is).
 std::string option_table_of(const std::string& protocol) { return drivers::protocol_option_table_name(protocol); }
 
@@ -757,7 +757,7 @@ ImuConfig parse_imu(const Table& t) {
     t.fail_at("name", "'" + imu.name + "' is not allowed; expected 1..64 characters from A-Z a-z 0-9 _ - .");
   t.require("rate_hz", "output rate in Hz, integer 1..100000");
   imu.rate_hz = *t.opt_int("rate_hz", 1, 100'000);
-  t.require("protocol", "one of native, mavlink2, mip, nmea, ubx, vectornav, sbg, dronecan or j1939");
+  t.require("protocol", "one of native, mavlink2, mip, nmea, ubx, vectornav, sbg, xsens, dronecan or j1939");
   imu.protocol = t.choice("protocol", "", kProtocols);
   // A GNSS receiver (issue 28): rate_hz is its navigation rate.
   if (drivers::is_gnss_protocol(imu.protocol) && imu.rate_hz > drivers::kMaxGnssRateHz)

@@ -12,6 +12,7 @@
 #include "drivers/protocols/mip_device.hpp"
 #include "drivers/protocols/vectornav.hpp"
 #include "drivers/protocols/sbg.hpp"
+#include "drivers/protocols/xsens.hpp"
 #include "drivers/protocols/wire_bytes.hpp"
 
 namespace imuemu::drivers::handshake {
@@ -449,6 +450,130 @@ class SbgClient final : public Client {
  private:
   std::vector<std::uint8_t> pending_;
 };
+
+// Xsens MTi: the sequence xspublic (Xsens' ROS driver's XDA) and ArduPilot's
+// AP_ExternalAHRS_Xsens send before data flow, each waiting for its
+// acknowledgement (MID + 1) or an Error (0x42). Frames from [L] (xsens.hpp).
+class XsensClient final : public Client {
+ public:
+  std::size_t step_count() const override { return kSteps.size(); }
+  std::string step_name(std::size_t step) const override { return kSteps[step].name; }
+  std::vector<std::uint8_t> request(std::size_t step) override {
+    buffer_.clear();
+    std::vector<std::uint8_t> data;
+    if (kSteps[step].mid == xsens::mid::kOutputConfiguration) {
+      // PacketCounter, SampleTimeFine (every packet), Quaternion,
+      // Acceleration, RateOfTurn, StatusWord at 100 Hz.
+      for (const auto& [id, rate] : std::array<std::pair<std::uint16_t, std::uint16_t>, 6>{
+               {{xsens::xdi::kPacketCounter, 0xFFFF},
+                {xsens::xdi::kSampleTimeFine, 0xFFFF},
+                {xsens::xdi::kQuaternion, 100},
+                {xsens::xdi::kAcceleration, 100},
+                {xsens::xdi::kRateOfTurn, 100},
+                {xsens::xdi::kStatusWord, 100}}}) {
+        for (const std::uint16_t v : {id, rate}) {
+          data.push_back(static_cast<std::uint8_t>(v >> 8));
+          data.push_back(static_cast<std::uint8_t>(v & 0xFF));
+        }
+      }
+    }
+    return xsens::message(kSteps[step].mid, data);
+  }
+  bool feed(std::size_t step, std::span<const std::uint8_t> bytes, StepResult& result) override {
+    buffer_.insert(buffer_.end(), bytes.begin(), bytes.end());
+    std::size_t pos = 0;
+    bool done = false;
+    while (!done && pos < buffer_.size()) {
+      if (buffer_[pos] != xsens::kPreamble) {
+        ++pos;
+        continue;
+      }
+      if (pos + 4 > buffer_.size()) break;
+      std::size_t header = 4, length = buffer_[pos + 3];
+      if (length == xsens::kExtendedLength) {
+        if (pos + 6 > buffer_.size()) break;
+        header = 6;
+        length = (std::size_t{buffer_[pos + 4]} << 8) | buffer_[pos + 5];
+      }
+      if (pos + header + length + 1 > buffer_.size()) break;
+      unsigned sum = 0;
+      for (std::size_t i = pos + 1; i < pos + header + length + 1; ++i) sum += buffer_[i];
+      if (buffer_[pos + 1] != xsens::kMasterBusId || (sum & 0xFF) != 0) {
+        ++pos;
+        continue;
+      }
+      const std::uint8_t m = buffer_[pos + 2];
+      const std::span<const std::uint8_t> data(buffer_.data() + pos + header, length);
+      if (m == xsens::mid::kError) {
+        char text[32];
+        std::snprintf(text, sizeof text, "Error 0x%02X", data.empty() ? 0u : static_cast<unsigned>(data[0]));
+        result.answered = true;
+        result.reply = text;
+        done = true;
+      } else if (m == static_cast<std::uint8_t>(kSteps[step].mid + 1)) {
+        result.answered = result.accepted = true;
+        result.reply = describe(kSteps[step].mid, data);
+        done = true;
+      }
+      pos += header + length + 1;
+    }
+    buffer_.erase(buffer_.begin(), buffer_.begin() + static_cast<std::ptrdiff_t>(pos));
+    return done;
+  }
+
+ private:
+  static std::string describe(std::uint8_t request, std::span<const std::uint8_t> d) {
+    char text[96];
+    switch (request) {
+      case xsens::mid::kReqDid: {
+        std::uint64_t id = 0;
+        for (const std::uint8_t b : d) id = id << 8 | b;
+        std::snprintf(text, sizeof text, "device id %0*llX", d.size() == 8 ? 10 : 8, static_cast<unsigned long long>(id));
+        return text;
+      }
+      case xsens::mid::kReqProductCode: {
+        std::string code(d.begin(), d.end());
+        code = code.substr(0, code.find(' '));  // [L] padded with spaces to 20
+        return "product code " + code;
+      }
+      case xsens::mid::kReqHardwareVersion:
+        if (d.size() < 2) return "hardware version (short)";
+        std::snprintf(text, sizeof text, "hardware %u.%u", static_cast<unsigned>(d[0]), static_cast<unsigned>(d[1]));
+        return text;
+      case xsens::mid::kReqFwRev:
+        if (d.size() < 3) return "firmware (short)";
+        std::snprintf(text, sizeof text, "firmware %u.%u.%u", static_cast<unsigned>(d[0]), static_cast<unsigned>(d[1]),
+                      static_cast<unsigned>(d[2]));
+        if (d.size() >= 11)
+          std::snprintf(text + std::strlen(text), sizeof text - std::strlen(text), " build %u svn %u",
+                        static_cast<unsigned>((d[3] << 24) | (d[4] << 16) | (d[5] << 8) | d[6]),
+                        static_cast<unsigned>((d[7] << 24) | (d[8] << 16) | (d[9] << 8) | d[10]));
+        return text;
+      case xsens::mid::kOutputConfiguration: {
+        std::string s = "applied";
+        for (std::size_t i = 0; i + 4 <= d.size(); i += 4) {
+          const unsigned id = (d[i] << 8) | d[i + 1], rate = (d[i + 2] << 8) | d[i + 3];
+          std::snprintf(text, sizeof text, " %04X@%u", id, rate);
+          s += text;
+        }
+        return s;
+      }
+      default: return "ACK";
+    }
+  }
+  struct Step {
+    const char* name;
+    std::uint8_t mid;
+  };
+  static constexpr std::array<Step, 7> kSteps{{{"GotoConfig (0x30)", xsens::mid::kGotoConfig},
+                                               {"ReqDID (0x00)", xsens::mid::kReqDid},
+                                               {"ReqProductCode (0x1C)", xsens::mid::kReqProductCode},
+                                               {"ReqHardwareVersion (0x1E)", xsens::mid::kReqHardwareVersion},
+                                               {"ReqFWRev (0x12)", xsens::mid::kReqFwRev},
+                                               {"SetOutputConfiguration (0xC0)", xsens::mid::kOutputConfiguration},
+                                               {"GotoMeasurement (0x10)", xsens::mid::kGotoMeasurement}}};
+  std::vector<std::uint8_t> buffer_;
+};
 }  // namespace
 
 std::unique_ptr<Client> make_client(const std::string& protocol) {
@@ -456,6 +581,7 @@ std::unique_ptr<Client> make_client(const std::string& protocol) {
   if (protocol == "mavlink2") return std::make_unique<MavlinkClient>();
   if (protocol == "vectornav") return std::make_unique<VectorNavClient>();
   if (protocol == "sbg") return std::make_unique<SbgClient>();
+  if (protocol == "xsens") return std::make_unique<XsensClient>();
   return nullptr;
 }
 

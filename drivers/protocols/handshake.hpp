@@ -23,6 +23,9 @@
 //    read (VectorNavClient in handshake.cpp).
 //  - sbg: sbgEComExample's GET /api/v1/info, the CMD_INFO of ellipseLegacy,
 //    PX4 and ArduPilot, and an OUTPUT_CONF read (SbgClient in handshake.cpp).
+//  - xsens: xspublic's (Xsens' ROS driver) connect and configure sequence:
+//    GotoConfig, ReqDID, ReqProductCode, ReqHardwareVersion, ReqFWRev,
+//    SetOutputConfiguration, GotoMeasurement (XsensClient in handshake.cpp).
 // Frames are built here from the protocol documents ([DCP] MicroStrain's
 // MIP Data Communications Protocol manuals; [G] the MAVLink developer guide,
 // [X] common.xml); the replies are read with the same framing rules.

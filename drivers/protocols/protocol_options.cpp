@@ -330,6 +330,20 @@ std::vector<ProtocolOption> make_table() {
                       "send the factory logs from power-up (STATUS, UTC_TIME, IMU_SHORT, MAG, EKF_EULER, EKF_QUAT; "
                       "EKF_NAV, GPS1_VEL, GPS1_POS on an INS); false: nothing until the driver configures outputs",
                       [](ProtocolOptions& o, bool v) { o.stream.sbg.outputs_at_power_up = v; }));
+  // ---- xsens (xsens.hpp, xsens_device.hpp, issue 29)
+  t.push_back(choice("xsens", "model", {"mti630", "mti3", "mti7", "mti680g", "mti-g-710"},
+                     "MTi-630 (AHRS, 400 Hz), MTi-3 (AHRS, 100 Hz), MTi-7 (GNSS/INS, 100 Hz), MTi-680G (RTK GNSS/INS, "
+                     "400 Hz) or MTi-G-710 (GNSS/INS, 400 Hz): the identity presets (device id, product code, "
+                     "firmware), the maximum rate the output rates divide and the outputs the device has",
+                     [](ProtocolOptions& o, const std::string& v) {
+                       o.stream.xsens.model = v == "mti3"        ? XsensModel::mti3
+                                              : v == "mti7"      ? XsensModel::mti7
+                                              : v == "mti680g"   ? XsensModel::mti680g
+                                              : v == "mti-g-710" ? XsensModel::mti_g710
+                                                                 : XsensModel::mti630;
+                     }));
+  // (Only the keys that change the stream, as for vectornav: the identity
+  // and the power-up baud rate are XsensDeviceConfig's, set in code.)
 
   // ---- dronecan (dronecan.hpp)
   t.push_back(integer("dronecan", "node_id", 1, 127, "42", "source node id, unique per CAN interface",

@@ -2,6 +2,7 @@
 
 #include <algorithm>
 #include <cmath>
+#include <cstdio>
 #include <stdexcept>
 #include <utility>
 
@@ -12,6 +13,7 @@
 #include "drivers/protocols/ubx.hpp"
 #include "drivers/protocols/vectornav.hpp"
 #include "drivers/protocols/sbg.hpp"
+#include "drivers/protocols/xsens.hpp"
 
 namespace imuemu::drivers {
 
@@ -83,6 +85,28 @@ void check_options(const std::string& protocol, const StreamEncoderOptions& o) {
       if (!std::isfinite(g) || std::fabs(g) > 10.0)
         throw std::invalid_argument("stream protocol 'sbg': the magnetic reference must be finite, within 10 gauss");
   }
+  if (protocol == "xsens") {
+    const XsensDeviceConfig& x = o.xsens;
+    // ReqProductCode's answer: at most 20 printable characters ([L] ProductCode).
+    const bool printable = std::all_of(x.product_code.begin(), x.product_code.end(), [](char c) { return c > ' ' && c <= '~'; });
+    if (x.product_code.size() > 20 || !printable)
+      throw std::invalid_argument("stream protocol 'xsens': product_code '" + x.product_code +
+                                  "' must be at most 20 printable characters without spaces");
+    unsigned a = 0, b = 0, c = 0;
+    char rest = 0;
+    if (!x.firmware_version.empty() &&
+        (std::sscanf(x.firmware_version.c_str(), "%u.%u.%u%c", &a, &b, &c, &rest) != 3 || a > 255 || b > 255 || c > 255))
+      throw std::invalid_argument("stream protocol 'xsens': firmware_version '" + x.firmware_version +
+                                  "' must be major.minor.revision (each 0..255)");
+    if (x.baud != 4800 && x.baud != 9600 && x.baud != 14400 && x.baud != 19200 && x.baud != 28800 && x.baud != 38400 &&
+        x.baud != 57600 && x.baud != 76800 && x.baud != 115200 && x.baud != 230400 && x.baud != 460800 &&
+        x.baud != 921600 && x.baud != 2000000)
+      throw std::invalid_argument("stream protocol 'xsens': baud " + std::to_string(x.baud) +
+                                  " is not one of SetBaudrate's rates");
+    for (const double v : x.mag_reference_ned_au)
+      if (!std::isfinite(v) || std::fabs(v) > 10.0)
+        throw std::invalid_argument("stream protocol 'xsens': the magnetic reference must be finite, within 10 a.u.");
+  }
   if (is_gnss_protocol(protocol)) {
     if (o.nmea_talker != "GP" && o.nmea_talker != "GN")
       throw std::invalid_argument("stream protocol '" + protocol + "': talker '" + o.nmea_talker +
@@ -116,7 +140,7 @@ void check_options(const std::string& protocol, const StreamEncoderOptions& o) {
 
 }  // namespace
 
-std::vector<std::string> stream_protocol_names() { return {"native", "mavlink2", "mip", "nmea", "ubx", "vectornav", "sbg"}; }
+std::vector<std::string> stream_protocol_names() { return {"native", "mavlink2", "mip", "nmea", "ubx", "vectornav", "sbg", "xsens"}; }
 
 bool is_gnss_protocol(const std::string& protocol) { return protocol == "nmea" || protocol == "ubx"; }
 
@@ -130,6 +154,7 @@ std::unique_ptr<StreamEncoder> make_stream_encoder(const std::string& protocol,
   if (protocol == "ubx") return std::make_unique<ubx::Encoder>(options);
   if (protocol == "vectornav") return std::make_unique<vectornav::Encoder>(options);
   if (protocol == "sbg") return std::make_unique<sbg::Encoder>(options);
+  if (protocol == "xsens") return std::make_unique<xsens::Encoder>(options);
   throw std::invalid_argument("unknown stream protocol '" + protocol + "' (expected one of: " + joined_names() +
                               ")");
 }
@@ -144,6 +169,7 @@ std::unique_ptr<StreamDecoder> make_stream_decoder(const std::string& protocol,
   if (protocol == "ubx") return std::make_unique<ubx::Decoder>();
   if (protocol == "vectornav") return std::make_unique<vectornav::Decoder>();
   if (protocol == "sbg") return std::make_unique<sbg::Decoder>();
+  if (protocol == "xsens") return std::make_unique<xsens::Decoder>();
   throw std::invalid_argument("unknown stream protocol '" + protocol + "' (expected one of: " + joined_names() +
                               ")");
 }

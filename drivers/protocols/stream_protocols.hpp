@@ -14,6 +14,7 @@
 //              and async ASCII sentences as its registers set them
 //   "sbg"      SBG Systems ELLIPSE-A / -N / -D: sbgECom binary logs as its
 //              output configuration (OUTPUT_CONF, REST API) sets them
+//   "xsens"    Xsens MTi (Xbus): MTData2 as its output configuration sets it
 // The GNSS receivers send one navigation epoch per device sample: the
 // device's rate is the navigation rate, 1..10 Hz.
 #pragma once
@@ -90,6 +91,26 @@ struct SbgDeviceConfig {
   // The magnetic field the magnetometer measures, in NED (gauss), as
   // VectorNavDeviceConfig's: a fixed reference, not a field model.
   double mag_reference_ned_gauss[3] = {0.21, 0.0, 0.43};
+};
+
+// The Xsens MTi device (drivers/protocols/xsens_device.hpp,
+// docs/xsens-device.md, issue 29): scene keys [imu.xsens]. The model decides
+// the identity presets (device id, product code, hardware and firmware
+// versions), the maximum output rate the rates divide and the outputs it has
+// (GNSS: MTi-7, MTi-680G, MTi-G-710). Empty strings / 0: the model's preset.
+enum class XsensModel : std::uint8_t { mti3, mti7, mti630, mti680g, mti_g710 };
+struct XsensDeviceConfig {
+  bool answers_commands = true;      // false: input read and discarded
+  XsensModel model = XsensModel::mti630;
+  std::uint32_t device_id = 0;       // ReqDID (0: the model's preset)
+  std::string product_code;          // ReqProductCode (at most 20 characters)
+  std::string firmware_version;      // ReqFWRev "major.minor.revision" (build and svn fields below)
+  std::uint32_t firmware_build = 0;  // 0: the preset's
+  std::uint32_t firmware_svn = 0;
+  std::uint32_t baud = 115200;       // ReqBaudrate at power-up
+  // The magnetic field the magnetometer measures, in NED, in a.u. (1: the
+  // local field's magnitude; [L] MagneticField is normalised).
+  double mag_reference_ned_au[3] = {0.44, 0.0, 0.90};
 };
 
 // Issue 28: the MIP device's GNSS data set 0x81 and its own navigation
@@ -217,6 +238,9 @@ struct StreamEncoderOptions {
   // sbg (issue 29): the SBG device's model, identity and power-up outputs.
   // GPS1_POS / GPS1_VEL / UTC_TIME (ELLIPSE-N / -D) come from `gnss` below.
   SbgDeviceConfig sbg;
+  // xsens (issue 29): the MTi model and identity. Position, velocity and UTC
+  // (GNSS models) come from `gnss` below as for vectornav.
+  XsensDeviceConfig xsens;
 
   // nmea and ubx (issue 28, drivers/gnss_fix.hpp): the receiver's time base
   // and the figures it reports; mavlink2 HIL_GPS: its satellites, DOPs,

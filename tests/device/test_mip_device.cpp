@@ -55,6 +55,7 @@
 #include "drivers/protocols/stream_protocols.hpp"
 #include "drivers/protocols/vectornav.hpp"
 #include "drivers/protocols/sbg.hpp"
+#include "drivers/protocols/xsens.hpp"
 #include "drivers/pty_transport.hpp"
 #include "drivers/queued_writer.hpp"
 
@@ -1109,6 +1110,74 @@ TEST(MipDevice, SbgEmissionWithCommandsBetweenSamplesAllocatesNothing) {
   }
   EXPECT_EQ(allocations, 0u);
   EXPECT_EQ(sink.replies, 11u + 10u + 4u);
+  EXPECT_EQ(r->command_counters().nacked, 0u);
+}
+
+// The Xsens MTi device (tests/device/test_xsens_device.cpp): its encoder
+// builds an MTData2 of every quantity in float64 and fixed point per sample
+// and hands its latest measurements to the command side, while ReqData,
+// GotoConfig / SetOutputConfiguration / GotoMeasurement change what it
+// streams between samples - allocating nothing.
+TEST(MipDevice, XsensEmissionWithCommandsBetweenSamplesAllocatesNothing) {
+  drivers::StreamEncoderOptions o;
+  o.nominal_sample_rate_hz = 400.0;
+  o.xsens.model = drivers::XsensModel::mti680g;
+  drivers::xsens::Encoder enc(o);
+  drivers::CommandResponder* r = enc.command_responder();
+  ASSERT_NE(r, nullptr);
+  struct CountingSink final : drivers::ReplySink {
+    std::size_t replies = 0;
+    bool reply(std::span<const std::uint8_t>) override { return ++replies, true; }
+    void change_baud_after_replies(std::uint32_t) override {}
+  } sink;
+  // Xbus frames written here from [L 2.2]: FA FF MID LEN DATA CS.
+  auto send = [&](std::uint8_t mid, std::vector<std::uint8_t> data) {
+    Bytes f{0xFA, 0xFF, mid, static_cast<std::uint8_t>(data.size())};
+    f.insert(f.end(), data.begin(), data.end());
+    unsigned sum = 0;
+    for (std::size_t i = 1; i < f.size(); ++i) sum += f[i];
+    f.push_back(static_cast<std::uint8_t>(0x100 - (sum & 0xFF)));
+    r->on_input(f, sink);
+  };
+  auto configure = [&](bool wide) {
+    send(0x30, {});
+    std::vector<std::uint8_t> cfg;
+    const std::vector<std::uint16_t> ids =
+        wide ? std::vector<std::uint16_t>{0x1020, 0x1060, 0x1010, 0x0813, 0x2013, 0x2027, 0x2033, 0x3010, 0x4012,
+                                          0x4023, 0x4037, 0x5022, 0x5043, 0x7010, 0x8021, 0x8033, 0xC023, 0xD016, 0xE020}
+             : std::vector<std::uint16_t>{0x1020, 0x1060, 0x2010, 0x4020, 0x8020, 0xE020};
+    for (const std::uint16_t id : ids)
+      for (const std::uint16_t v : {id, std::uint16_t{400}}) {
+        cfg.push_back(static_cast<std::uint8_t>(v >> 8));
+        cfg.push_back(static_cast<std::uint8_t>(v & 0xFF));
+      }
+    send(0xC0, cfg);
+    send(0x10, {});
+  };
+  configure(true);
+  Bytes out;
+  out.reserve(enc.max_bytes_per_sample());
+  drivers::ImuFrameInput s;
+  s.period_ns = 2'500'000;
+  s.has_navigation = true;
+  s.latitude_rad = 0.8;
+  std::uint64_t allocations = 0, bytes = 0;
+  for (std::uint64_t k = 0; k < 400; ++k) {
+    if (k % 10 == 0) send(0x34, {});  // ReqData
+    if (k % 100 == 50) configure(k % 200 != 50);
+    s.sample_counter = k;
+    s.t_ns = static_cast<TimeNs>(k) * s.period_ns;
+    out.clear();
+    const std::uint64_t before = g_emission_allocations.load();
+    t_counting = true;
+    enc.encode(s, out);
+    t_counting = false;
+    allocations += g_emission_allocations.load() - before;
+    bytes += out.size();
+  }
+  EXPECT_EQ(allocations, 0u);
+  EXPECT_GT(bytes, 400u * 100u);  // every sample streamed (config mode only between the commands)
+  EXPECT_EQ(sink.replies, 3u + 40u + 4u * 3u);
   EXPECT_EQ(r->command_counters().nacked, 0u);
 }
 

@@ -14,7 +14,8 @@ FLOAT32_REL = 2.0 ** -24  # round-to-nearest float32: half an ulp, relative
 IMU_COLUMNS = ["gyro_x_rad_s", "gyro_y_rad_s", "gyro_z_rad_s", "accel_x_m_s2", "accel_y_m_s2", "accel_z_m_s2"]
 # native: doubles end to end; MAVLink 2: one float32 rounding; MIP sends accel
 # in g (float32 of a/g, then x g back): at most 1.5 float32 roundings.
-ALLOWED_RELATIVE = {"native": 0.0, "mavlink2": FLOAT32_REL * 1.0001, "mip": 3.0 * FLOAT32_REL}
+ALLOWED_RELATIVE = {"native": 0.0, "mavlink2": FLOAT32_REL * 1.0001, "mip": 3.0 * FLOAT32_REL,
+                    "xsens": FLOAT32_REL * 1.0001}
 
 
 def memory_dir():

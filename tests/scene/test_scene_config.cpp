@@ -257,7 +257,7 @@ TEST(SceneErrors, EachNamesFileLineKeyAndWhatIsAllowed) {
       {"GNSS receiver in a flat scene", {{10, "rate_hz = 5"}, {11, "protocol = \"ubx\""}}, "", 11, "imu[0].protocol",
        "reports WGS84 positions, which a flat scene does not have"},
       {"unknown protocol", {{11, "protocol = \"sirf\""}}, "", 11, "imu[0].protocol",
-       "expected one of native, mavlink2, mip, nmea, ubx, vectornav, sbg, dronecan or j1939"},
+       "expected one of native, mavlink2, mip, nmea, ubx, vectornav, sbg, xsens, dronecan or j1939"},
       {"unknown physics", {{3, "physics = \"ned\""}}, "", 3, "scene.physics", "expected one of flat or ecef"},
       {"missing link", {{14, ""}}, "", 12, "imu[0].transport.link", "missing required key"},
       {"missing rate", {{10, ""}}, "", 8, "imu[0].rate_hz", "missing required key"},
