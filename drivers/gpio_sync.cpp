@@ -128,7 +128,6 @@ void GpioSyncOutput::run_helper() noexcept {
 }
 
 void GpioSyncOutput::helper_failed(std::string_view what) noexcept {
-  helper_faults_.fetch_add(1, std::memory_order_relaxed);
   down_.store(true, std::memory_order_release);
   try {
     {
@@ -148,6 +147,10 @@ void GpioSyncOutput::helper_failed(std::string_view what) noexcept {
     } catch (...) {
     }
   }
+  // Counted last: once helper_faults says so, the failure is recorded and
+  // logged and the lines are left inactive (a test, or a status reader,
+  // waits for this, not for `down`, which is set first to stop new pulses).
+  helper_faults_.fetch_add(1, std::memory_order_release);
 }
 
 std::string GpioSyncOutput::failure() const {
@@ -322,7 +325,7 @@ GpioSyncCounters GpioSyncOutput::counters() const {
   c.skipped_pulses = skipped_.load(std::memory_order_relaxed);
   c.set_errors = set_errors_.load(std::memory_order_relaxed);
   c.max_trailing_edge_delay_ns = max_delay_ns_.load(std::memory_order_relaxed);
-  c.helper_faults = helper_faults_.load(std::memory_order_relaxed);
+  c.helper_faults = helper_faults_.load(std::memory_order_acquire);
   c.down = down_.load(std::memory_order_acquire);
   for (const Output* output : {sync_.get(), pps_.get()}) {
     if (output != nullptr && output->active.load(std::memory_order_acquire) != 0) ++c.pulses_in_progress;

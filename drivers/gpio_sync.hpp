@@ -74,7 +74,8 @@ struct GpioSyncCounters {
   std::uint64_t pulses_in_progress = 0;
   // The trailing-edge thread ended with an exception (caught there, never
   // leaving the thread): counted, logged, and the sync output is down; later
-  // pulses are not raised (counted skipped_pulses).
+  // pulses are not raised (counted skipped_pulses). Counted once the failure
+  // is recorded and logged and the lines are inactive; `down` is set first.
   std::uint64_t helper_faults = 0;
   bool down = false;
 };
