@@ -544,7 +544,10 @@ TEST(Emission, StarvedProducerCountsLateTicksAndSendsNothingNonFinite) {
     EXPECT_TRUE(finite(s.gyro_rad_s) && finite(s.accel_m_s2) && finite(s.delta_theta_rad) && finite(s.delta_velocity_m_s));
     EXPECT_EQ(s.gyro_rad_s, batch.imu[s.sequence].gyro_rad_s);  // late ticks skipped, the others still exact
   }
-  EXPECT_EQ(samples.front().sequence, 0u);
+  // The first ticks had prefilled samples (ring of 16); on a loaded host the
+  // emitter itself may wake late for the very first and count it dropped_late
+  // (CI's ASan run: first sent sequence 1), so any of those may be first.
+  EXPECT_LT(samples.front().sequence, 16u);
   // Caught up after the starvation (ticks 16.. ~120 had nothing): later ticks go out again.
   EXPECT_GT(samples.back().sequence, 200u);
 }
