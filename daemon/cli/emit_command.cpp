@@ -456,6 +456,7 @@ void add_emit_command(CLI::App& app, int& exit_code) {
     const std::string type = o.type == drivers::OptionType::boolean   ? "BOOL"
                              : o.type == drivers::OptionType::integer ? "INT"
                              : o.type == drivers::OptionType::number  ? "NUMBER"
+                             : o.type == drivers::OptionType::text    ? "TEXT"
                                                                       : "CHOICE";
     protocol_flags.emplace_back(flag, c->add_option(flag, (*texts)[flag], help)->type_name(type)->group("Protocol options"));
   }

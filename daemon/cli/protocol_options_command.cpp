@@ -24,6 +24,7 @@ const char* type_name(drivers::OptionType t) {
     case drivers::OptionType::number:
       return "number";
     case drivers::OptionType::choice:
+    case drivers::OptionType::text:
       return "string";
   }
   return "";

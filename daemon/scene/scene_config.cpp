@@ -522,6 +522,13 @@ void parse_protocol_options(const Table& imu, ImuConfig& out) {
         case drivers::OptionType::choice:
           value = t->choice(row->key, row->default_text, row->choices);
           break;
+        case drivers::OptionType::text: {
+          std::string text = *t->opt_string(row->key);
+          if (const std::optional<std::string> why = drivers::text_problem(*row, text))
+            t->fail_at(row->key, "'" + text + "' " + *why + "; expected " + drivers::allowed_text(*row));
+          value = std::move(text);
+          break;
+        }
       }
       row->apply(options, value);
     }

@@ -76,6 +76,22 @@ ProtocolOption choice(std::string protocol, std::string key, std::vector<std::st
   return o;
 }
 
+ProtocolOption text(std::string protocol, std::string key, std::size_t max_chars, std::string form,
+                    std::string fallback, std::string example, std::string help,
+                    std::function<void(ProtocolOptions&, const std::string&)> set) {
+  ProtocolOption o;
+  o.protocol = std::move(protocol);
+  o.key = std::move(key);
+  o.type = OptionType::text;
+  o.text_max_chars = max_chars;
+  o.text_form = std::move(form);
+  o.default_text = std::move(fallback);
+  o.text_example = std::move(example);
+  o.help = std::move(help);
+  o.apply = [set = std::move(set)](ProtocolOptions& p, const OptionValue& v) { set(p, as_choice(v)); };
+  return o;
+}
+
 // The GNSS receiver's error rows (drivers/gnss_fix.hpp GnssErrorConfig;
 // bounds of core/aiding/gnss.hpp validate): per axis, 1 sigma, local NED.
 // One set for every protocol that sends a GNSS fix: nmea and ubx (keys as
@@ -317,6 +333,27 @@ std::vector<ProtocolOption> make_table() {
                         o.stream.vectornav.power_up_adof_hz = static_cast<std::uint16_t>(v);
                       }));
 
+  // Identity (what the driver reads and may check) and the settings saved in
+  // the device's flash ($VNWNV): a bench sets them to the unit it replaces.
+  t.push_back(text("vectornav", "model_number", 24, "a model number", "\"\"", "VN-100S-CR",
+                   "register 1, the model number (no , * or $); empty: the model's (VN-100T-CR, VN-200T-CR, "
+                   "VN-300T-CR)",
+                   [](ProtocolOptions& o, const std::string& v) { o.stream.vectornav.model_number = v; }));
+  t.push_back(integer("vectornav", "serial_number", 0, 4294967295LL, "100012345", "register 3, the serial number",
+                      [](ProtocolOptions& o, std::int64_t v) {
+                        o.stream.vectornav.serial_number = static_cast<std::uint32_t>(v);
+                      }));
+  t.push_back(integer("vectornav", "port", 1, 2, "1",
+                      "the device's serial port this line is (registers 5-7 read and written without a port name "
+                      "it; a binary output streams here when its async mode has this port's bit)",
+                      [](ProtocolOptions& o, std::int64_t v) { o.stream.vectornav.port = static_cast<std::uint8_t>(v); }));
+  t.push_back(text("vectornav", "saved_registers", 1000, "register writes ID,VALUES separated by ;", "\"\"",
+                   "6,0;75,1,4,01,0121",
+                   "settings saved in the device ($VNWRG bodies then $VNWNV): applied at power-up and by $VNRST, "
+                   "each checked as the device checks the write (e.g. 75,1,4,01,0121: binary output 1 on port 1 at "
+                   "the IMU rate / 4, common group time, rates, acceleration); $VNRFS restores the factory's",
+                   [](ProtocolOptions& o, const std::string& v) { o.stream.vectornav.saved_registers = v; }));
+
   // ---- sbg (sbg.hpp, sbg_device.hpp, issue 29)
   t.push_back(choice("sbg", "model", {"ellipse_n", "ellipse_d", "ellipse_a"},
                      "ELLIPSE-N (INS, one GNSS antenna), ELLIPSE-D (INS, dual antenna) or ELLIPSE-A (AHRS: no GNSS, "
@@ -330,6 +367,20 @@ std::vector<ProtocolOption> make_table() {
                       "send the factory logs from power-up (STATUS, UTC_TIME, IMU_SHORT, MAG, EKF_EULER, EKF_QUAT; "
                       "EKF_NAV, GPS1_VEL, GPS1_POS on an INS); false: nothing until the driver configures outputs",
                       [](ProtocolOptions& o, bool v) { o.stream.sbg.outputs_at_power_up = v; }));
+  t.push_back(text("sbg", "product_code", 31, "a product code", "\"\"", "ELLIPSE2-N-G4A2-B1",
+                   "CMD_INFO and GET /api/v1/info product code (no spaces, \" or \\); empty: the model's "
+                   "(ELLIPSE-N-G4A3-B1, ELLIPSE-D-G4A3-B1, ELLIPSE-A-G4A3-B1)",
+                   [](ProtocolOptions& o, const std::string& v) { o.stream.sbg.product_code = v; }));
+  t.push_back(integer("sbg", "serial_number", 0, 999999999, "45000123",
+                      "CMD_INFO serial number (GET /api/v1/info: nine digits)",
+                      [](ProtocolOptions& o, std::int64_t v) { o.stream.sbg.serial_number = static_cast<std::uint32_t>(v); }));
+  t.push_back(text("sbg", "saved_outputs", 1000, "NAME=RATE pairs separated by ,", "\"\"",
+                   "imuData=5ms,imuShort=disabled",
+                   "output settings saved in the device (port A, REST API names and rates: imuShort, imuData, "
+                   "imuFast, mag, ekfEuler, ekfQuat, ekfNav, gps1Vel, gps1Pos, utcTime, status; 5ms ... 1000ms, "
+                   "newData, pps, disabled): over the factory logs at power-up and after a reboot; restoring "
+                   "the factory settings drops them",
+                   [](ProtocolOptions& o, const std::string& v) { o.stream.sbg.saved_outputs = v; }));
   // ---- xsens (xsens.hpp, xsens_device.hpp, issue 29)
   t.push_back(choice("xsens", "model", {"mti630", "mti3", "mti7", "mti680g", "mti-g-710"},
                      "MTi-630 (AHRS, 400 Hz), MTi-3 (AHRS, 100 Hz), MTi-7 (GNSS/INS, 100 Hz), MTi-680G (RTK GNSS/INS, "
@@ -342,8 +393,14 @@ std::vector<ProtocolOption> make_table() {
                                               : v == "mti-g-710" ? XsensModel::mti_g710
                                                                  : XsensModel::mti630;
                      }));
-  // (Only the keys that change the stream, as for vectornav: the identity
-  // and the power-up baud rate are XsensDeviceConfig's, set in code.)
+  t.push_back(integer("xsens", "device_id", 0, 4294967295LL, "0",
+                      "ReqDID, the device id (0: the model's preset, 0x0080001A2D on an MTi-630; on the MTi-600 models, which "
+                      "report a 64-bit id, this is its low 32 bits)",
+                      [](ProtocolOptions& o, std::int64_t v) { o.stream.xsens.device_id = static_cast<std::uint32_t>(v); }));
+  t.push_back(text("xsens", "product_code", 20, "a product code", "\"\"", "MTi-630R-8A1G6",
+                   "ReqProductCode; empty: the model's (MTi-630-8A1G6, MTi-3-8A7G6, MTi-7-8A7G6, MTi-680G-8A1G6, "
+                   "MTi-G-710-2A8G4)",
+                   [](ProtocolOptions& o, const std::string& v) { o.stream.xsens.product_code = v; }));
 
   // ---- dronecan (dronecan.hpp)
   t.push_back(integer("dronecan", "node_id", 1, 127, "42", "source node id, unique per CAN interface",
@@ -439,8 +496,18 @@ std::string allowed_text(const ProtocolOption& option) {
     }
     case OptionType::choice:
       return "one of " + join_choices(option.choices);
+    case OptionType::text:
+      return option.text_form + ", at most " + std::to_string(option.text_max_chars) + " printable characters";
   }
   return "";
+}
+
+std::optional<std::string> text_problem(const ProtocolOption& option, const std::string& text) {
+  if (text.size() > option.text_max_chars)
+    return "has " + std::to_string(text.size()) + " characters, more than " + std::to_string(option.text_max_chars);
+  for (const char c : text)
+    if (c < ' ' || c > '~') return "has a character that is not printable ASCII";
+  return std::nullopt;
 }
 
 OptionValue parse_option_text(const ProtocolOption& option, const std::string& text) {
@@ -472,6 +539,9 @@ OptionValue parse_option_text(const ProtocolOption& option, const std::string& t
       for (const std::string& c : option.choices)
         if (c == text) return text;
       throw refuse("is not allowed");
+    case OptionType::text:
+      if (const std::optional<std::string> why = text_problem(option, text)) throw refuse(*why);
+      return text;
   }
   throw refuse("is not understood");
 }
@@ -517,6 +587,19 @@ std::optional<OptionProblem> finish_protocol_options(const std::string& protocol
     if (!has("horizontal_accuracy_m")) g.horizontal_accuracy_m = a.horizontal_m;
     if (!has("vertical_accuracy_m")) g.vertical_accuracy_m = a.vertical_m;
     if (!has("speed_accuracy_m_s")) g.speed_accuracy_m_s = a.speed_m_s;
+  }
+  if (protocol == "vectornav" || protocol == "sbg" || protocol == "xsens") {
+    // The devices check their identity and saved settings themselves
+    // (stream_protocols.cpp, as the device checks a driver's write); the
+    // refusal names the key it is about.
+    try {
+      (void)make_stream_encoder(protocol, options.stream);
+    } catch (const std::invalid_argument& e) {
+      const std::string what = e.what();
+      for (const ProtocolOption* row : protocol_options_of(protocol))
+        if (given.count(row->key) != 0 && what.find(row->key) != std::string::npos) return OptionProblem{row->key, what};
+      if (!given.empty()) return OptionProblem{*given.begin(), what};
+    }
   }
   if (protocol == "j1939") {
     const j1939::J1939Options& j = options.can.j1939;

@@ -28,7 +28,9 @@ struct ProtocolOptions {
   CanEncoderOptions can;
 };
 
-enum class OptionType : std::uint8_t { boolean, integer, number, choice };
+// text: a string the protocol itself checks (a device's identity or saved
+// settings, finish_protocol_options), at most text_max_chars printable ASCII.
+enum class OptionType : std::uint8_t { boolean, integer, number, choice, text };
 using OptionValue = std::variant<bool, std::int64_t, double, std::string>;
 
 struct ProtocolOption {
@@ -39,6 +41,9 @@ struct ProtocolOption {
   double number_min = 0.0, number_max = 0.0;      // number: [min, max] (or (min, max])
   bool number_min_open = false;
   std::vector<std::string> choices;  // choice
+  std::size_t text_max_chars = 0;    // text: its length limit...
+  std::string text_form;             // ...and its form, for messages ("register writes ID,VALUES;...")
+  std::string text_example;          // text: a valid value other than the default (docs, tests)
   std::string default_text;          // as the help and the docs show it
   std::string help;
   // Stores a value (of `type`, already within the range) into the options.
@@ -62,6 +67,9 @@ std::string allowed_text(const ProtocolOption& option);
 // Command-line text as the option's type (true/false/1/0/yes/no for
 // booleans); throws std::invalid_argument "VALUE: what is allowed".
 OptionValue parse_option_text(const ProtocolOption& option, const std::string& text);
+// A text option's own limits (length, printable ASCII); what the text means
+// the protocol checks in finish_protocol_options. Nothing when within them.
+std::optional<std::string> text_problem(const ProtocolOption& option, const std::string& text);
 
 // The defaults every device starts from (nominal_sample_rate_hz = rate_hz).
 ProtocolOptions default_protocol_options(double rate_hz);

@@ -8,6 +8,7 @@
 #include <cmath>
 #include <cstring>
 #include <limits>
+#include <stdexcept>
 
 #include "core/aiding/calendar.hpp"
 #include "core/attitude.hpp"
@@ -168,7 +169,62 @@ bool model_has(SbgModel model, int output) noexcept {
   return output >= 0 && output < kOutputCount && (!output_info(output).ins_only || traits_of(model).ins);
 }
 
+int output_named(std::string_view name) noexcept {
+  for (int i = 0; i < kOutputCount; ++i)
+    if (name == output_info(i).rest_name) return i;
+  return -1;
+}
+
+const char* rest_rate_of(int output, std::uint16_t mode) noexcept {
+  if (output == kOutFastImu && mode == kModeHighFreqLoop) return "1ms";
+  return rest_rate_name(mode);
+}
+
+int rest_mode_of(int output, std::string_view rate) noexcept {
+  const int mode = rest_rate_mode(rate);
+  if (output != kOutFastImu) return mode;
+  if (mode == kMode1Ms) return kModeHighFreqLoop;
+  return mode == kModeDisabled ? mode : -1;
+}
+
 StreamConfig power_up_config(const SbgDeviceConfig& config) {
+  StreamConfig c = factory_config(config);
+  // "NAME=RATE,NAME=RATE": the REST API's names and rates, as a driver posts
+  // them to /api/v1/settings before /api/v1/settings/save.
+  std::string_view rest = config.saved_outputs;
+  while (!rest.empty()) {
+    const std::size_t comma = rest.find(',');
+    const std::string_view pair = rest.substr(0, comma);
+    rest = comma == std::string_view::npos ? std::string_view() : rest.substr(comma + 1);
+    if (pair.empty()) continue;
+    const std::size_t equals = pair.find('=');
+    const std::string_view name = pair.substr(0, equals);
+    const std::string_view rate = equals == std::string_view::npos ? std::string_view() : pair.substr(equals + 1);
+    const int output = output_named(name);
+    const int mode = output < 0 ? -1 : rest_mode_of(output, rate);
+    if (equals == std::string_view::npos || output < 0 || !model_has(config.model, output) || mode < 0)
+      throw std::invalid_argument(
+          "saved output '" + std::string(pair) + "': " +
+          (equals == std::string_view::npos ? std::string("expected NAME=RATE")
+           : output < 0                     ? "no output message '" + std::string(name) + "'"
+           : !model_has(config.model, output) ? "this model has no " + std::string(name)
+                                              : "'" + std::string(rate) + "' is not a rate " + std::string(name) +
+                                                    " takes (5ms ... 1000ms, newData, pps, disabled; imuFast: 1ms)"));
+    c.modes[static_cast<std::size_t>(output)] = static_cast<std::uint16_t>(mode);
+  }
+  return c;
+}
+
+std::optional<std::string> saved_outputs_problem(const SbgDeviceConfig& config) {
+  try {
+    (void)power_up_config(config);
+  } catch (const std::invalid_argument& e) {
+    return std::string(e.what());
+  }
+  return std::nullopt;
+}
+
+StreamConfig factory_config(const SbgDeviceConfig& config) {
   StreamConfig c;
   if (!config.outputs_at_power_up) return c;
   // The factory configuration this emulator uses (docs/sbg-device.md): the

@@ -33,6 +33,7 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <optional>
 #include <memory>
 #include <span>
 #include <string>
@@ -141,6 +142,14 @@ int output_of(std::uint8_t cls, std::uint8_t msg) noexcept;
 const char* rest_rate_name(std::uint16_t mode) noexcept;
 // The mode of a REST rate name; -1 if none.
 int rest_rate_mode(std::string_view name) noexcept;
+// The output of a REST name ("imuShort"), -1 if none.
+int output_named(std::string_view name) noexcept;
+// The REST rate of an output's mode: FAST_IMU_DATA's 1 kHz loop (20001) is
+// "1ms" there; nullptr when the REST API has no name for the mode.
+const char* rest_rate_of(int output, std::uint16_t mode) noexcept;
+// The mode a REST rate sets for an output; -1 if the output cannot take it
+// (FAST_IMU_DATA: "1ms" or "disabled" only).
+int rest_mode_of(int output, std::string_view rate) noexcept;
 
 // What a model has.
 struct ModelTraits {
@@ -206,8 +215,15 @@ void append_log(int output, const Measurements& m, std::vector<std::uint8_t>& ou
 // The payload alone into buf (at least 128 bytes); returns its size.
 std::size_t write_log_payload(int output, const Measurements& m, std::uint8_t* buf) noexcept;
 
-// The power-up (factory) outputs of a model (docs/sbg-device.md).
+// The factory outputs of a model (docs/sbg-device.md), none when
+// !config.outputs_at_power_up: what restoring the factory settings gives.
+StreamConfig factory_config(const SbgDeviceConfig& config);
+// The factory outputs with config.saved_outputs over them: what the device
+// sends after power-up and after a reboot. Throws std::invalid_argument
+// naming the saved pair that is not valid for the model.
 StreamConfig power_up_config(const SbgDeviceConfig& config);
+// power_up_config's refusal, if any.
+std::optional<std::string> saved_outputs_problem(const SbgDeviceConfig& config);
 
 class Device;
 

@@ -190,27 +190,6 @@ int port_index(std::uint8_t port) {
   if (port == kPortC) return 1;
   return -1;
 }
-int output_named(std::string_view name) {
-  for (int i = 0; i < kOutputCount; ++i)
-    if (name == output_info(i).rest_name) return i;
-  return -1;
-}
-
-// The REST rate of an output's mode: FAST_IMU_DATA's 1 kHz loop (20001) is
-// "1ms" there; nullptr when the REST API has no name for the mode.
-const char* rest_rate_of(int output, std::uint16_t mode) {
-  if (output == kOutFastImu && mode == kModeHighFreqLoop) return "1ms";
-  return rest_rate_name(mode);
-}
-// The mode a REST rate sets for an output; -1 if the output cannot take it
-// (FAST_IMU_DATA: "1ms" or "disabled" only).
-int rest_mode_of(int output, std::string_view rate) {
-  const int mode = rest_rate_mode(rate);
-  if (output != kOutFastImu) return mode;
-  if (mode == kMode1Ms) return kModeHighFreqLoop;
-  return mode == kModeDisabled ? mode : -1;
-}
-
 }  // namespace
 
 std::string product_code_of(const SbgDeviceConfig& config) {
@@ -225,8 +204,9 @@ std::string product_code_of(const SbgDeviceConfig& config) {
 
 Device::Device(const SbgDeviceConfig& config)
     : config_(config), product_code_(product_code_of(config)), published_(EmitConfig{}), latest_(Measurements{}) {
-  defaults_.ports[0] = power_up_config(config);
+  defaults_.ports[0] = factory_config(config);
   current_ = saved_ = defaults_;
+  saved_.ports[0] = current_.ports[0] = power_up_config(config);
   publish();
 }
 

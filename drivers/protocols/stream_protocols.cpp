@@ -12,6 +12,7 @@
 #include "drivers/protocols/nmea.hpp"
 #include "drivers/protocols/ubx.hpp"
 #include "drivers/protocols/vectornav.hpp"
+#include "drivers/protocols/vectornav_device.hpp"
 #include "drivers/protocols/sbg.hpp"
 #include "drivers/protocols/xsens.hpp"
 
@@ -72,6 +73,8 @@ void check_options(const std::string& protocol, const StreamEncoderOptions& o) {
     for (const double g : v.mag_reference_ned_gauss)
       if (!std::isfinite(g) || std::fabs(g) > 10.0)
         throw std::invalid_argument("stream protocol 'vectornav': the magnetic reference must be finite, within 10 gauss");
+    if (const std::optional<std::string> problem = vectornav::saved_registers_problem(v))
+      throw std::invalid_argument("stream protocol 'vectornav': saved_registers: " + *problem);
   }
   if (protocol == "sbg") {
     const SbgDeviceConfig& c = o.sbg;
@@ -84,6 +87,8 @@ void check_options(const std::string& protocol, const StreamEncoderOptions& o) {
     for (const double g : c.mag_reference_ned_gauss)
       if (!std::isfinite(g) || std::fabs(g) > 10.0)
         throw std::invalid_argument("stream protocol 'sbg': the magnetic reference must be finite, within 10 gauss");
+    if (const std::optional<std::string> problem = sbg::saved_outputs_problem(c))
+      throw std::invalid_argument("stream protocol 'sbg': saved_outputs: " + *problem);
   }
   if (protocol == "xsens") {
     const XsensDeviceConfig& x = o.xsens;

@@ -70,6 +70,11 @@ struct VectorNavDeviceConfig {
   // VNYMR (14) for a VN-100, VNINS (22) for the INS models) at this rate (Hz).
   int power_up_ador = -1;             // -1: the model's default
   std::uint16_t power_up_adof_hz = 40;
+  // Register writes saved in the device ($VNWRG bodies "ID,VALUES"
+  // separated by ';', then $VNWNV): applied over the factory settings at
+  // power-up and by $VNRST; $VNRFS restores the factory's. Each is checked
+  // as the device checks the write.
+  std::string saved_registers;
   // The magnetic field the magnetometer measures, in NED (gauss): a fixed
   // reference (register 21's role), not a field model.
   double mag_reference_ned_gauss[3] = {0.21, 0.0, 0.43};
@@ -88,6 +93,10 @@ struct SbgDeviceConfig {
   // The logs sent after power-up (factory output configuration, docs/sbg-device.md);
   // false: none until the driver configures them.
   bool outputs_at_power_up = true;
+  // Output settings saved in the device, port A ("NAME=RATE,..." with the
+  // REST API's names and rates): over the factory logs at power-up and after
+  // a reboot; restoring the factory settings drops them.
+  std::string saved_outputs;
   // The magnetic field the magnetometer measures, in NED (gauss), as
   // VectorNavDeviceConfig's: a fixed reference, not a field model.
   double mag_reference_ned_gauss[3] = {0.21, 0.0, 0.43};

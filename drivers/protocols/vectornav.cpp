@@ -433,7 +433,10 @@ Encoder::Encoder(const StreamEncoderOptions& options)
     : options_(options), traits_(traits_of(options.vectornav.model)), power_up_(power_up_config(options.vectornav)) {
   const double r = options_.nominal_sample_rate_hz;
   scene_rate_hz_ = r >= 1.0 ? static_cast<std::uint64_t>(std::llround(r)) : traits_.imu_rate_hz;
-  if (options_.vectornav.answers_commands) device_ = std::make_unique<Device>(options_.vectornav, traits_);
+  // The device keeps its settings (saved registers included) whether or not
+  // its driver can talk to it; answers_commands = false only hides its
+  // command side (a line with its receive wire not connected).
+  device_ = std::make_unique<Device>(options_.vectornav, traits_);
 }
 
 Encoder::~Encoder() = default;
@@ -453,7 +456,9 @@ Encoder& Encoder::operator=(const Encoder& other) {
   return *this;
 }
 
-CommandResponder* Encoder::command_responder() { return device_.get(); }
+CommandResponder* Encoder::command_responder() {
+  return options_.vectornav.answers_commands ? device_.get() : nullptr;
+}
 
 void Encoder::restart(TimeNs now_ns, std::vector<std::uint8_t>& out) {
   (void)out;  // the device sends nothing at power-up before its first outputs

@@ -5,6 +5,7 @@
 
 #include <algorithm>
 #include <charconv>
+#include <stdexcept>
 #include <cstdio>
 #include <utility>
 
@@ -42,6 +43,24 @@ std::vector<std::string_view> split(std::string_view body) {
     if (comma == std::string_view::npos) return t;
     start = comma + 1;
   }
+}
+// [U] the error codes' names, for messages.
+const char* error_name(ErrorCode code) {
+  switch (code) {
+    case ErrorCode::hard_fault: return "hard fault";
+    case ErrorCode::serial_buffer_overflow: return "serial buffer overflow";
+    case ErrorCode::invalid_checksum: return "invalid checksum";
+    case ErrorCode::invalid_command: return "invalid command";
+    case ErrorCode::not_enough_parameters: return "not enough parameters";
+    case ErrorCode::too_many_parameters: return "too many parameters";
+    case ErrorCode::invalid_parameter: return "invalid parameter";
+    case ErrorCode::invalid_register: return "invalid register";
+    case ErrorCode::unauthorized_access: return "unauthorized access";
+    case ErrorCode::watchdog_reset: return "watchdog reset";
+    case ErrorCode::output_buffer_overflow: return "output buffer overflow";
+    case ErrorCode::insufficient_baud_rate: return "insufficient baud rate";
+  }
+  return "error";
 }
 std::string two_digits(int id) {
   char b[8];
@@ -96,7 +115,37 @@ Device::Device(const VectorNavDeviceConfig& config, const ModelTraits& traits)
     p.adof_hz = power_up.adof_hz;
   }
   current_ = saved_ = defaults_;
+  apply_saved_registers();
   publish();
+}
+
+void Device::apply_saved_registers() {
+  std::string_view rest = config_.saved_registers;
+  while (!rest.empty()) {
+    const std::size_t semicolon = rest.find(';');
+    const std::string_view item = rest.substr(0, semicolon);
+    rest = semicolon == std::string_view::npos ? std::string_view() : rest.substr(semicolon + 1);
+    if (item.empty()) continue;
+    std::vector<std::string_view> tokens{"VNWRG"};
+    for (const std::string_view t : split(item)) tokens.push_back(t);
+    const Outcome o = write_register(tokens);
+    if (o.error) {
+      char code[8];
+      std::snprintf(code, sizeof code, "%02X", static_cast<unsigned>(*o.error));
+      throw std::invalid_argument("saved register write '" + std::string(item) +
+                                  "': the device refuses it ($VNERR," + code + ", " + error_name(*o.error) + ")");
+    }
+  }
+  saved_ = current_;  // $VNWNV
+}
+
+std::optional<std::string> saved_registers_problem(const VectorNavDeviceConfig& config) {
+  try {
+    const Device device(config, traits_of(config.model));
+  } catch (const std::invalid_argument& e) {
+    return std::string(e.what());
+  }
+  return std::nullopt;
 }
 
 void Device::set_log(std::function<void(std::string_view)> log) { status_.set_log(std::move(log)); }

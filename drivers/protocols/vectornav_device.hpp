@@ -54,8 +54,14 @@ namespace imuemu::drivers::vectornav {
 std::string model_number_of(const VectorNavDeviceConfig& config);
 std::string firmware_version_of(const VectorNavDeviceConfig& config);
 
+// The first saved register write of config.saved_registers the device
+// refuses (the write and its VNERR code); nothing when it takes them all.
+std::optional<std::string> saved_registers_problem(const VectorNavDeviceConfig& config);
+
 class Device final : public CommandResponder {
  public:
+  // Throws std::invalid_argument naming the saved register write
+  // (config.saved_registers) the device refuses, and its VNERR code.
   Device(const VectorNavDeviceConfig& config, const ModelTraits& traits);
 
   // --- io thread ---
@@ -95,6 +101,8 @@ class Device final : public CommandResponder {
   Outcome command(const std::vector<std::string_view>& tokens);
   Outcome read_register(const std::vector<std::string_view>& tokens);
   Outcome write_register(const std::vector<std::string_view>& tokens);
+  // config_.saved_registers, each as $VNWRG then $VNWNV (constructor only).
+  void apply_saved_registers();
   // The register's contents as the reply lists them ("14" / "14,1"); empty
   // optional: not a register this device has.
   std::optional<std::string> register_text(int id, std::optional<int> port) const;

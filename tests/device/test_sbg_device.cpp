@@ -179,9 +179,11 @@ struct Sink final : drivers::ReplySink {
 
 // The device, its driver's side, and what it answered.
 struct Bench {
-  explicit Bench(drivers::SbgModel model = drivers::SbgModel::ellipse_n, double rate_hz = 200.0) {
+  explicit Bench(drivers::SbgModel model = drivers::SbgModel::ellipse_n, double rate_hz = 200.0,
+                 std::string saved_outputs = "") {
     o.nominal_sample_rate_hz = rate_hz;
     o.sbg.model = model;
+    o.sbg.saved_outputs = std::move(saved_outputs);
     enc = std::make_unique<drivers::sbg::Encoder>(o);
   }
   // Sends one frame and returns the frames answered.
@@ -596,6 +598,55 @@ TEST(SbgDevice, SettingsActionSavesRebootsAndRestores) {
   EXPECT_EQ(mode_of(6), 40);
   EXPECT_EQ(action(2), 0);  // factory settings
   EXPECT_EQ(mode_of(6), 8);
+}
+
+// Scene key saved_outputs: a unit whose outputs were set and saved (REST
+// names and rates) sends them from power-up and after a reboot; the factory
+// restore drops them. Invalid pairs are refused naming the pair.
+TEST(SbgDevice, SavedOutputsStreamFromPowerUpAndOnlyTheFactoryRestoreDropsThem) {
+  Bench b(drivers::SbgModel::ellipse_n, 200.0, "imuData=5ms,imuShort=disabled,ekfNav=disabled");
+  std::vector<Frame> f = spec_frames(b.stream(200));
+  EXPECT_EQ(count(f, 0, 3), 200) << "IMU_DATA every 5 ms main-loop tick";
+  EXPECT_EQ(count(f, 0, 44), 0) << "IMU_SHORT saved disabled";
+  EXPECT_EQ(count(f, 0, 8), 0) << "EKF_NAV saved disabled";
+  EXPECT_EQ(count(f, 0, 7), 25) << "EKF_QUAT at the factory's 25 Hz";
+  auto mode_of = [&](std::uint8_t msg) {
+    const std::vector<Frame> r = b.send(spec_frame(30, 0x10, Bytes{0, msg, 0}));
+    return r.size() == 1 && r[0].payload.size() == 5 ? u16(r[0].payload, 3) : 0xFFFF;
+  };
+  auto action = [&](std::uint8_t a) {
+    const std::vector<Frame> r = b.send(spec_frame(1, 0x10, Bytes{a}));
+    return r.size() == 1 && r[0].msg == 0 ? static_cast<int>(u16(r[0].payload, 2)) : -1;
+  };
+  EXPECT_EQ(mode_of(3), 1);
+  EXPECT_EQ(action(0), 0);  // reboot: the saved outputs again
+  EXPECT_EQ(mode_of(3), 1);
+  EXPECT_EQ(mode_of(44), 0);
+  EXPECT_EQ(action(2), 0);  // factory settings
+  EXPECT_EQ(mode_of(3), 0);
+  EXPECT_EQ(mode_of(44), 4);
+  f = spec_frames(b.stream(200, 200));
+  EXPECT_EQ(count(f, 0, 3), 0);
+  EXPECT_EQ(count(f, 0, 44), 50);
+
+  drivers::SbgDeviceConfig c;
+  for (const auto& [saved, says] : std::vector<std::pair<std::string, std::string>>{
+           {"imuShort=3ms", "'3ms' is not a rate imuShort takes"},
+           {"imuShort", "expected NAME=RATE"},
+           {"imuFast=5ms", "'5ms' is not a rate imuFast takes"},
+           {"nope=5ms", "no output message 'nope'"}}) {
+    c.saved_outputs = saved;
+    const std::optional<std::string> problem = drivers::sbg::saved_outputs_problem(c);
+    ASSERT_TRUE(problem.has_value()) << saved;
+    EXPECT_NE(problem->find("'" + saved + "'"), std::string::npos) << *problem;
+    EXPECT_NE(problem->find(says), std::string::npos) << *problem;
+  }
+  c.model = drivers::SbgModel::ellipse_a;
+  c.saved_outputs = "gps1Pos=newData";
+  ASSERT_TRUE(drivers::sbg::saved_outputs_problem(c).has_value());
+  EXPECT_NE(drivers::sbg::saved_outputs_problem(c)->find("this model has no gps1Pos"), std::string::npos);
+  c.model = drivers::SbgModel::ellipse_n;
+  EXPECT_FALSE(drivers::sbg::saved_outputs_problem(c).has_value());
 }
 
 TEST(SbgDevice, RestApiAnswersInfoOutputsAndErrors) {

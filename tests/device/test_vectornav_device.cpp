@@ -508,6 +508,49 @@ TEST(VectorNavDevice, ARestartBringsBackTheSavedSettings) {
   EXPECT_EQ(ask(d, framed("VNRRG,06")), framed("VNRRG,06,14"));
 }
 
+// Scene key saved_registers: a unit configured in flash ($VNWRG ... $VNWNV)
+// streams that at power-up, with or without a driver; $VNRST keeps it,
+// $VNRFS restores the factory's. A write the device refuses is refused as
+// a scene (the device's own error code).
+TEST(VectorNavDevice, SavedRegistersStreamFromPowerUpAndOnlyTheFactoryResetDropsThem) {
+  drivers::StreamEncoderOptions o = options(drivers::VectorNavModel::vn100, 800);
+  o.vectornav.saved_registers = "6,0;75,1,16,01,0001;0,BENCH UNIT";
+  {
+    drivers::vectornav::Encoder e(o);
+    Split s = run(e, 0, 800, 800);
+    EXPECT_EQ(s.packets.size(), 50u) << "binary output 1 at 800 / 16 Hz from power-up";
+    EXPECT_TRUE(s.lines.empty()) << "register 6 saved as 0: no VNYMR";
+    drivers::CommandResponder& d = *e.command_responder();
+    EXPECT_EQ(ask(d, framed("VNRRG,00")), framed("VNRRG,00,BENCH UNIT"));
+    ask(d, framed("VNWRG,75,1,8,01,0001"));
+    EXPECT_EQ(ask(d, framed("VNRST")), framed("VNRST"));
+    EXPECT_EQ(ask(d, framed("VNRRG,75")), framed("VNRRG,75,1,16,01,0001")) << "a reset comes back to the saved settings";
+    EXPECT_EQ(ask(d, framed("VNRFS")), framed("VNRFS"));
+    EXPECT_EQ(ask(d, framed("VNRRG,75")), framed("VNRRG,75,0,0,00"));
+    EXPECT_EQ(ask(d, framed("VNRRG,06")), framed("VNRRG,06,14"));
+    s = run(e, 800, 800, 800);
+    EXPECT_TRUE(s.packets.empty());
+    EXPECT_EQ(s.lines.size(), 40u) << "the factory's VNYMR at 40 Hz";
+  }
+  // Its receive wire not connected (answers_commands = false): the saved
+  // settings stream all the same, and nothing answers.
+  o.vectornav.answers_commands = false;
+  drivers::vectornav::Encoder quiet(o);
+  EXPECT_EQ(quiet.command_responder(), nullptr);
+  EXPECT_EQ(run(quiet, 0, 800, 800).packets.size(), 50u);
+  // Refused as the device refuses the write: divisor 0 on a port, a group
+  // the VN-100 lacks (GNSS, bit 3), a read-only register.
+  for (const auto& [saved, code] : std::vector<std::pair<std::string, std::string>>{
+           {"75,1,0,01,0001", "$VNERR,07"}, {"75,1,4,08,0001", "$VNERR,07"}, {"1,VN-100", "$VNERR,09"}}) {
+    o.vectornav.saved_registers = saved;
+    const std::optional<std::string> problem = drivers::vectornav::saved_registers_problem(o.vectornav);
+    ASSERT_TRUE(problem.has_value()) << saved;
+    EXPECT_NE(problem->find("'" + saved + "'"), std::string::npos) << *problem;
+    EXPECT_NE(problem->find(code), std::string::npos) << *problem;
+    EXPECT_THROW(drivers::make_stream_encoder("vectornav", o), std::invalid_argument);
+  }
+}
+
 TEST(VectorNavDevice, RegisterReadsOfAttitudeAndBomPollsCarryTheLatestSample) {
   drivers::vectornav::Encoder e(options(drivers::VectorNavModel::vn100, 800));
   drivers::CommandResponder& d = *e.command_responder();

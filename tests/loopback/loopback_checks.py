@@ -15,7 +15,7 @@ IMU_COLUMNS = ["gyro_x_rad_s", "gyro_y_rad_s", "gyro_z_rad_s", "accel_x_m_s2", "
 # native: doubles end to end; MAVLink 2: one float32 rounding; MIP sends accel
 # in g (float32 of a/g, then x g back): at most 1.5 float32 roundings.
 ALLOWED_RELATIVE = {"native": 0.0, "mavlink2": FLOAT32_REL * 1.0001, "mip": 3.0 * FLOAT32_REL,
-                    "xsens": FLOAT32_REL * 1.0001}
+                    "xsens": FLOAT32_REL * 1.0001, "vectornav": FLOAT32_REL * 1.0001, "sbg": FLOAT32_REL * 1.0001}
 
 
 def memory_dir():

@@ -40,6 +40,18 @@ def run(cmd, **kw):
     return subprocess.run(cmd, check=True, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True, **kw)
 
 
+# The device personalities stream their IMU as configured: a unit whose saved
+# settings send one IMU packet per sample and nothing the listener would
+# skip (VectorNav: binary output 1 at the 800 Hz IMU rate / 4 with the
+# common group's time since start-up, angular rate and acceleration, the
+# ASCII output off; SBG: IMU_DATA every 5 ms main-loop tick instead of the
+# factory IMU_SHORT). Rates here are for 200 Hz.
+DEVICE_OPTIONS = {
+    "vectornav": ["--vectornav-saved-registers", "6,0;75,1,4,01,0121"],
+    "sbg": ["--sbg-saved-outputs", "imuData=5ms,imuShort=disabled"],
+}
+
+
 def start_pair(imuemu, protocol, workdir, trajectory, rate, seconds, delta):
     link = os.path.join(workdir, f"tty_{protocol}")
     stats = os.path.join(workdir, f"emit_{protocol}.json")
@@ -53,7 +65,7 @@ def start_pair(imuemu, protocol, workdir, trajectory, rate, seconds, delta):
          # A wake-up later than a period (the VM was descheduled) is counted
          # and sent late rather than dropped: this test checks the chain
          # encoder -> pty -> decoder; `imuemu bench timing` measures lateness.
-         "--late-ticks", "send"],
+         "--late-ticks", "send"] + DEVICE_OPTIONS.get(protocol, []),
         stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True)
     wait_for_link(emit, link, f"{protocol}: emit")
     listen = subprocess.Popen(

@@ -25,6 +25,7 @@
 #include "daemon/scene/scene_config.hpp"
 #include "drivers/byte_stream_reader.hpp"
 #include "drivers/protocols/protocol_options.hpp"
+#include "drivers/transport.hpp"
 
 // This file's own namespace: tests compile as unity batches (tests/CMakeLists.txt).
 namespace imuemu {}
@@ -39,6 +40,42 @@ namespace {
 constexpr std::int64_t kRateHz = 100;
 
 bool is_can(const std::string& protocol) { return protocol == "dronecan" || protocol == "j1939"; }
+
+// Collects a device's replies.
+class CollectingReplySink final : public ReplySink {
+ public:
+  bool reply(std::span<const std::uint8_t> bytes) override {
+    bytes_.insert(bytes_.end(), bytes.begin(), bytes.end());
+    return true;
+  }
+  void change_baud_after_replies(std::uint32_t) override {}
+  std::vector<std::uint8_t>& bytes() { return bytes_; }
+
+ private:
+  std::vector<std::uint8_t> bytes_;
+};
+
+// What a driver asks a device that answers commands after streaming: its
+// identity and the settings the table can set (written here from the
+// protocol documents; CRCs and checksums the protocols' own, or a wildcard).
+std::vector<std::uint8_t> identity_probe(const std::string& protocol) {
+  std::string text;
+  if (protocol == "vectornav")  // [U] register reads: model, serial, serial port settings, binary output 1
+    text = "$VNRRG,01*XX\r\n$VNRRG,03*XX\r\n$VNRRG,05*XX\r\n$VNRRG,06*XX\r\n$VNRRG,75*XX\r\n";
+  std::vector<std::uint8_t> probe(text.begin(), text.end());
+  if (protocol == "sbg") probe = {0xFF, 0x5A, 0x04, 0x10, 0x00, 0x00, 0x00, 0x00, 0x33};  // CMD_INFO, CRC below
+  if (protocol == "sbg") {
+    std::uint16_t crc = 0;  // CRC-16/KERMIT over id, class, length (sbgECom's sbgCrc16Compute)
+    for (std::size_t i = 2; i < 6; ++i) {
+      crc = static_cast<std::uint16_t>(crc ^ probe[i]);
+      for (int b = 0; b < 8; ++b) crc = static_cast<std::uint16_t>((crc & 1u) != 0 ? (crc >> 1) ^ 0x8408 : crc >> 1);
+    }
+    probe[6] = static_cast<std::uint8_t>(crc & 0xFF), probe[7] = static_cast<std::uint8_t>(crc >> 8);
+  }
+  if (protocol == "xsens")  // Xbus GotoConfig, ReqDID, ReqProductCode (checksum: the bytes after FA sum to 0)
+    probe = {0xFA, 0xFF, 0x30, 0x00, 0xD1, 0xFA, 0xFF, 0x00, 0x00, 0x01, 0xFA, 0xFF, 0x1C, 0x00, 0xE5};
+  return probe;
+}
 
 // Everything an encoder puts on the wire for 3 s of a slowly turning, tilted
 // sensor at 100 Hz (periodic traffic included), as one byte string: stream
@@ -84,6 +121,13 @@ std::vector<std::uint8_t> wire_of(const std::string& protocol, const StreamEncod
       }
     }
   }
+  // A device's identity and settings reach the wire in its replies.
+  if (s && s->command_responder() != nullptr) {
+    CollectingReplySink replies;
+    const std::vector<std::uint8_t> probe = identity_probe(protocol);
+    s->command_responder()->on_input(probe, replies);
+    wire.insert(wire.end(), replies.bytes().begin(), replies.bytes().end());
+  }
   return wire;
 }
 
@@ -116,6 +160,8 @@ OtherValue other_value(const ProtocolOption& o) {
     }
     case OptionType::choice:
       return {o.choices.back(), "\"" + o.choices.back() + "\""};
+    case OptionType::text:
+      return {o.text_example, "\"" + o.text_example + "\""};
   }
   return {};
 }
@@ -130,6 +176,8 @@ std::map<std::string, OtherValue> companions_of(const ProtocolOption& o) {
     return {{"mag", {"true", "true"}}};
   if (o.protocol == "mavlink2" && o.key.rfind("gps_", 0) == 0) return {{"hil_gps_rate_hz", {"5", "5"}}};
   if (o.protocol == "mip" && o.key == "gps_minus_utc_s") return {{"time_base", {"utc", "\"utc\""}}};
+  // A VectorNav on its port 2 sends binary output 1 only if its async mode has port 2's bit.
+  if (o.protocol == "vectornav" && o.key == "port") return {{"saved_registers", {"75,1,4,01,0121", "\"75,1,4,01,0121\""}}};
   // The MIP device's GNSS and filter figures act only with those sets on.
   if (o.protocol == "mip" && (o.key.rfind("gnss_", 0) == 0 || o.key.rfind("filter_", 0) == 0) &&
       o.key != "gnss_rate_hz" && o.key != "filter_rate_hz")
@@ -176,7 +224,9 @@ TEST(ProtocolOptionTable, DocumentedDefaultsAreTheEncodersDefaults) {
     SCOPED_TRACE(o.protocol + "." + o.key + " = " + o.default_text);
     OptionValue v;
     try {
-      v = parse_option_text(o, o.default_text);
+      // A text row's default "" is the empty text (the model's preset, nothing saved).
+      v = o.type == OptionType::text && o.default_text == "\"\"" ? OptionValue(std::string())
+                                                                 : parse_option_text(o, o.default_text);
     } catch (const std::invalid_argument&) {
       continue;  // "not sent", "not available", "leap-second table ...": no value
     }
@@ -246,6 +296,15 @@ TEST(ProtocolOptionTable, SceneErrorsStillNameFileLineKeyAndWhatIsAllowed) {
       {"j1939", "send_angular_rate = false\nsend_acceleration = false\n", 13, "imu[0].j1939.send_angular_rate",
        "nothing would be sent"},
       {"j1939", "source_address = \"x\"\n", 13, "imu[0].j1939.source_address", "expected an integer in 0..253, got a string"},
+      // The devices' saved settings, checked as the device checks the write
+      // (VectorNav: a binary output on a port with rate divisor 0 is
+      // VNERR 07; SBG: IMU_SHORT has no 3 ms rate).
+      {"vectornav", "saved_registers = \"6,0;75,1,0,01,0121\"\n", 13, "imu[0].vectornav.saved_registers",
+       "saved register write '75,1,0,01,0121': the device refuses it ($VNERR,07, invalid parameter)"},
+      {"sbg", "saved_outputs = \"imuShort=3ms\"\n", 13, "imu[0].sbg.saved_outputs", "'3ms' is not a rate imuShort takes"},
+      {"sbg", "product_code = \"ELLIPSE N\"\n", 13, "imu[0].sbg.product_code", "without spaces"},
+      {"xsens", "product_code = \"MTi-630-8A1G6-TOO-LONG\"\n", 13, "imu[0].xsens.product_code",
+       "more than 20; expected a product code, at most 20 printable characters"},
   };
   for (const Case& c : cases) {
     SCOPED_TRACE(c.protocol + ": " + c.body);
