@@ -72,5 +72,26 @@ else
   echo "uart_emit_guest: setserial /dev/ttyS1 baud_base 921600 failed"
   status=1
 fi
+# Issue 29: the VectorNav, SBG and Xsens devices through the 8250 driver at
+# 921600 baud (the port's baud_base was raised for the px4 run: 921600 is
+# divisor 1), each as a unit whose saved settings stream one IMU packet per
+# sample (the pty loopback's, tests/loopback/pty_loopback.py): VectorNav
+# binary output 1 at 800 / 4 Hz with its ASCII output off, SBG IMU_DATA on
+# every 5 ms main-loop tick, Xsens MTData2 at its default 100 Hz. The host
+# checks every frame's CRC / checksum and counts them against emit's samples.
+device_run() {  # device_run PROTOCOL RATE_HZ [emit options...]
+  protocol=$1 device_rate_hz=$2
+  shift 2
+  marker "BEGIN:$protocol:$protocol"
+  "$imuemu" emit --sample static --duration-s $((SECONDS_EMITTED + 2)) --seconds $SECONDS_EMITTED \
+    --rate "$device_rate_hz" --protocol "$protocol" --device serial:/dev/ttyS1,baud=921600 \
+    --stats-json "$HIL_OUT/$protocol.emit.json" "$@"
+  rc=$?
+  echo "uart_emit_guest: $protocol: imuemu emit exit status $rc"
+  [ $rc -eq 0 ] || status=1
+}
+device_run vectornav "$rate_hz" --vectornav-saved-registers '6,0;75,1,4,01,0121'
+device_run sbg "$rate_hz" --sbg-saved-outputs 'imuData=5ms,imuShort=disabled'
+device_run xsens 100
 marker END
 exit $status

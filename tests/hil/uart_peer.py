@@ -16,7 +16,10 @@ host's own `imuemu listen`, fed live through a FIFO.
       specific force ~1 g. The bytes are also decoded here, from the protocol
       documents (every byte in a packet, MAVLink X.25 CRCs with CRC_EXTRA and
       consecutive packet sequence, MIP Fletcher checksums, IMU packets = emit's
-      samples, accelerometer ~1 g in m/s^2 resp. g).
+      samples, accelerometer ~1 g in m/s^2 resp. g). Then PX4's microstrain
+      start-up (Px4Run), then the VectorNav, SBG and Xsens devices at 921600
+      baud with the same checks (their frames' CRCs and checksums decoded
+      here from the manuals, one IMU packet per sample).
 
   uart_peer.py gpio --imuemu PATH [--results DIR]
       hil_gpio_sync_qemu: guest tests/hil/gpio_sync_guest.sh emits native
@@ -676,6 +679,123 @@ def check_mip_wire(run, emitted, c):
     log(f"{tag}: {samples} packets, first scaled accelerometer {accels[0] if accels else None} g")
 
 
+# VectorNav binary output (VN-100 / VN-200 / VN-300 user manuals, "Binary
+# output", written from them): 0xFA, the groups byte, one little-endian uint16
+# field mask per group present, the fields in bit order, CRC-16/CCITT (poly
+# 0x1021, init 0) over everything after 0xFA, sent big-endian, so the CRC of
+# the packet after 0xFA including it is 0. Sizes of the common group (group
+# 1) fields by bit: TimeStartup, TimeGps, TimeSyncIn 8; YawPitchRoll 12;
+# Quaternion 16; AngularRate 12; Position 24; Velocity 12; Accel 12; Imu 24;
+# MagPres 20; DeltaTheta 28; InsStatus 2; SyncInCnt 4; TimeGpsPps 8.
+VN_COMMON_FIELD_BYTES = [8, 8, 8, 12, 16, 12, 24, 12, 12, 24, 20, 28, 2, 4, 8]
+
+
+def crc_ccitt(data, crc=0):
+    for byte in data:
+        crc ^= byte << 8
+        for _ in range(8):
+            crc = ((crc << 1) ^ 0x1021 if crc & 0x8000 else crc << 1) & 0xFFFF
+    return crc
+
+
+def check_vectornav_wire(run, emitted, c):
+    tag = f"{run.name} (vectornav binary output, decoded here)"
+    wire, at, packets, accels = bytes(run.wire), 0, 0, []
+    while at < len(wire):
+        if not c.expect(wire[at] == 0xFA and at + 4 <= len(wire) and wire[at + 1] == 0x01,
+                        f"{tag}: no common-group-only binary packet at byte {at}"):
+            return
+        mask = int.from_bytes(wire[at + 2:at + 4], "little")
+        bits = [b for b in range(16) if mask >> b & 1]
+        if not c.expect(all(b < len(VN_COMMON_FIELD_BYTES) for b in bits), f"{tag}: field mask {mask:#06x} at byte {at}"):
+            return
+        end = at + 4 + sum(VN_COMMON_FIELD_BYTES[b] for b in bits) + 2
+        if not c.expect(end <= len(wire), f"{tag}: packet at byte {at} runs past the end"):
+            return
+        c.expect(crc_ccitt(wire[at + 1:end]) == 0, f"{tag}: CRC mismatch in the packet at byte {at}")
+        field = at + 4
+        for b in bits:
+            if b == 8:  # Accel: 3 float32, m/s^2
+                accels.append(struct.unpack_from("<3f", wire, field))
+            field += VN_COMMON_FIELD_BYTES[b]
+        packets += 1
+        at = end
+    c.expect(packets == emitted, f"{tag}: {packets} packets, emit reports {emitted}")
+    c.expect(len(accels) == packets, f"{tag}: {packets - len(accels)} packets without Accel")
+    bad = [a for a in accels if not 9.7 < math.sqrt(sum(v * v for v in a)) < 9.9]
+    c.expect(not bad, f"{tag}: static acceleration not ~1 g: {bad[:3]}")
+    log(f"{tag}: {packets} packets, first Accel {accels[0] if accels else None} m/s^2")
+
+
+# sbgECom frames (sbgECom reference manual, "Frame format"): 0xFF 0x5A, message
+# id, class, payload length (uint16 LE), payload, CRC-16 (reflected 0x8408,
+# init 0: CRC-16/KERMIT) over id..payload sent LE, 0x33. IMU_DATA is class 0
+# message 3: time stamp uint32, status uint16, accelerometers 3 float32 m/s^2.
+def crc_kermit(data):
+    crc = 0
+    for byte in data:
+        crc ^= byte
+        for _ in range(8):
+            crc = (crc >> 1) ^ 0x8408 if crc & 1 else crc >> 1
+    return crc
+
+
+def check_sbg_wire(run, emitted, c):
+    tag = f"{run.name} (sbg, decoded here)"
+    wire, at, frames, accels = bytes(run.wire), 0, 0, []
+    while at < len(wire):
+        if not c.expect(wire[at:at + 2] == b"\xff\x5a" and at + 9 <= len(wire), f"{tag}: no sbgECom frame at byte {at}"):
+            return
+        length = int.from_bytes(wire[at + 4:at + 6], "little")
+        end = at + 6 + length + 3
+        if not c.expect(end <= len(wire) and wire[end - 1] == 0x33, f"{tag}: frame at byte {at} has no ETX where its length ends"):
+            return
+        c.expect(crc_kermit(wire[at + 2:at + 6 + length]) == int.from_bytes(wire[end - 3:end - 1], "little"),
+                 f"{tag}: CRC mismatch in the frame at byte {at}")
+        if wire[at + 3] == 0 and wire[at + 2] == 3:
+            accels.append(struct.unpack_from("<3f", wire, at + 6 + 6))
+        frames += 1
+        at = end
+    c.expect(len(accels) == emitted, f"{tag}: {len(accels)} IMU_DATA logs, emit reports {emitted}")
+    bad = [a for a in accels if not 9.7 < math.sqrt(sum(v * v for v in a)) < 9.9]
+    c.expect(not bad, f"{tag}: static accelerometers not ~1 g: {bad[:3]}")
+    log(f"{tag}: {frames} frames, {len(accels)} IMU_DATA, first accelerometers {accels[0] if accels else None} m/s^2")
+
+
+# Xsens Xbus (MT Low-Level Communication Protocol, as xspublic's headers
+# give it): 0xFA, bus id 0xFF, message id, length (0xFF: a 2-byte big-endian
+# extended length follows), data, checksum: the bytes after 0xFA sum to 0
+# mod 256. MTData2 (0x36): items of data id (uint16 BE), size, data;
+# Acceleration 0x4020 (float32, big-endian, m/s^2).
+def check_xsens_wire(run, emitted, c):
+    tag = f"{run.name} (xsens, decoded here)"
+    wire, at, packets, accels = bytes(run.wire), 0, 0, []
+    while at < len(wire):
+        if not c.expect(wire[at:at + 2] == b"\xfa\xff" and at + 5 <= len(wire), f"{tag}: no Xbus message at byte {at}"):
+            return
+        length, head = wire[at + 3], 4
+        if length == 0xFF:
+            length, head = int.from_bytes(wire[at + 4:at + 6], "big"), 6
+        end = at + head + length + 1
+        if not c.expect(end <= len(wire), f"{tag}: message at byte {at} runs past the end"):
+            return
+        c.expect(sum(wire[at + 1:end]) & 0xFF == 0, f"{tag}: checksum mismatch in the message at byte {at}")
+        if c.expect(wire[at + 2] == 0x36, f"{tag}: message id {wire[at + 2]:#x} at byte {at}, expected MTData2"):
+            packets += 1
+            item = at + head
+            while item + 3 <= end - 1:
+                data_id, size = int.from_bytes(wire[item:item + 2], "big"), wire[item + 2]
+                if data_id == 0x4020 and size == 12:
+                    accels.append(struct.unpack_from(">3f", wire, item + 3))
+                item += 3 + size
+        at = end
+    c.expect(packets == emitted, f"{tag}: {packets} MTData2 messages, emit reports {emitted}")
+    c.expect(len(accels) == packets, f"{tag}: {packets - len(accels)} MTData2 without Acceleration (0x4020)")
+    bad = [a for a in accels if not 9.7 < math.sqrt(sum(v * v for v in a)) < 9.9]
+    c.expect(not bad, f"{tag}: static acceleration not ~1 g: {bad[:3]}")
+    log(f"{tag}: {packets} MTData2, first Acceleration {accels[0] if accels else None} m/s^2")
+
+
 def check_common(rc, splitter, expected_runs, c):
     if rc != 0:
         c.expect(False, f"the guest script exited with {rc} (its output is above)")
@@ -686,6 +806,9 @@ def check_common(rc, splitter, expected_runs, c):
 
 
 UART_RATE_HZ = 200  # passed to tests/hil/uart_emit_guest.sh
+# The runs at another rate (uart_emit_guest.sh device_run): the Xsens MTi's
+# default output configuration sends every item at 100 Hz.
+RUN_RATE_HZ = {"xsens": 100}
 
 
 def check_px4_run(run, results, c):
@@ -788,13 +911,14 @@ def test_uart(args, results):
     if rc == FIXTURE_FAILURE:
         return rc
     c = Checks()
-    check_common(rc, splitter, ["mavlink2", "mip", "px4"], c)
+    check_common(rc, splitter, ["mavlink2", "mip", "px4", "vectornav", "sbg", "xsens"], c)
     for run in splitter.runs:
         if isinstance(run, Px4Run):
             check_px4_run(run, results, c)
             continue
-        device = check_stream_run(run, results, UART_RATE_HZ, c)
-        {"mavlink2": check_mavlink_wire, "mip": check_mip_wire}[run.protocol](run, device.get("emitted"), c)
+        device = check_stream_run(run, results, RUN_RATE_HZ.get(run.protocol, UART_RATE_HZ), c)
+        {"mavlink2": check_mavlink_wire, "mip": check_mip_wire, "vectornav": check_vectornav_wire,
+         "sbg": check_sbg_wire, "xsens": check_xsens_wire}[run.protocol](run, device.get("emitted"), c)
     return 1 if c.failures else 0
 
 
