@@ -73,15 +73,25 @@ struct GpioSyncOutput::Output {
   std::string name;            // "GPIO chip 'gpiochip0' [label] line 5"
   std::atomic<int> active{0};  // 1 from the leading edge until the helper has ended the pulse
   std::atomic<TimeNs> trailing_due_ns{0};
+  // The device asked for the other polarity than the line was requested
+  // with: its levels are swapped (idle = the request's active level).
+  std::atomic<bool> inverted{false};
 };
 
-void GpioSyncOutput::raise(Output& output, std::atomic<std::uint64_t>& started) {
+namespace {
+// Drives the pulse level (on: the leading edge) whatever the polarity.
+bool drive(const GpioSyncOutput::LineWriter& write, const std::atomic<bool>& inverted, bool on) {
+  return write(on != inverted.load(std::memory_order_acquire));
+}
+}  // namespace
+
+void GpioSyncOutput::raise(Output& output, std::atomic<std::uint64_t>& started, TimeNs width_ns) {
   int idle = 0;
   if (!output.active.compare_exchange_strong(idle, 1, std::memory_order_acq_rel)) {
     skipped_.fetch_add(1, std::memory_order_relaxed);
     return;
   }
-  if (!output.write(true)) {
+  if (!drive(output.write, output.inverted, true)) {
     set_errors_.fetch_add(1, std::memory_order_relaxed);
     output.active.store(0, std::memory_order_release);
     return;
@@ -89,14 +99,14 @@ void GpioSyncOutput::raise(Output& output, std::atomic<std::uint64_t>& started) 
   // The width counts from when the leading edge is on the line, not from before
   // the write: a write that is slow (a preempted ioctl, a slow guest) would
   // otherwise eat into the pulse and make it shorter than configured.
-  const TimeNs due = monotonic_ns() + output.width_ns;
+  const TimeNs due = monotonic_ns() + width_ns;
   output.trailing_due_ns.store(due, std::memory_order_relaxed);
   itimerspec when{};
   when.it_value.tv_sec = static_cast<time_t>(due / kNsPerSecond);
   when.it_value.tv_nsec = static_cast<long>(due % kNsPerSecond);
   if (::timerfd_settime(output.timer_fd, TFD_TIMER_ABSTIME, &when, nullptr) != 0) {
     // No timer, no trailing edge from the helper: end the pulse here (short).
-    output.write(false);
+    drive(output.write, output.inverted, false);
     set_errors_.fetch_add(1, std::memory_order_relaxed);
     output.active.store(0, std::memory_order_release);
     return;
@@ -110,11 +120,33 @@ void GpioSyncOutput::pulse(std::uint64_t sample_counter, TimeNs t_ns) {
     if (sample_counter % options_.every_n_samples == 0) skipped_.fetch_add(1, std::memory_order_relaxed);
     return;
   }
-  if (sample_counter % options_.every_n_samples == 0) raise(*sync_, pulses_);
+  if (sample_counter % options_.every_n_samples == 0) raise(*sync_, pulses_, sync_->width_ns);
+  pps_step(t_ns);
+}
+
+void GpioSyncOutput::pulse(std::uint64_t sample_counter, TimeNs t_ns, const DeviceSyncPulse& device) {
+  (void)sample_counter;
+  if (down_.load(std::memory_order_acquire)) {
+    if (device.pulse) skipped_.fetch_add(1, std::memory_order_relaxed);
+    return;
+  }
+  Output& sync = *sync_;
+  const bool invert = device.active_low != options_.active_low;
+  if (invert != sync.inverted.load(std::memory_order_relaxed) && sync.active.load(std::memory_order_acquire) == 0) {
+    // Only this thread raises pulses and the line is idle: the helper thread
+    // will not touch it until the next leading edge.
+    sync.inverted.store(invert, std::memory_order_release);
+    if (!drive(sync.write, sync.inverted, false)) set_errors_.fetch_add(1, std::memory_order_relaxed);
+  }
+  if (device.pulse && device.width_ns > 0) raise(sync, pulses_, device.width_ns);
+  pps_step(t_ns);
+}
+
+void GpioSyncOutput::pps_step(TimeNs t_ns) {
   if (pps_) {
     const bool whole_second_reached = previous_t_ns_ ? floor_seconds(t_ns) > floor_seconds(*previous_t_ns_)
                                                      : t_ns % kNsPerSecond == 0;
-    if (whole_second_reached) raise(*pps_, pps_pulses_);
+    if (whole_second_reached) raise(*pps_, pps_pulses_, pps_->width_ns);
   }
   previous_t_ns_ = t_ns;
 }
@@ -143,7 +175,7 @@ void GpioSyncOutput::helper_failed(std::string_view what) noexcept {
   for (Output* output : {sync_.get(), pps_.get()}) {
     if (output == nullptr || !output->write) continue;
     try {
-      output->write(false);
+      drive(output->write, output->inverted, false);
     } catch (...) {
     }
   }
@@ -174,7 +206,7 @@ void GpioSyncOutput::end_pulses() {
       Output& output = *outputs[i];
       std::uint64_t expirations = 0;
       if (::read(output.timer_fd, &expirations, sizeof expirations) != sizeof expirations) continue;
-      if (!output.write(false)) set_errors_.fetch_add(1, std::memory_order_relaxed);
+      if (!drive(output.write, output.inverted, false)) set_errors_.fetch_add(1, std::memory_order_relaxed);
       const TimeNs delay = monotonic_ns() - output.trailing_due_ns.load(std::memory_order_relaxed);
       TimeNs worst = max_delay_ns_.load(std::memory_order_relaxed);
       while (delay > worst && !max_delay_ns_.compare_exchange_weak(worst, delay, std::memory_order_relaxed)) {

@@ -34,6 +34,7 @@
 #include <thread>
 
 #include "core/types.hpp"
+#include "drivers/sync_pulse.hpp"
 
 struct gpiod_chip;
 struct gpiod_line;
@@ -101,6 +102,11 @@ class GpioSyncOutput {
   // At the sample instant; never blocks (one line write and one timer arm
   // per pulse). Called from one thread (the emission thread).
   void pulse(std::uint64_t sample_counter, TimeNs t_ns);
+  // As pulse(), with the sync line driven by the device personality's own
+  // sync-out setting (drivers/sync_pulse.hpp): its pulse, width and
+  // polarity. A polarity change moves the line to the new idle level when no
+  // pulse is in progress (at the next sample otherwise).
+  void pulse(std::uint64_t sample_counter, TimeNs t_ns, const DeviceSyncPulse& device);
 
   GpioSyncCounters counters() const;
   std::string describe() const;
@@ -115,7 +121,8 @@ class GpioSyncOutput {
   std::unique_ptr<Output> request_line(gpiod_chip* chip, unsigned offset, bool active_low, TimeNs width_ns);
   void start_helper();
   void release_all() noexcept;
-  void raise(Output& output, std::atomic<std::uint64_t>& started);
+  void raise(Output& output, std::atomic<std::uint64_t>& started, TimeNs width_ns);
+  void pps_step(TimeNs t_ns);
   void run_helper() noexcept;
   void end_pulses();
   void helper_failed(std::string_view what) noexcept;

@@ -9,12 +9,14 @@
 #include <array>
 #include <cstddef>
 #include <cstdint>
+#include <optional>
 #include <functional>
 #include <span>
 #include <string>
 #include <string_view>
 #include <vector>
 
+#include "drivers/sync_pulse.hpp"
 #include "core/types.hpp"
 #include "drivers/transport.hpp"
 
@@ -140,6 +142,12 @@ class StreamEncoder {
   // The encoder reports a navigation fix (a GNSS receiver, issue 28): the
   // producer fills ImuFrameInput's navigation fields only then.
   virtual bool needs_navigation() const { return false; }
+  // The GPIO sync line as the device's own sync-out setting drives it for
+  // the sample just encoded (drivers/sync_pulse.hpp); nothing when the
+  // device has no such setting or it is off: the scene's [imu.sync] pulse
+  // then applies. Called on the emission thread after encode(); never
+  // allocates or blocks.
+  virtual std::optional<DeviceSyncPulse> device_sync_pulse() const noexcept { return std::nullopt; }
 
   // ---- link-fault hooks (issue 18; applied by drivers/link_fault.cpp,
   // effects per protocol in docs/faults.md). Defaults: a protocol without

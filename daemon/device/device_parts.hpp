@@ -33,8 +33,10 @@ class SyncPulse {
  public:
   explicit SyncPulse(std::unique_ptr<drivers::GpioSyncOutput> gpio) : gpio_(std::move(gpio)) {}
   // The emission thread: the pulse of sample k at t_ns (never blocks).
-  void pulse(std::uint64_t sample_counter, TimeNs t_ns) {
-    if (gpio_) gpio_->pulse(sample_counter, t_ns);
+  void pulse(std::uint64_t sample_counter, TimeNs t_ns, const std::optional<drivers::DeviceSyncPulse>& device) {
+    if (!gpio_) return;
+    if (device) gpio_->pulse(sample_counter, t_ns, *device);
+    else gpio_->pulse(sample_counter, t_ns);
   }
   // The lines released (inactive); the counters as they were stay readable.
   void release() {
@@ -77,7 +79,13 @@ class EncoderDevice : public Device {
     } catch (const std::exception&) {  // the encoder refusing a sample: counted, the schedule goes on
       ++out.refused;
     }
-    if (!link.silence) sync_.pulse(frame.sample_counter, pulse_t_ns);
+    if (!link.silence) {
+      // A device with its own sync-out setting (a StreamEncoder's
+      // device_sync_pulse) drives the line; a CAN encoder has none.
+      std::optional<drivers::DeviceSyncPulse> device_pulse;
+      if constexpr (requires { encoder_->device_sync_pulse(); }) device_pulse = encoder_->device_sync_pulse();
+      sync_.pulse(frame.sample_counter, pulse_t_ns, device_pulse);
+    }
     return out;
   }
 

@@ -452,6 +452,8 @@ Encoder& Encoder::operator=(const Encoder& other) {
     have_power_up_ = false;
     deltas_ = {};
     restarts_ = 0;
+    sync_pulse_.reset();
+    last_gps_second_ = -1;
   }
   return *this;
 }
@@ -465,6 +467,7 @@ void Encoder::restart(TimeNs now_ns, std::vector<std::uint8_t>& out) {
   have_power_up_ = true;
   power_up_t_ns_ = now_ns;
   deltas_ = {};
+  last_gps_second_ = -1;
   if (!device_) return;
   ++restarts_;
   device_->note_restart();
@@ -612,6 +615,8 @@ void Encoder::encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out
   }
   Measurements m = measurements_of(sample);
   if (device_) device_->publish_measurements(m);
+  // SyncOut follows the IMU's events, not the async outputs: $VNASY,0 leaves it on.
+  sync_pulse_ = sync_out_for(*c, sample.sample_counter, m);
   if (!c->async_enabled) return;  // $VNASY,0: nothing until $VNASY,1
   const std::uint8_t port_bit = static_cast<std::uint8_t>(1u << (options_.vectornav.port - 1));
   auto take = [&](Deltas& d) {
@@ -633,6 +638,39 @@ void Encoder::encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out
     const std::size_t n = format_ascii_output(c->ador, m, c->crc16_mode, line, sizeof line);
     out.insert(out.end(), line, line + n);
   }
+}
+
+// [U] register 32: SyncOutMode ItStart / ImuReady pulse on the IMU's
+// samples (its IMU rate), Ins when an attitude solution is ready (400 Hz on
+// each model: the VN-100's / VN-200's filter runs at half their 800 Hz IMU
+// rate), GpsPps on each whole second of GPS time (an INS with a time fix);
+// every (SyncOutSkipFactor + 1)-th event. The events are counted on the
+// scene's sample grid as the rate divisors are (due()): a scene slower than
+// the event rate pulses on every sample the skip factor allows.
+std::optional<DeviceSyncPulse> Encoder::sync_out_for(const StreamConfig& c, std::uint64_t k,
+                                                     const Measurements& m) noexcept {
+  if (c.sync_out_mode == kSyncOutNone) {
+    last_gps_second_ = -1;
+    return std::nullopt;
+  }
+  DeviceSyncPulse p;
+  p.width_ns = static_cast<TimeNs>(c.sync_out_width_ns);
+  p.active_low = !c.sync_out_positive;
+  const std::uint64_t every = std::uint64_t{c.sync_out_skip} + 1;
+  switch (c.sync_out_mode) {
+    case kSyncOutItStart:
+    case kSyncOutImuReady: p.pulse = due(k, traits_.imu_rate_hz, every); break;
+    case kSyncOutIns: p.pulse = due(k, 400, every); break;
+    case kSyncOutGpsPps: {
+      const std::int64_t second = m.gps_time_valid ? static_cast<std::int64_t>(m.time_gps_ns / 1'000'000'000ULL) : -1;
+      p.pulse = second >= 0 && last_gps_second_ >= 0 && second != last_gps_second_ &&
+                second % static_cast<std::int64_t>(every) == 0;
+      last_gps_second_ = second;
+      break;
+    }
+    default: break;
+  }
+  return p;
 }
 
 std::size_t Encoder::max_bytes_per_sample() const {

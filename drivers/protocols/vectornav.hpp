@@ -36,6 +36,7 @@
 #include <cstddef>
 #include <cstdint>
 #include <memory>
+#include <optional>
 #include <span>
 #include <string>
 #include <string_view>
@@ -116,7 +117,16 @@ struct StreamConfig {
   std::uint16_t adof_hz = 40;   // this port's register 7
   bool crc16_mode = false;      // register 30 serial checksum: CRC-16 ("*XXXX") instead of 8-bit
   std::array<BinaryOutput, 3> binary{};
+  // [U] register 32, Synchronization Control: the SyncOut pin (the scene's
+  // GPIO sync line) pulses on every (skip + 1)-th event of its mode.
+  std::uint8_t sync_out_mode = 0;          // SyncOutMode: 0 none, 1 ItStart, 2 ImuReady, 3 Ins, 6 GpsPps
+  bool sync_out_positive = false;          // SyncOutPolarity: 1 positive pulse, 0 negative
+  std::uint16_t sync_out_skip = 0;         // SyncOutSkipFactor
+  std::uint32_t sync_out_width_ns = 100'000'000;  // SyncOutPulseWidth
 };
+// SyncOutMode values ([U] register 32).
+inline constexpr std::uint8_t kSyncOutNone = 0, kSyncOutItStart = 1, kSyncOutImuReady = 2, kSyncOutIns = 3,
+                              kSyncOutGpsPps = 6;
 struct EmitConfig : StreamConfig {
   // As mip::EmitConfig: what the device streams after a power cycle (its
   // saved settings), used alone after a restart fault until the io thread
@@ -201,6 +211,9 @@ class Encoder final : public StreamEncoder {
   bool compensated_increments() const override { return true; }
   // Attitude, position and velocity go into every model's outputs.
   bool needs_navigation() const override { return true; }
+  // The SyncOut pin as register 32 sets it, for the sample encode() took
+  // last; nothing while SyncOutMode is none (the scene's [imu.sync] applies).
+  std::optional<DeviceSyncPulse> device_sync_pulse() const noexcept override { return sync_pulse_; }
   StreamFrameLayout frame_layout(std::span<const std::uint8_t> frame) const override;
   void restart(TimeNs now_ns, std::vector<std::uint8_t>& out) override;
 
@@ -229,6 +242,10 @@ class Encoder final : public StreamEncoder {
   };
   std::array<Deltas, 4> deltas_{};
   std::uint64_t restarts_ = 0;
+  std::optional<DeviceSyncPulse> sync_pulse_;
+  std::int64_t last_gps_second_ = -1;  // GpsPps: the GPS second of the last sample
+  // The SyncOut decision for sample k (register 32 in `c`).
+  std::optional<DeviceSyncPulse> sync_out_for(const StreamConfig& c, std::uint64_t k, const Measurements& m) noexcept;
 };
 
 // Binary packets and ASCII sentences from a byte stream (`imuemu listen`):

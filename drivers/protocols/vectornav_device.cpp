@@ -175,6 +175,10 @@ void Device::publish() {
     c.adof_hz = p.adof_hz;
     c.crc16_mode = s.protocol_control[4] == 2;
     c.binary = s.binary;
+    c.sync_out_mode = static_cast<std::uint8_t>(s.sync_control[4]);
+    c.sync_out_positive = s.sync_control[5] == 1;
+    c.sync_out_skip = static_cast<std::uint16_t>(s.sync_control[6]);
+    c.sync_out_width_ns = s.sync_control[7];
   };
   fill(e, current_, async_enabled_);
   fill(e.startup, saved_, true);
@@ -480,6 +484,13 @@ Device::Outcome Device::write_register(const std::vector<std::string_view>& t) {
         if (id == 32) next.sync_control[i] = *v;
         else if (*v > 255) return error(ErrorCode::invalid_parameter);
         else next.vpe_basic[i] = *v;
+      }
+      if (id == 32) {
+        // [U] SyncOutMode 0 none, 1 ItStart, 2 ImuReady, 3 Ins, 6 GpsPps (a
+        // GNSS model's); polarity 0 / 1; the skip factor a uint16.
+        const auto& sc = next.sync_control;
+        const bool mode_ok = sc[4] <= kSyncOutIns || (sc[4] == kSyncOutGpsPps && traits_.ins);
+        if (!mode_ok || sc[5] > 1 || sc[6] > 0xFFFF) return error(ErrorCode::invalid_parameter);
       }
       break;
     }

@@ -551,6 +551,59 @@ TEST(VectorNavDevice, SavedRegistersStreamFromPowerUpAndOnlyTheFactoryResetDrops
   }
 }
 
+// [U] register 32, Synchronization Control: SyncInMode, SyncInEdge,
+// SyncInSkipFactor, reserved, SyncOutMode (0 none, 1 ItStart, 2 ImuReady,
+// 3 Ins, 6 GpsPps), SyncOutPolarity (0 negative, 1 positive),
+// SyncOutSkipFactor, SyncOutPulseWidth (ns), reserved. The SyncOut pin is
+// the scene's GPIO sync line: the device decides each sample's pulse.
+TEST(VectorNavDevice, Register32SyncOutDecidesTheSyncLinesPulses) {
+  drivers::vectornav::Encoder e(options(drivers::VectorNavModel::vn100, 800));
+  drivers::CommandResponder& d = *e.command_responder();
+  auto pulses_over = [&](std::uint64_t first, std::uint64_t n) {
+    std::vector<std::uint64_t> at;
+    for (std::uint64_t k = first; k < first + n; ++k) {
+      Bytes out;
+      e.encode(sample_at(k, 800), out);
+      const std::optional<drivers::DeviceSyncPulse> p = e.device_sync_pulse();
+      if (!p) return std::vector<std::uint64_t>{~std::uint64_t{0}};  // the scene's pulse applies
+      if (p->pulse) at.push_back(k);
+    }
+    return at;
+  };
+  // Factory: SyncOutMode none, the scene's [imu.sync] applies.
+  EXPECT_EQ(ask(d, framed("VNRRG,32")), framed("VNRRG,32,3,0,0,0,0,0,0,100000000,0"));
+  EXPECT_EQ(pulses_over(0, 8), std::vector<std::uint64_t>{~std::uint64_t{0}});
+  // ImuReady, every 4th IMU sample (skip 3), positive, 500 us.
+  EXPECT_EQ(ask(d, framed("VNWRG,32,3,0,0,0,2,1,3,500000,0")), framed("VNWRG,32,3,0,0,0,2,1,3,500000,0"));
+  EXPECT_EQ(pulses_over(8, 16), std::vector<std::uint64_t>({8, 12, 16, 20}));
+  const std::optional<drivers::DeviceSyncPulse> p = e.device_sync_pulse();
+  ASSERT_TRUE(p.has_value());
+  EXPECT_EQ(p->width_ns, 500'000);
+  EXPECT_FALSE(p->active_low);
+  // Ins: the 400 Hz attitude solution, every one (skip 0), negative.
+  ask(d, framed("VNWRG,32,3,0,0,0,3,0,0,1000000,0"));
+  EXPECT_EQ(pulses_over(24, 8), std::vector<std::uint64_t>({24, 26, 28, 30}));
+  EXPECT_TRUE(e.device_sync_pulse()->active_low);
+  // $VNASY,0 pauses the async outputs, not the IMU's sync events.
+  ask(d, framed("VNASY,0"));
+  EXPECT_EQ(pulses_over(32, 4), std::vector<std::uint64_t>({32, 34}));
+  // Refused, nothing changed: GpsPps on a VN-100 (no GNSS), mode 4, polarity 2.
+  for (const char* bad : {"VNWRG,32,3,0,0,0,6,1,0,1000,0", "VNWRG,32,3,0,0,0,4,1,0,1000,0", "VNWRG,32,3,0,0,0,2,2,0,1000,0"})
+    EXPECT_EQ(ask(d, framed(bad)), framed("VNERR,07")) << bad;
+  EXPECT_EQ(ask(d, framed("VNRRG,32")), framed("VNRRG,32,3,0,0,0,3,0,0,1000000,0"));
+  // Saved as a scene key: pulses from power-up.
+  drivers::StreamEncoderOptions o = options(drivers::VectorNavModel::vn100, 800);
+  o.vectornav.saved_registers = "32,3,0,0,0,1,1,7,200000,0";  // ItStart, every 8th
+  drivers::vectornav::Encoder saved(o);
+  std::vector<std::uint64_t> at;
+  for (std::uint64_t k = 0; k < 24; ++k) {
+    Bytes out;
+    saved.encode(sample_at(k, 800), out);
+    if (saved.device_sync_pulse() && saved.device_sync_pulse()->pulse) at.push_back(k);
+  }
+  EXPECT_EQ(at, std::vector<std::uint64_t>({0, 8, 16}));
+}
+
 TEST(VectorNavDevice, RegisterReadsOfAttitudeAndBomPollsCarryTheLatestSample) {
   drivers::vectornav::Encoder e(options(drivers::VectorNavModel::vn100, 800));
   drivers::CommandResponder& d = *e.command_responder();

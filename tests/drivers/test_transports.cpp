@@ -1173,6 +1173,54 @@ TEST(GpioSync, APulseDueWhileTheLastIsStillOnIsSkippedNotMerged) {
   for (const auto& p : pulses) EXPECT_GE(p.fall_ns - p.rise_ns, 200'000'000);
 }
 
+// Issue 29: a device personality's own sync-out setting (VectorNav register
+// 32) drives the sync line: its pulses, widths and polarity, not the
+// scene's every_n_samples. A polarity change moves the idle level at once
+// when the line is idle, and waits for a pulse in progress to end.
+TEST(GpioSync, TheDevicesSyncOutSettingDrivesPulseWidthAndPolarity) {
+  using imuemu::drivers::DeviceSyncPulse;
+  RecordingLine line;
+  imuemu::drivers::GpioSyncOptions options;
+  options.every_n_samples = 1;  // the scene's: a pulse per sample, 100 us, active high
+  options.pulse_width_ns = 100'000;
+  {
+    imuemu::drivers::GpioSyncOutput gpio(options, line.writer(), nullptr);
+    auto idle = [&] { return wait_until([&] { return gpio.counters().pulses_in_progress == 0; }, 2s); };
+    auto level_writes = [&] {
+      std::lock_guard lock(line.mutex);
+      std::vector<bool> levels;
+      for (const auto& w : line.writes) levels.push_back(w.second);
+      return levels;
+    };
+    gpio.pulse(0, 0, DeviceSyncPulse{false, 300'000, false});  // the device says no pulse here
+    EXPECT_EQ(level_writes(), std::vector<bool>({false})) << "only the constructor's idle level";
+    gpio.pulse(1, 1'000'000, DeviceSyncPulse{true, 300'000, false});
+    ASSERT_TRUE(idle());
+    gpio.pulse(2, 2'000'000, DeviceSyncPulse{false, 300'000, true});  // negative polarity: idle high at once
+    EXPECT_EQ(level_writes(), std::vector<bool>({false, true, false, true}));
+    gpio.pulse(3, 3'000'000, DeviceSyncPulse{true, 300'000, true});  // a low pulse
+    ASSERT_TRUE(idle());
+    EXPECT_EQ(level_writes(), std::vector<bool>({false, true, false, true, false, true}));
+    {
+      std::lock_guard lock(line.mutex);
+      const auto& w = line.writes;
+      EXPECT_GE(w[2].first - w[1].first, 300'000) << "the device's width, not the scene's 100 us";
+      EXPECT_GE(w[5].first - w[4].first, 300'000);
+    }
+    // A long pulse in progress: the polarity change waits for its end.
+    gpio.pulse(4, 4'000'000, DeviceSyncPulse{true, 50'000'000, true});
+    gpio.pulse(5, 5'000'000, DeviceSyncPulse{false, 300'000, false});
+    EXPECT_EQ(level_writes().size(), 7u) << "no write while the pulse is on";
+    ASSERT_TRUE(idle());
+    gpio.pulse(6, 6'000'000, DeviceSyncPulse{false, 300'000, false});
+    EXPECT_EQ(level_writes(), std::vector<bool>({false, true, false, true, false, true, false, true, false}));
+    const auto c = gpio.counters();
+    EXPECT_EQ(c.pulses, 3u);
+    EXPECT_EQ(c.skipped_pulses, 0u);
+    EXPECT_EQ(c.set_errors, 0u);
+  }
+}
+
 // Issue 13: no exception leaves the trailing-edge thread. A line writer that
 // throws there (the line gone, a bad writer) ended the process through
 // std::terminate; now the thread records it, counts it, logs it and marks the
