@@ -13,6 +13,7 @@
 // members, is only needed by the constructors and destructor defined there).
 #pragma once
 
+#include <algorithm>
 #include <array>
 #include <cmath>
 #include <cstddef>
@@ -54,6 +55,14 @@ inline bool due_on_scene_grid(std::uint64_t k, std::uint64_t rate_per_s, std::ui
   const std::uint64_t now = k * rate_per_s / scene_rate_hz / divisor;
   const std::uint64_t before = (k - 1) * rate_per_s / scene_rate_hz / divisor;
   return now != before;
+}
+
+// How many times per second an output on that schedule goes out in a scene
+// at sample_rate_hz (due_on_scene_grid): its own rate, or every sample of a
+// slower scene.
+inline double sent_per_second(std::uint64_t rate_per_s, std::uint64_t divisor, double sample_rate_hz) noexcept {
+  if (divisor == 0 || rate_per_s == 0) return 0.0;
+  return std::min(static_cast<double>(rate_per_s) / static_cast<double>(divisor), sample_rate_hz);
 }
 
 // Device: the command side (emit_config(), note_restart(),

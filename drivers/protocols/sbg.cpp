@@ -364,25 +364,29 @@ Encoder& Encoder::operator=(const Encoder& other) {
 
 Encoder& Encoder::operator=(Encoder&& other) = default;
 
-// Sample k is due for an output in `mode` when it crosses a multiple of the
-// mode's period on its clock: the 200 Hz main loop over N, the 1 kHz loop
-// over 1 / 2 / 4 (1001, 1002, 1004, 20001). New data: every sample for the
-// IMU logs, each 5 Hz GNSS epoch for GPS1_*, the main loop otherwise. A
-// scene slower than the output sends every sample.
-bool Encoder::due(std::uint64_t k, int output, std::uint16_t mode) const noexcept {
-  std::uint64_t rate = kMainLoopHz, divisor = mode;
+// The clock of an output in `mode`: the 200 Hz main loop over N, the 1 kHz
+// loop over 1 / 2 / 4 (1001, 1002, 1004, 20001). New data: every sample for
+// the IMU logs, each 5 Hz GNSS epoch for GPS1_*, the main loop otherwise.
+// Disabled and PPS (no PPS line is emulated): never.
+Encoder::Schedule Encoder::schedule_of(int output, std::uint16_t mode) noexcept {
   switch (mode) {
-    case kModeDisabled: case kModePps: return false;  // no PPS line is emulated
-    case kMode1Ms: case kMode2Ms: case kMode4Ms: rate = 1000, divisor = mode - 1000u; break;
-    case kModeHighFreqLoop: rate = 1000, divisor = 1; break;
+    case kModeDisabled: case kModePps: return {0, 0, false};
+    case kMode1Ms: case kMode2Ms: case kMode4Ms: return {1000, mode - 1000u, false};
+    case kModeHighFreqLoop: return {1000, 1, false};
     case kModeNewData:
-      if (output == kOutGps1Vel || output == kOutGps1Pos) rate = 5, divisor = 1;
-      else if (output == kOutImuData || output == kOutImuShort || output == kOutFastImu || output == kOutMag) return true;
-      else divisor = 1;
-      break;
-    default: break;
+      if (output == kOutGps1Vel || output == kOutGps1Pos) return {5, 1, false};
+      if (output == kOutImuData || output == kOutImuShort || output == kOutFastImu || output == kOutMag)
+        return {0, 0, true};
+      return {kMainLoopHz, 1, false};
+    default: return {kMainLoopHz, mode, false};
   }
-  return due_on_grid(k, rate, divisor);
+}
+
+// Sample k is due when it crosses a multiple of the mode's period on its
+// clock; a scene slower than the output sends every sample.
+bool Encoder::due(std::uint64_t k, int output, std::uint16_t mode) const noexcept {
+  const Schedule s = schedule_of(output, mode);
+  return s.every_sample || due_on_grid(k, s.rate_per_s, s.divisor);
 }
 
 Measurements Encoder::measurements_of(const ImuFrameInput& s) const {
@@ -504,6 +508,19 @@ std::size_t Encoder::max_bytes_per_sample() const {
   std::size_t n = 0;
   for (const OutputInfo& o : kOutputs) n += o.payload_bytes + kFrameOverheadBytes;
   return n;
+}
+
+double Encoder::configured_bytes_per_second(double sample_rate_hz) const {
+  // Each log this model has, in its mode now: its frame times how often it goes.
+  const StreamConfig& c = published_or_startup_config();
+  double bytes = 0.0;
+  for (int i = 0; i < kOutputCount; ++i) {
+    if (!model_has(options_.sbg.model, i)) continue;
+    const Schedule s = schedule_of(i, c.modes[static_cast<std::size_t>(i)]);
+    const double per_second = s.every_sample ? sample_rate_hz : sent_per_second(s.rate_per_s, s.divisor, sample_rate_hz);
+    bytes += per_second * static_cast<double>(output_info(i).payload_bytes + kFrameOverheadBytes);
+  }
+  return bytes;
 }
 
 StreamFrameLayout Encoder::frame_layout(std::span<const std::uint8_t> frame) const {

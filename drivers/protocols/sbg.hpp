@@ -222,7 +222,10 @@ class Encoder final : public DeviceEncoderBase<Device, StreamConfig, kOutputCoun
   ~Encoder() override;
   std::string name() const override { return "sbg"; }
   void encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out) override;
+  // Every log at once on every sample (the emission buffers' size).
   std::size_t max_bytes_per_sample() const override;
+  // The logs in their modes now (docs/sbg-device.md "Link budget").
+  double configured_bytes_per_second(double sample_rate_hz) const override;
   StreamFrameLayout frame_layout(std::span<const std::uint8_t> frame) const override;
 
   Measurements measurements_of(const ImuFrameInput& sample) const;
@@ -231,6 +234,14 @@ class Encoder final : public DeviceEncoderBase<Device, StreamConfig, kOutputCoun
   Device* device() noexcept { return device_.get(); }
 
  private:
+  // An output goes out at rate_per_s / divisor Hz on the scene's grid, or
+  // on every sample.
+  struct Schedule {
+    std::uint64_t rate_per_s = 0;
+    std::uint64_t divisor = 0;
+    bool every_sample = false;
+  };
+  static Schedule schedule_of(int output, std::uint16_t mode) noexcept;
   bool due(std::uint64_t k, int output, std::uint16_t mode) const noexcept;
   ModelTraits traits_;
 };

@@ -590,6 +590,26 @@ std::size_t Encoder::max_bytes_per_sample() const {
   return 3 * packet_bytes(all) + kAsciiMaxBytes;
 }
 
+double Encoder::configured_bytes_per_second(double sample_rate_hz) const {
+  // The outputs on at this port now: each binary packet at the IMU rate
+  // over its divisor, the ASCII sentence (fixed-width fields [U]: its
+  // length does not depend on the values) at register 7's rate.
+  const StreamConfig& c = published_or_startup_config();
+  if (!c.async_enabled) return 0.0;
+  const std::uint8_t port_bit = static_cast<std::uint8_t>(1u << (options_.vectornav.port - 1));
+  double bytes = 0.0;
+  for (const BinaryOutput& o : c.binary) {
+    if ((o.async_mode & port_bit) == 0 || o.groups == 0) continue;
+    bytes += sent_per_second(traits_.imu_rate_hz, o.rate_divisor, sample_rate_hz) * static_cast<double>(packet_bytes(o));
+  }
+  if (c.ador != kAdorOff) {
+    char line[kAsciiMaxBytes];
+    const std::size_t n = format_ascii_output(c.ador, Measurements{}, c.crc16_mode, line, sizeof line);
+    bytes += sent_per_second(c.adof_hz, 1, sample_rate_hz) * static_cast<double>(n);
+  }
+  return bytes;
+}
+
 StreamFrameLayout Encoder::frame_layout(std::span<const std::uint8_t> frame) const {
   StreamFrameLayout l;
   if (frame.empty()) return l;

@@ -197,7 +197,11 @@ class Encoder final : public DeviceEncoderBase<Device, StreamConfig, 4> {  // 3 
   ~Encoder() override;
   std::string name() const override { return "vectornav"; }
   void encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out) override;
+  // Three binary outputs of every field and a sentence on every sample (the
+  // emission buffers' size).
   std::size_t max_bytes_per_sample() const override;
+  // The outputs on at this port now (docs/vectornav-device.md "Link budget").
+  double configured_bytes_per_second(double sample_rate_hz) const override;
   StreamFrameLayout frame_layout(std::span<const std::uint8_t> frame) const override;
 
   // The quantities of one sample as the device reports them (tests; the

@@ -483,13 +483,6 @@ void Encoder::restart(TimeNs now_ns, std::vector<std::uint8_t>& out) {
   out.insert(out.end(), std::begin(wake), std::end(wake));
 }
 
-// An output at rate_hz is due on the sample that crosses the next multiple
-// of its period on the scene's grid (every sample when the scene is slower).
-bool Encoder::due(std::uint64_t k, std::uint16_t rate_hz) const noexcept {
-  if (rate_hz == xdi::kEveryPacket) return true;
-  return due_on_grid(k, rate_hz, 1);
-}
-
 Measurements Encoder::measurements_of(const ImuFrameInput& s) const {
   Measurements m;
   m.since_power_up_ns = static_cast<std::uint64_t>(since_power_up_ns(s));
@@ -556,19 +549,39 @@ Measurements Encoder::measurements_of(const ImuFrameInput& s) const {
   return m;
 }
 
-void Encoder::encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out) {
-  const StreamConfig* c = &power_up_;
-  StreamConfig after_restart;
-  if (device_) {
-    const EmitConfig& published = device_->emit_config();
-    c = &published;
-    if (restart_pending(published) && !published.measurement) {
-      // Power-cycled, the io thread not yet told: measurement with the kept settings.
-      after_restart = published;
-      after_restart.measurement = true;
-      c = &after_restart;
-    }
+const StreamConfig& Encoder::streamed_config(StreamConfig& after_restart) const {
+  if (!device_) return power_up_;
+  const EmitConfig& published = device_->emit_config();
+  if (!restart_pending(published) || published.measurement) return published;
+  // Power-cycled, the io thread not yet told: measurement with the kept settings.
+  after_restart = published;
+  after_restart.measurement = true;
+  return after_restart;
+}
+
+// The outputs of `c` due at sample k of a scene at scene_rate_hz, into
+// due_items (n of them); false when no packet goes. An output at rate_hz is
+// due on the sample that crosses the next multiple of its period on the
+// scene's grid (every sample when the scene is slower); a packet goes when a
+// timed output is due (or, when every output is "every packet", on every
+// sample).
+bool Encoder::packet_due(std::uint64_t k, std::uint64_t scene_rate_hz, const OutputConfiguration& c,
+                         std::span<OutputItem> due_items, std::size_t& n) noexcept {
+  n = 0;
+  bool any_timed = false, only_every = true;
+  for (std::size_t i = 0; i < c.count; ++i) {
+    const OutputItem& it = c.items[i];
+    only_every = only_every && it.rate_hz == xdi::kEveryPacket;
+    if (it.rate_hz != xdi::kEveryPacket && !due_on_scene_grid(k, it.rate_hz, 1, scene_rate_hz)) continue;
+    due_items[n++] = it;
+    any_timed = any_timed || it.rate_hz != xdi::kEveryPacket;
   }
+  return n != 0 && (any_timed || only_every);
+}
+
+void Encoder::encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out) {
+  StreamConfig after_restart;
+  const StreamConfig* c = &streamed_config(after_restart);
   start_sample(sample);
   IncrementSums& sums = increments_[0];
   if (!c->measurement) {
@@ -577,18 +590,7 @@ void Encoder::encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out
     return;
   }
   std::size_t n = 0;
-  bool any_timed = false;
-  for (std::size_t i = 0; i < c->output.count; ++i) {
-    const OutputItem& it = c->output.items[i];
-    if (!due(sample.sample_counter, it.rate_hz)) continue;
-    due_items_[n++] = it;
-    any_timed = any_timed || it.rate_hz != xdi::kEveryPacket;
-  }
-  // A packet goes when a timed output is due (or when every output is
-  // "every packet": then at the scene's rate).
-  bool only_every = true;
-  for (std::size_t i = 0; i < c->output.count; ++i) only_every = only_every && c->output.items[i].rate_hz == xdi::kEveryPacket;
-  if (n == 0 || (!any_timed && !only_every)) return;
+  if (!packet_due(sample.sample_counter, scene_rate_hz_, c->output, due_items_, n)) return;
   Measurements m = measurements_of(sample);
   // The sums are in body FRD; S is FLU (negating y and z commutes with the
   // sums, to the bit).
@@ -622,6 +624,27 @@ std::size_t Encoder::max_bytes_per_sample() const {
   std::size_t payload = 0;
   for (std::size_t i = 0; i < sizes.size() && i < kMaxOutputItems; ++i) payload += sizes[i];
   return 7 + payload + 5;  // preamble, bus id, MID, extended length (3), checksum; WakeUp
+}
+
+double Encoder::configured_bytes_per_second(double sample_rate_hz) const {
+  // The packets of one second of the scene, counted: a packet's size
+  // depends on which outputs are due together, and outputs at rates that do
+  // not divide each other share some packets and not others.
+  StreamConfig after_restart;
+  const StreamConfig& c = streamed_config(after_restart);
+  if (!c.measurement || !(sample_rate_hz > 0.0)) return 0.0;
+  const auto samples = static_cast<std::uint64_t>(std::max<long long>(1, std::llround(sample_rate_hz)));
+  std::array<OutputItem, kMaxOutputItems> items{};
+  double bytes = 0.0;
+  for (std::uint64_t k = 0; k < samples; ++k) {
+    std::size_t n = 0;
+    if (!packet_due(k, samples, c.output, items, n)) continue;
+    std::size_t payload = 0;
+    for (std::size_t i = 0; i < n; ++i) payload += 3 + data_bytes(items[i].id);
+    // [L] preamble, bus id, MID, length (3 bytes when extended), checksum.
+    bytes += static_cast<double>(payload + (payload < kExtendedLength ? 5 : 7));
+  }
+  return bytes * sample_rate_hz / static_cast<double>(samples);
 }
 
 StreamFrameLayout Encoder::frame_layout(std::span<const std::uint8_t> frame) const {

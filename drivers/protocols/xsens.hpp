@@ -248,7 +248,11 @@ class Encoder final : public DeviceEncoderBase<Device, StreamConfig, 1> {  // on
   ~Encoder() override;
   std::string name() const override { return "xsens"; }
   void encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out) override;
+  // The widest MTData2 any configuration makes (the emission buffers' size).
   std::size_t max_bytes_per_sample() const override;
+  // The MTData2 packets of the output configuration now
+  // (docs/xsens-device.md "Link budget").
+  double configured_bytes_per_second(double sample_rate_hz) const override;
   StreamFrameLayout frame_layout(std::span<const std::uint8_t> frame) const override;
   bool has_sequence_counter() const override { return true; }
   void sequence_step(std::int64_t step) override { packet_counter_ = static_cast<std::uint16_t>(packet_counter_ + step); }
@@ -261,7 +265,10 @@ class Encoder final : public DeviceEncoderBase<Device, StreamConfig, 1> {  // on
   static StreamConfig power_up_config(const XsensDeviceConfig& config);
 
  private:
-  bool due(std::uint64_t k, std::uint16_t rate_hz) const noexcept;
+  // What streams now; after_restart: the room for a configuration made here.
+  const StreamConfig& streamed_config(StreamConfig& after_restart) const;
+  static bool packet_due(std::uint64_t k, std::uint64_t scene_rate_hz, const OutputConfiguration& c,
+                         std::span<OutputItem> due_items, std::size_t& n) noexcept;
   ModelTraits traits_;
   std::uint16_t packet_counter_ = 0;
   std::array<OutputItem, kMaxOutputItems> due_items_{};  // scratch, no allocation
