@@ -89,10 +89,16 @@ LinkBudget uart_budget(double bytes_per_second, const SerialSettings& settings) 
 
 LinkBudget uart_budget(const StreamEncoder& encoder, double sample_rate_hz, const SerialSettings& settings) {
   require_finite_non_negative(sample_rate_hz, "sample rate");
-  const double bytes_per_sample = static_cast<double>(encoder.max_bytes_per_sample());
-  LinkBudget budget = uart_budget(bytes_per_sample * sample_rate_hz, settings);
-  budget.message = encoder.name() + " at " + number(sample_rate_hz) + " Hz x " + number(bytes_per_sample) +
-                   " B/sample: " + budget.message;
+  const double configured = encoder.configured_bytes_per_second(sample_rate_hz);
+  const double max_bytes_per_sample = static_cast<double>(encoder.max_bytes_per_sample());
+  LinkBudget budget = uart_budget(configured, settings);
+  budget.worst_case_bytes_per_second = max_bytes_per_sample * sample_rate_hz;
+  budget.worst_case_load_fraction =
+      *budget.worst_case_bytes_per_second * uart_bits_per_byte(settings) / budget.capacity_bits_per_second;
+  budget.message = encoder.name() + " at " + number(sample_rate_hz) + " Hz, outputs as configured: " +
+                   budget.message + " (worst case, every output on every sample: " + number(max_bytes_per_sample) +
+                   " B/sample = " + number(*budget.worst_case_bytes_per_second) + " B/s, " +
+                   percent(*budget.worst_case_load_fraction) + ")";
   return budget;
 }
 

@@ -14,6 +14,7 @@
 
 #include <cstddef>
 #include <cstdint>
+#include <optional>
 #include <span>
 #include <string>
 #include <vector>
@@ -35,6 +36,12 @@ struct LinkBudget {
   double capacity_bits_per_second = 0.0;   // UART: baud; CAN: nominal bit rate
   BudgetVerdict verdict = BudgetVerdict::ok;
   std::string message;                     // names the numbers, e.g. "uart 115200 8N1: 11521 B/s x 10 bit = ..."
+  // UART of a stream encoder: every output at its maximum on every sample
+  // (max_bytes_per_sample() x rate), beside the configured traffic the
+  // verdict is on (a device whose driver may ask for more than its
+  // power-up outputs).
+  std::optional<double> worst_case_bytes_per_second;
+  std::optional<double> worst_case_load_fraction;
 };
 
 // ---- UART ----
@@ -43,7 +50,9 @@ struct LinkBudget {
 // Throws TransportError (drivers/transport.hpp) for invalid settings.
 int uart_bits_per_byte(const SerialSettings& settings);
 LinkBudget uart_budget(double bytes_per_second, const SerialSettings& settings);
-// A stream encoder at `sample_rate_hz`: max_bytes_per_sample() * rate.
+// A stream encoder at `sample_rate_hz`: the verdict on what it is configured
+// to send (configured_bytes_per_second), the worst case (every output,
+// max_bytes_per_sample() x rate) beside it in the fields and the message.
 LinkBudget uart_budget(const StreamEncoder& encoder, double sample_rate_hz, const SerialSettings& settings);
 
 // ---- CAN ----

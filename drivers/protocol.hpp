@@ -134,8 +134,19 @@ class StreamEncoder {
   // status) due at or before now_ns; called once per sample.
   virtual void periodic(TimeNs now_ns, std::vector<std::uint8_t>& out) { (void)now_ns; (void)out; }
   // Largest number of bytes one sample (plus periodic traffic, averaged per
-  // sample) puts on the wire: for the link budget.
+  // sample) puts on the wire, whatever the device is configured to send:
+  // what sizes the emission buffers, and the link budget's worst case.
   virtual std::size_t max_bytes_per_sample() const = 0;
+  // Bytes per second the device sends as it is configured now (its
+  // power-up outputs, or what its driver has commanded since, periodic
+  // traffic included) in a scene at sample_rate_hz: the link budget's
+  // verdict. Default: the worst case, max_bytes_per_sample() per sample (a
+  // protocol whose traffic no configuration changes). Call it where
+  // encode() runs, or before emission starts (it reads the configuration
+  // the emission thread reads).
+  virtual double configured_bytes_per_second(double sample_rate_hz) const {
+    return static_cast<double>(max_bytes_per_sample()) * sample_rate_hz;
+  }
   // The frame's delta_theta / delta_velocity are coning/sculling-compensated
   // increments (true) or raw integrals (false, the default).
   virtual bool compensated_increments() const { return false; }

@@ -33,7 +33,7 @@ void add_budget_command(CLI::App& app, int& exit_code) {
   std::vector<std::string> protocols = drivers::stream_protocol_names();
   for (const auto& n : drivers::can_protocol_names()) protocols.push_back(n);
 
-  auto* c = app.add_subcommand("budget", "Link budget of a device: the real encoder's traffic against the UART or CAN bus (worst-case stuffing); warns above 70 %, refuses above 100 %");
+  auto* c = app.add_subcommand("budget", "Link budget of a device: the real encoder's traffic against the UART (its outputs as configured at power-up; the worst case of every output beside it) or CAN bus (worst-case stuffing); warns above 70 %, refuses above 100 %");
   c->add_option("--protocol", o->protocol, "Wire protocol")->required()->check(CLI::IsMember(protocols));
   c->add_option("--rate", o->rate_hz, "Sample rate (Hz)")->capture_default_str()->check(finite_in(0.0, 1e6, true));
   c->add_option("--baud", o->serial.baud, "UART: baud rate")->capture_default_str()->check(CLI::PositiveNumber);
@@ -66,15 +66,19 @@ void add_budget_command(CLI::App& app, int& exit_code) {
         budget = drivers::uart_budget(*encoder, o->rate_hz, serial);
       }
       if (o->json) {
-        std::cout << nlohmann::json{{"protocol", o->protocol},
-                                    {"rate_hz", o->rate_hz},
-                                    {"load_fraction", budget.load_fraction},
-                                    {"bits_per_second_used", budget.bits_per_second_used},
-                                    {"capacity_bits_per_second", budget.capacity_bits_per_second},
-                                    {"verdict", drivers::to_string(budget.verdict)},
-                                    {"message", budget.message}}
-                         .dump()
-                  << "\n";
+        nlohmann::json j{{"protocol", o->protocol},
+                         {"rate_hz", o->rate_hz},
+                         {"load_fraction", budget.load_fraction},
+                         {"bits_per_second_used", budget.bits_per_second_used},
+                         {"capacity_bits_per_second", budget.capacity_bits_per_second},
+                         {"verdict", drivers::to_string(budget.verdict)},
+                         {"message", budget.message}};
+        // UART: every output on every sample, beside the configured outputs the verdict is on.
+        if (budget.worst_case_load_fraction) {
+          j["worst_case_bytes_per_second"] = *budget.worst_case_bytes_per_second;
+          j["worst_case_load_fraction"] = *budget.worst_case_load_fraction;
+        }
+        std::cout << j.dump() << "\n";
       } else {
         std::cout << budget.message << "\n";
       }

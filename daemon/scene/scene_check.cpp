@@ -295,7 +295,8 @@ SceneCheck check_scene(const SceneConfig& scene) {
     } else {
       const auto encoder = drivers::make_stream_encoder(imu.protocol, imu.stream_options);
       check_faults(*encoder);
-      c.bytes_per_second = static_cast<double>(encoder->max_bytes_per_sample()) * rate;
+      c.bytes_per_second = encoder->configured_bytes_per_second(rate);
+      c.worst_case_bytes_per_second = static_cast<double>(encoder->max_bytes_per_sample()) * rate;
       if (imu.transport.type == TransportType::serial)
         c.link = drivers::uart_budget(*encoder, rate, imu.transport.serial.settings);
     }
@@ -364,7 +365,9 @@ std::string to_text(const SceneCheck& c) {
           << d.accel_error_1hz_with_rates << " (poses with rates) / " << d.accel_error_1hz_estimated
           << " (rates estimated) of a 1 Hz motion's acceleration amplitude; x f^2 at f Hz\n"
           << std::defaultfloat;
-    if (d.bytes_per_second) out << "    traffic " << fixed(*d.bytes_per_second, 0) << " B/s (worst case per sample x rate)\n";
+    if (d.bytes_per_second)
+      out << "    traffic " << fixed(*d.bytes_per_second, 0) << " B/s as configured (worst case "
+          << fixed(d.worst_case_bytes_per_second.value_or(0.0), 0) << " B/s: every output on every sample)\n";
     if (d.can_frames_per_second) out << "    traffic " << fixed(*d.can_frames_per_second, 1) << " CAN frames/s\n";
     if (d.link)
       out << "    link " << fixed(100.0 * d.link->load_fraction, 1) << " % (" << drivers::to_string(d.link->verdict)
@@ -409,7 +412,8 @@ std::string to_json(const SceneCheck& c) {
                 {"bits_per_second_used", b.bits_per_second_used},
                 {"capacity_bits_per_second", b.capacity_bits_per_second},
                 {"verdict", drivers::to_string(b.verdict)},
-                {"message", b.message}};
+                {"message", b.message},
+                {"worst_case_load_fraction", b.worst_case_load_fraction ? json(*b.worst_case_load_fraction) : json(nullptr)}};
   };
   json j;
   j["file"] = c.file;
@@ -441,6 +445,7 @@ std::string to_json(const SceneCheck& c) {
                                     {"vibration_rotations", d.work.vibration_rotations},
                                     {"vibration_direct", d.work.vibration_direct}}}};
     e["bytes_per_second"] = d.bytes_per_second ? json(*d.bytes_per_second) : json(nullptr);
+    e["worst_case_bytes_per_second"] = d.worst_case_bytes_per_second ? json(*d.worst_case_bytes_per_second) : json(nullptr);
     e["can_frames_per_second"] = d.can_frames_per_second ? json(*d.can_frames_per_second) : json(nullptr);
     e["link"] = d.link ? budget_json(*d.link) : json(nullptr);
     e["error_model"] = d.error_model;

@@ -61,7 +61,8 @@ struct ImuCheck {
   // bound |p'' - H''| <= h^2/12 |p''''|), and 2 (2 pi f h)^2 with slopes
   // estimated from the poses (tests/core/test_causal_hermite.cpp).
   double accel_error_1hz_with_rates = 0.0, accel_error_1hz_estimated = 0.0;
-  std::optional<double> bytes_per_second;     // byte-stream protocols: max_bytes_per_sample x rate
+  std::optional<double> bytes_per_second;     // byte-stream protocols: the outputs as configured at power-up (the verdict's)
+  std::optional<double> worst_case_bytes_per_second;  // byte-stream protocols: max_bytes_per_sample x rate (every output)
   std::optional<double> can_frames_per_second;
   std::optional<drivers::LinkBudget> link;    // serial and can transports (pty and null have no line rate)
   double cpu_fraction = 0.0;             // of one core: rate x (kCpuSecondsPerSample + the chain's share)

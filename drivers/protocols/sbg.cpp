@@ -95,6 +95,19 @@ T fixed(double v, double scale, bool& clipped) {
 
 void copy3(const Vec3& v, double* to) { to[0] = v.x(), to[1] = v.y(), to[2] = v.z(); }
 
+// [L] sbgEComLogEkf.c: EKF_EULER and EKF_QUAT are the same log but for the
+// attitude after the time stamp (roll, pitch, yaw or the quaternion w, x, y,
+// z): then the Euler angles' standard deviations, the solution status and
+// the magnetic declination / inclination.
+void write_ekf_attitude_log(PayloadWriter& w, const Measurements& m, std::span<const double> attitude) {
+  w.u32(m.time_stamp_us);
+  for (const double a : attitude) w.f(a);
+  w.f3(m.euler_sigma_rad);
+  w.u32(m.solution_status);
+  w.f(m.mag_declination_rad);
+  w.f(m.mag_inclination_rad);
+}
+
 bool all_finite_within(const double* v, double limit) {
   for (int i = 0; i < 3; ++i)
     if (!std::isfinite(v[i]) || std::fabs(v[i]) > limit) return false;
@@ -333,22 +346,8 @@ std::size_t write_log_payload(int output, const Measurements& m, std::uint8_t* b
       w.f3(m.mag);
       w.f3(m.accel_m_s2);
       break;
-    case kOutEkfEuler:
-      w.u32(m.time_stamp_us);
-      w.f3(m.euler_rad);
-      w.f3(m.euler_sigma_rad);
-      w.u32(m.solution_status);
-      w.f(m.mag_declination_rad);
-      w.f(m.mag_inclination_rad);
-      break;
-    case kOutEkfQuat:
-      w.u32(m.time_stamp_us);
-      for (const double q : m.quat_wxyz) w.f(q);
-      w.f3(m.euler_sigma_rad);
-      w.u32(m.solution_status);
-      w.f(m.mag_declination_rad);
-      w.f(m.mag_inclination_rad);
-      break;
+    case kOutEkfEuler: write_ekf_attitude_log(w, m, m.euler_rad); break;
+    case kOutEkfQuat: write_ekf_attitude_log(w, m, m.quat_wxyz); break;
     case kOutEkfNav:
       w.u32(m.time_stamp_us);
       w.f3(m.vel_ned_m_s);
@@ -407,71 +406,48 @@ void append_log(int output, const Measurements& m, std::vector<std::uint8_t>& ou
 // ------------------------------------------------------------------ encoder
 
 Encoder::Encoder(const StreamEncoderOptions& options)
-    : options_(options), traits_(traits_of(options.sbg.model)), power_up_(power_up_config(options.sbg)) {
-  const double r = options_.nominal_sample_rate_hz;
-  scene_rate_hz_ = r >= 1.0 ? static_cast<std::uint64_t>(std::llround(r)) : kMainLoopHz;
-  if (options_.sbg.answers_commands) device_ = std::make_unique<Device>(options_.sbg);
+    : DeviceEncoderBase(options, kMainLoopHz, power_up_config(options.sbg)), traits_(traits_of(options.sbg.model)) {
+  if (options_.sbg.answers_commands) install_device(std::make_unique<Device>(options_.sbg));
 }
 
 Encoder::~Encoder() = default;
 
 Encoder& Encoder::operator=(const Encoder& other) {
-  if (this != &other) {
-    Encoder fresh(other.options_);
-    options_ = fresh.options_;
-    traits_ = fresh.traits_;
-    scene_rate_hz_ = fresh.scene_rate_hz_;
-    device_ = std::move(fresh.device_);
-    power_up_ = fresh.power_up_;
-    have_power_up_ = false;
-    deltas_ = {};
-    restarts_ = 0;
-  }
+  // As the copy constructor: a fresh device of the same options.
+  if (this != &other) *this = Encoder(other.options_);
   return *this;
 }
 
-CommandResponder* Encoder::command_responder() { return device_.get(); }
+Encoder& Encoder::operator=(Encoder&& other) = default;
 
-void Encoder::restart(TimeNs now_ns, std::vector<std::uint8_t>& out) {
-  (void)out;
-  have_power_up_ = true;
-  power_up_t_ns_ = now_ns;
-  deltas_ = {};
-  if (!device_) return;
-  ++restarts_;
-  device_->note_restart();
+// The clock of an output in `mode`: the 200 Hz main loop over N, the 1 kHz
+// loop over 1 / 2 / 4 (1001, 1002, 1004, 20001). New data: every sample for
+// the IMU logs, each 5 Hz GNSS epoch for GPS1_*, the main loop otherwise.
+// Disabled and PPS (no PPS line is emulated): never.
+Encoder::Schedule Encoder::schedule_of(int output, std::uint16_t mode) noexcept {
+  switch (mode) {
+    case kModeDisabled: case kModePps: return {0, 0, false};
+    case kMode1Ms: case kMode2Ms: case kMode4Ms: return {1000, mode - 1000u, false};
+    case kModeHighFreqLoop: return {1000, 1, false};
+    case kModeNewData:
+      if (output == kOutGps1Vel || output == kOutGps1Pos) return {5, 1, false};
+      if (output == kOutImuData || output == kOutImuShort || output == kOutFastImu || output == kOutMag)
+        return {0, 0, true};
+      return {kMainLoopHz, 1, false};
+    default: return {kMainLoopHz, mode, false};
+  }
 }
 
-// Sample k is due for an output in `mode` when it crosses a multiple of the
-// mode's period on its clock: the 200 Hz main loop over N, the 1 kHz loop
-// over 1 / 2 / 4 (1001, 1002, 1004, 20001). New data: every sample for the
-// IMU logs, each 5 Hz GNSS epoch for GPS1_*, the main loop otherwise. A
-// scene slower than the output sends every sample.
+// Sample k is due when it crosses a multiple of the mode's period on its
+// clock; a scene slower than the output sends every sample.
 bool Encoder::due(std::uint64_t k, int output, std::uint16_t mode) const noexcept {
-  std::uint64_t rate = kMainLoopHz, divisor = mode;
-  switch (mode) {
-    case kModeDisabled: case kModePps: return false;  // no PPS line is emulated
-    case kMode1Ms: case kMode2Ms: case kMode4Ms: rate = 1000, divisor = mode - 1000u; break;
-    case kModeHighFreqLoop: rate = 1000, divisor = 1; break;
-    case kModeNewData:
-      if (output == kOutGps1Vel || output == kOutGps1Pos) rate = 5, divisor = 1;
-      else if (output == kOutImuData || output == kOutImuShort || output == kOutFastImu || output == kOutMag) return true;
-      else divisor = 1;
-      break;
-    default: break;
-  }
-  if (divisor == 0) return false;
-  if (k == 0) return true;
-  const std::uint64_t now = k * rate / scene_rate_hz_ / divisor;
-  const std::uint64_t before = (k - 1) * rate / scene_rate_hz_ / divisor;
-  return now != before;
+  const Schedule s = schedule_of(output, mode);
+  return s.every_sample || due_on_grid(k, s.rate_per_s, s.divisor);
 }
 
 Measurements Encoder::measurements_of(const ImuFrameInput& s) const {
   Measurements m;
-  const TimeNs power_up =
-      have_power_up_ ? power_up_t_ns_ : s.t_ns - static_cast<TimeNs>(s.sample_counter) * s.period_ns;
-  const TimeNs since_ns = s.t_ns > power_up ? s.t_ns - power_up : 0;
+  const TimeNs since_ns = since_power_up_ns(s);
   m.time_stamp_us = static_cast<std::uint32_t>(static_cast<std::uint64_t>(since_ns / 1000) & 0xFFFFFFFFu);
   m.uptime_s = static_cast<std::uint32_t>(std::min<std::int64_t>(since_ns / 1'000'000'000LL, 0xFFFFFFFFLL));
   copy3(s.accel_m_s2, m.accel_m_s2);
@@ -566,33 +542,20 @@ Measurements Encoder::measurements_of(const ImuFrameInput& s) const {
 }
 
 void Encoder::encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out) {
-  const StreamConfig* c = &power_up_;
-  if (device_) {
-    const EmitConfig& published = device_->emit_config();
-    c = published.restarts_handled < restarts_ ? &published.startup : &published;
-  }
-  if (!have_power_up_) {
-    have_power_up_ = true;
-    power_up_t_ns_ = sample.t_ns - static_cast<TimeNs>(sample.sample_counter) * sample.period_ns;
-  }
-  const double dt = static_cast<double>(sample.period_ns) * 1e-9;
-  for (Deltas& d : deltas_) {
-    d.dtime_s += dt;
-    d.dtheta_rad += sample.delta_theta_rad;
-    d.dvel_m_s += sample.delta_velocity_m_s;
-  }
+  const StreamConfig* c = &published_or_startup_config();
+  start_sample(sample);
   Measurements m = measurements_of(sample);
   if (device_) device_->publish_measurements(m);
   for (int i = 0; i < kOutputCount; ++i) {
     const std::uint16_t mode = c->modes[static_cast<std::size_t>(i)];
     if (mode == kModeDisabled || !model_has(options_.sbg.model, i) || !due(sample.sample_counter, i, mode)) continue;
-    Deltas& d = deltas_[static_cast<std::size_t>(i)];
+    IncrementSums& d = increments_[static_cast<std::size_t>(i)];
     if ((i == kOutImuData || i == kOutImuShort) && d.dtime_s > 0.0) {
       // [L] the increments over the output's interval, as mean rates.
       copy3(d.dvel_m_s / d.dtime_s, m.dvel_rate_m_s2);
       copy3(d.dtheta_rad / d.dtime_s, m.dtheta_rate_rad_s);
     }
-    d = Deltas{};
+    d = IncrementSums{};
     append_log(i, m, out);
   }
 }
@@ -601,6 +564,19 @@ std::size_t Encoder::max_bytes_per_sample() const {
   std::size_t n = 0;
   for (const OutputInfo& o : kOutputs) n += o.payload_bytes + kFrameOverheadBytes;
   return n;
+}
+
+double Encoder::configured_bytes_per_second(double sample_rate_hz) const {
+  // Each log this model has, in its mode now: its frame times how often it goes.
+  const StreamConfig& c = published_or_startup_config();
+  double bytes = 0.0;
+  for (int i = 0; i < kOutputCount; ++i) {
+    if (!model_has(options_.sbg.model, i)) continue;
+    const Schedule s = schedule_of(i, c.modes[static_cast<std::size_t>(i)]);
+    const double per_second = s.every_sample ? sample_rate_hz : sent_per_second(s.rate_per_s, s.divisor, sample_rate_hz);
+    bytes += per_second * static_cast<double>(output_info(i).payload_bytes + kFrameOverheadBytes);
+  }
+  return bytes;
 }
 
 StreamFrameLayout Encoder::frame_layout(std::span<const std::uint8_t> frame) const {
@@ -619,35 +595,29 @@ StreamFrameLayout Encoder::frame_layout(std::span<const std::uint8_t> frame) con
 
 // ------------------------------------------------------------------ decoder
 
-void Decoder::feed(std::span<const std::uint8_t> bytes, const SampleCallback& on_sample) {
-  buffer_.insert(buffer_.end(), bytes.begin(), bytes.end());
+std::size_t Decoder::decode_buffer(const SampleCallback& on_sample) {
   std::size_t pos = 0;
   const std::size_t n = buffer_.size();
+  constexpr std::uint8_t kSync[] = {kSync1, kSync2};
   while (pos < n) {
-    if (buffer_[pos] != kSync1) {
-      ++counters_.resync_bytes, ++pos;
-      continue;
-    }
-    if (pos + 2 > n) break;
-    if (buffer_[pos + 1] != kSync2) {
-      ++counters_.resync_bytes, ++pos;
-      continue;
-    }
+    const FrameStart start = frame_start_at(pos, kSync, sizeof kSync);
+    if (start == FrameStart::need_more) break;
+    if (start == FrameStart::skipped) continue;
     if (pos + 6 > n) break;
     const std::size_t len = wire::get_le<std::uint16_t>(buffer_.data() + pos + 4);
     if (len > kMaxPayloadBytes) {
-      ++counters_.other_errors, ++counters_.resync_bytes, ++pos;
+      skip_byte(pos, &DecoderCounters::other_errors);
       continue;
     }
     if (pos + len + kFrameOverheadBytes > n) break;
     const std::uint8_t* f = buffer_.data() + pos;
     const std::uint16_t crc = wire::get_le<std::uint16_t>(f + 6 + len);
     if (f[8 + len] != kEtx) {
-      ++counters_.other_errors, ++counters_.resync_bytes, ++pos;
+      skip_byte(pos, &DecoderCounters::other_errors);
       continue;
     }
     if (crc16(std::span<const std::uint8_t>(f + 2, len + 4)) != crc) {
-      ++counters_.checksum_errors, ++counters_.resync_bytes, ++pos;
+      skip_byte(pos, &DecoderCounters::checksum_errors);
       continue;
     }
     ++counters_.frames;
@@ -690,7 +660,7 @@ void Decoder::feed(std::span<const std::uint8_t> bytes, const SampleCallback& on
     }
     pos += len + kFrameOverheadBytes;
   }
-  buffer_.erase(buffer_.begin(), buffer_.begin() + static_cast<std::ptrdiff_t>(pos));
+  return pos;
 }
 
 }  // namespace imuemu::drivers::sbg

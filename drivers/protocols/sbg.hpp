@@ -40,6 +40,8 @@
 #include <vector>
 
 #include "drivers/protocol.hpp"
+#include "drivers/protocols/device_encoder_base.hpp"
+#include "drivers/protocols/frame_resync.hpp"
 #include "drivers/protocols/stream_protocols.hpp"
 
 namespace imuemu::drivers::sbg {
@@ -227,22 +229,20 @@ std::optional<std::string> saved_outputs_problem(const SbgDeviceConfig& config);
 
 class Device;
 
-class Encoder final : public StreamEncoder {
+class Encoder final : public DeviceEncoderBase<Device, StreamConfig, kOutputCount> {
  public:
   explicit Encoder(const StreamEncoderOptions& options);
   Encoder(const Encoder& other) : Encoder(other.options_) {}
   Encoder& operator=(const Encoder& other);
+  Encoder& operator=(Encoder&& other);
   ~Encoder() override;
   std::string name() const override { return "sbg"; }
-  CommandResponder* command_responder() override;
   void encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out) override;
+  // Every log at once on every sample (the emission buffers' size).
   std::size_t max_bytes_per_sample() const override;
-  // [F] the ELLIPSE's delta angles / velocities are coning and sculling
-  // compensated.
-  bool compensated_increments() const override { return true; }
-  bool needs_navigation() const override { return true; }
+  // The logs in their modes now (docs/sbg-device.md "Link budget").
+  double configured_bytes_per_second(double sample_rate_hz) const override;
   StreamFrameLayout frame_layout(std::span<const std::uint8_t> frame) const override;
-  void restart(TimeNs now_ns, std::vector<std::uint8_t>& out) override;
 
   Measurements measurements_of(const ImuFrameInput& sample) const;
   const ModelTraits& traits() const noexcept { return traits_; }
@@ -250,34 +250,23 @@ class Encoder final : public StreamEncoder {
   Device* device() noexcept { return device_.get(); }
 
  private:
-  bool due(std::uint64_t k, int output, std::uint16_t mode) const noexcept;
-  StreamEncoderOptions options_;
-  ModelTraits traits_;
-  std::uint64_t scene_rate_hz_ = kMainLoopHz;
-  std::unique_ptr<Device> device_;
-  StreamConfig power_up_;
-  bool have_power_up_ = false;
-  TimeNs power_up_t_ns_ = 0;
-  // Deltas accumulated since each IMU output last went out.
-  struct Deltas {
-    double dtime_s = 0.0;
-    Vec3 dtheta_rad = Vec3::Zero();
-    Vec3 dvel_m_s = Vec3::Zero();
+  // An output goes out at rate_per_s / divisor Hz on the scene's grid, or
+  // on every sample.
+  struct Schedule {
+    std::uint64_t rate_per_s = 0;
+    std::uint64_t divisor = 0;
+    bool every_sample = false;
   };
-  std::array<Deltas, kOutputCount> deltas_{};
-  std::uint64_t restarts_ = 0;
+  static Schedule schedule_of(int output, std::uint16_t mode) noexcept;
+  bool due(std::uint64_t k, int output, std::uint16_t mode) const noexcept;
+  ModelTraits traits_;
 };
 
 // Frames from a byte stream (`imuemu listen`): IMU_DATA, IMU_SHORT and
 // FAST_IMU_DATA decode as samples; every other valid frame counts.
-class Decoder final : public StreamDecoder {
- public:
-  void feed(std::span<const std::uint8_t> bytes, const SampleCallback& on_sample) override;
-  const DecoderCounters& counters() const override { return counters_; }
-
+class Decoder final : public ResyncingDecoder {
  private:
-  std::vector<std::uint8_t> buffer_;
-  DecoderCounters counters_;
+  std::size_t decode_buffer(const SampleCallback& on_sample) override;
 };
 
 }  // namespace imuemu::drivers::sbg

@@ -430,66 +430,27 @@ StreamConfig Encoder::power_up_config(const VectorNavDeviceConfig& config) {
 }
 
 Encoder::Encoder(const StreamEncoderOptions& options)
-    : options_(options), traits_(traits_of(options.vectornav.model)), power_up_(power_up_config(options.vectornav)) {
-  const double r = options_.nominal_sample_rate_hz;
-  scene_rate_hz_ = r >= 1.0 ? static_cast<std::uint64_t>(std::llround(r)) : traits_.imu_rate_hz;
+    : DeviceEncoderBase(options, traits_of(options.vectornav.model).imu_rate_hz, power_up_config(options.vectornav)),
+      traits_(traits_of(options.vectornav.model)) {
   // The device keeps its settings (saved registers included) whether or not
   // its driver can talk to it; answers_commands = false only hides its
   // command side (a line with its receive wire not connected).
-  device_ = std::make_unique<Device>(options_.vectornav, traits_);
+  install_device(std::make_unique<Device>(options_.vectornav, traits_), options_.vectornav.answers_commands);
 }
 
 Encoder::~Encoder() = default;
 
 Encoder& Encoder::operator=(const Encoder& other) {
-  if (this != &other) {
-    Encoder fresh(other.options_);
-    options_ = fresh.options_;
-    traits_ = fresh.traits_;
-    scene_rate_hz_ = fresh.scene_rate_hz_;
-    device_ = std::move(fresh.device_);
-    power_up_ = fresh.power_up_;
-    have_power_up_ = false;
-    deltas_ = {};
-    restarts_ = 0;
-    sync_pulse_.reset();
-    last_gps_second_ = -1;
-  }
+  // As the copy constructor: a fresh device of the same options.
+  if (this != &other) *this = Encoder(other.options_);
   return *this;
 }
 
-CommandResponder* Encoder::command_responder() {
-  return options_.vectornav.answers_commands ? device_.get() : nullptr;
-}
-
-void Encoder::restart(TimeNs now_ns, std::vector<std::uint8_t>& out) {
-  (void)out;  // the device sends nothing at power-up before its first outputs
-  have_power_up_ = true;
-  power_up_t_ns_ = now_ns;
-  deltas_ = {};
-  last_gps_second_ = -1;
-  if (!device_) return;
-  ++restarts_;
-  device_->note_restart();
-}
-
-// Output k of a stream at `rate` per second of a divisor: due when the
-// sample crosses a multiple of `divisor` on the rate's grid. With the scene
-// at the model's IMU rate a rate divisor d sends every d-th sample; a scene
-// slower than the output sends every sample.
-bool Encoder::due(std::uint64_t k, std::uint64_t rate, std::uint64_t divisor) const noexcept {
-  if (divisor == 0 || rate == 0) return false;
-  if (k == 0) return true;
-  const std::uint64_t now = k * rate / scene_rate_hz_ / divisor;
-  const std::uint64_t before = (k - 1) * rate / scene_rate_hz_ / divisor;
-  return now != before;
-}
+Encoder& Encoder::operator=(Encoder&& other) = default;
 
 Measurements Encoder::measurements_of(const ImuFrameInput& s) const {
   Measurements m;
-  const TimeNs power_up =
-      have_power_up_ ? power_up_t_ns_ : s.t_ns - static_cast<TimeNs>(s.sample_counter) * s.period_ns;
-  m.time_startup_ns = s.t_ns > power_up ? static_cast<std::uint64_t>(s.t_ns - power_up) : 0;
+  m.time_startup_ns = static_cast<std::uint64_t>(since_power_up_ns(s));
 
   const Mat3& r_sn = s.sensor_to_ned;  // identity when the producer has no attitude
   const attitude::HeadingPitchRoll hpr = attitude::hpr_from_rotation(r_sn);
@@ -596,44 +557,30 @@ Measurements Encoder::measurements_of(const ImuFrameInput& s) const {
 }
 
 void Encoder::encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out) {
-  const StreamConfig* c = &power_up_;
-  if (device_) {
-    const EmitConfig& published = device_->emit_config();
-    c = published.restarts_handled < restarts_ ? &published.startup : &published;
-  }
-  if (!have_power_up_) {
-    have_power_up_ = true;
-    power_up_t_ns_ = sample.t_ns - static_cast<TimeNs>(sample.sample_counter) * sample.period_ns;
-  }
-  // Deltas accumulate per output between its packets ([U] "delta theta and
-  // delta velocity ... integrated over the time since the last output").
-  const double dt = static_cast<double>(sample.period_ns) * 1e-9;
-  for (Deltas& d : deltas_) {
-    d.dtime_s += dt;
-    d.dtheta_rad += sample.delta_theta_rad;
-    d.dvel_m_s += sample.delta_velocity_m_s;
-  }
+  const StreamConfig* c = &published_or_startup_config();
+  start_sample(sample);
   Measurements m = measurements_of(sample);
   if (device_) device_->publish_measurements(m);
   // SyncOut follows the IMU's events, not the async outputs: $VNASY,0 leaves it on.
   sync_pulse_ = sync_out_for(*c, sample.sample_counter, m);
   if (!c->async_enabled) return;  // $VNASY,0: nothing until $VNASY,1
   const std::uint8_t port_bit = static_cast<std::uint8_t>(1u << (options_.vectornav.port - 1));
-  auto take = [&](Deltas& d) {
+  // [U] each output's deltas are integrated since its own last packet.
+  auto take = [&](IncrementSums& d) {
     m.dtime_s = d.dtime_s;
     copy3(d.dtheta_rad * kRadToDeg, m.dtheta_deg);
     copy3(d.dvel_m_s, m.dvel_m_s);
-    d = Deltas{};
+    d = IncrementSums{};
   };
   for (std::size_t i = 0; i < c->binary.size(); ++i) {
     const BinaryOutput& o = c->binary[i];
-    if ((o.async_mode & port_bit) == 0 || o.groups == 0 || !due(sample.sample_counter, traits_.imu_rate_hz, o.rate_divisor))
+    if ((o.async_mode & port_bit) == 0 || o.groups == 0 || !due_on_grid(sample.sample_counter, traits_.imu_rate_hz, o.rate_divisor))
       continue;
-    take(deltas_[i]);
+    take(increments_[i]);
     append_binary_packet(o, m, out);
   }
-  if (c->ador != kAdorOff && due(sample.sample_counter, c->adof_hz, 1)) {
-    take(deltas_[3]);
+  if (c->ador != kAdorOff && due_on_grid(sample.sample_counter, c->adof_hz, 1)) {
+    take(increments_[3]);
     char line[kAsciiMaxBytes];
     const std::size_t n = format_ascii_output(c->ador, m, c->crc16_mode, line, sizeof line);
     out.insert(out.end(), line, line + n);
@@ -645,7 +592,7 @@ void Encoder::encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out
 // each model: the VN-100's / VN-200's filter runs at half their 800 Hz IMU
 // rate), GpsPps on each whole second of GPS time (an INS with a time fix);
 // every (SyncOutSkipFactor + 1)-th event. The events are counted on the
-// scene's sample grid as the rate divisors are (due()): a scene slower than
+// scene's sample grid as the rate divisors are (due_on_grid()): a scene slower than
 // the event rate pulses on every sample the skip factor allows.
 std::optional<DeviceSyncPulse> Encoder::sync_out_for(const StreamConfig& c, std::uint64_t k,
                                                      const Measurements& m) noexcept {
@@ -659,8 +606,8 @@ std::optional<DeviceSyncPulse> Encoder::sync_out_for(const StreamConfig& c, std:
   const std::uint64_t every = std::uint64_t{c.sync_out_skip} + 1;
   switch (c.sync_out_mode) {
     case kSyncOutItStart:
-    case kSyncOutImuReady: p.pulse = due(k, traits_.imu_rate_hz, every); break;
-    case kSyncOutIns: p.pulse = due(k, 400, every); break;
+    case kSyncOutImuReady: p.pulse = due_on_grid(k, traits_.imu_rate_hz, every); break;
+    case kSyncOutIns: p.pulse = due_on_grid(k, 400, every); break;
     case kSyncOutGpsPps: {
       const std::int64_t second = m.gps_time_valid ? static_cast<std::int64_t>(m.time_gps_ns / 1'000'000'000ULL) : -1;
       p.pulse = second >= 0 && last_gps_second_ >= 0 && second != last_gps_second_ &&
@@ -679,6 +626,26 @@ std::size_t Encoder::max_bytes_per_sample() const {
   all.groups = 0x7F;
   all.fields.fill(0xFFFF);
   return 3 * packet_bytes(all) + kAsciiMaxBytes;
+}
+
+double Encoder::configured_bytes_per_second(double sample_rate_hz) const {
+  // The outputs on at this port now: each binary packet at the IMU rate
+  // over its divisor, the ASCII sentence (fixed-width fields [U]: its
+  // length does not depend on the values) at register 7's rate.
+  const StreamConfig& c = published_or_startup_config();
+  if (!c.async_enabled) return 0.0;
+  const std::uint8_t port_bit = static_cast<std::uint8_t>(1u << (options_.vectornav.port - 1));
+  double bytes = 0.0;
+  for (const BinaryOutput& o : c.binary) {
+    if ((o.async_mode & port_bit) == 0 || o.groups == 0) continue;
+    bytes += sent_per_second(traits_.imu_rate_hz, o.rate_divisor, sample_rate_hz) * static_cast<double>(packet_bytes(o));
+  }
+  if (c.ador != kAdorOff) {
+    char line[kAsciiMaxBytes];
+    const std::size_t n = format_ascii_output(c.ador, Measurements{}, c.crc16_mode, line, sizeof line);
+    bytes += sent_per_second(c.adof_hz, 1, sample_rate_hz) * static_cast<double>(n);
+  }
+  return bytes;
 }
 
 StreamFrameLayout Encoder::frame_layout(std::span<const std::uint8_t> frame) const {
@@ -721,8 +688,7 @@ StreamFrameLayout Encoder::frame_layout(std::span<const std::uint8_t> frame) con
 
 // ------------------------------------------------------------------ decoder
 
-void Decoder::feed(std::span<const std::uint8_t> bytes, const SampleCallback& on_sample) {
-  buffer_.insert(buffer_.end(), bytes.begin(), bytes.end());
+std::size_t Decoder::decode_buffer(const SampleCallback& on_sample) {
   std::size_t pos = 0;
   const std::size_t n = buffer_.size();
   while (pos < n) {
@@ -732,7 +698,7 @@ void Decoder::feed(std::span<const std::uint8_t> bytes, const SampleCallback& on
       while (end < n && buffer_[end] != '\n' && end - pos < kAsciiMaxBytes) ++end;
       if (end >= n) break;  // wait for the rest
       if (buffer_[end] != '\n') {
-        ++counters_.other_errors, ++counters_.resync_bytes, ++pos;
+        skip_byte(pos, &DecoderCounters::other_errors);
         continue;
       }
       const std::string_view line(reinterpret_cast<const char*>(buffer_.data() + pos), end + 1 - pos);
@@ -750,18 +716,17 @@ void Decoder::feed(std::span<const std::uint8_t> bytes, const SampleCallback& on
         else ok = false;
       }
       if (!ok) {
-        ++counters_.checksum_errors, ++counters_.resync_bytes, ++pos;
+        skip_byte(pos, &DecoderCounters::checksum_errors);
         continue;
       }
       ++counters_.frames;
       pos = end + 1;
       continue;
     }
-    if (b != kSync) {
-      ++counters_.resync_bytes, ++pos;
-      continue;
-    }
-    if (pos + 2 > n) break;
+    constexpr std::uint8_t kSyncBytes[] = {kSync};
+    const FrameStart start = frame_start_at(pos, kSyncBytes, 2);  // sync and group byte
+    if (start == FrameStart::need_more) break;
+    if (start == FrameStart::skipped) continue;
     BinaryOutput o;
     o.groups = buffer_[pos + 1];
     bool malformed = (o.groups & 0x80) != 0 || o.groups == 0;
@@ -780,14 +745,14 @@ void Decoder::feed(std::span<const std::uint8_t> bytes, const SampleCallback& on
       at += 2;
     }
     if (malformed) {
-      ++counters_.other_errors, ++counters_.resync_bytes, ++pos;
+      skip_byte(pos, &DecoderCounters::other_errors);
       continue;
     }
     if (need_more) break;
     const std::size_t len = packet_bytes(o);
     if (pos + len > n) break;
     if (crc16(std::span<const std::uint8_t>(buffer_.data() + pos + 1, len - 1)) != 0) {
-      ++counters_.checksum_errors, ++counters_.resync_bytes, ++pos;
+      skip_byte(pos, &DecoderCounters::checksum_errors);
       continue;
     }
     ++counters_.frames;
@@ -829,7 +794,7 @@ void Decoder::feed(std::span<const std::uint8_t> bytes, const SampleCallback& on
     }
     pos += len;
   }
-  buffer_.erase(buffer_.begin(), buffer_.begin() + static_cast<std::ptrdiff_t>(pos));
+  return pos;
 }
 
 }  // namespace imuemu::drivers::vectornav

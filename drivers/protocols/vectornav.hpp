@@ -43,6 +43,8 @@
 #include <vector>
 
 #include "drivers/protocol.hpp"
+#include "drivers/protocols/device_encoder_base.hpp"
+#include "drivers/protocols/frame_resync.hpp"
 #include "drivers/protocols/stream_protocols.hpp"
 
 namespace imuemu::drivers::vectornav {
@@ -196,26 +198,24 @@ std::size_t finish_sentence(char* buf, std::size_t len, std::size_t capacity, bo
 
 class Device;
 
-class Encoder final : public StreamEncoder {
+class Encoder final : public DeviceEncoderBase<Device, StreamConfig, 4> {  // 3 binary outputs, ASCII
  public:
   explicit Encoder(const StreamEncoderOptions& options);
   Encoder(const Encoder& other) : Encoder(other.options_) {}
   Encoder& operator=(const Encoder& other);
+  Encoder& operator=(Encoder&& other);
   ~Encoder() override;
   std::string name() const override { return "vectornav"; }
-  CommandResponder* command_responder() override;
   void encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out) override;
+  // Three binary outputs of every field and a sentence on every sample (the
+  // emission buffers' size).
   std::size_t max_bytes_per_sample() const override;
-  // [U] the device integrates its delta theta / delta velocity with coning
-  // and sculling compensation.
-  bool compensated_increments() const override { return true; }
-  // Attitude, position and velocity go into every model's outputs.
-  bool needs_navigation() const override { return true; }
+  // The outputs on at this port now (docs/vectornav-device.md "Link budget").
+  double configured_bytes_per_second(double sample_rate_hz) const override;
   // The SyncOut pin as register 32 sets it, for the sample encode() took
   // last; nothing while SyncOutMode is none (the scene's [imu.sync] applies).
   std::optional<DeviceSyncPulse> device_sync_pulse() const noexcept override { return sync_pulse_; }
   StreamFrameLayout frame_layout(std::span<const std::uint8_t> frame) const override;
-  void restart(TimeNs now_ns, std::vector<std::uint8_t>& out) override;
 
   // The quantities of one sample as the device reports them (tests; the
   // encoder's own deltas are the sample's increments).
@@ -225,23 +225,7 @@ class Encoder final : public StreamEncoder {
   static StreamConfig power_up_config(const VectorNavDeviceConfig& config);
 
  private:
-  bool due(std::uint64_t k, std::uint64_t per_second_numerator, std::uint64_t divisor) const noexcept;
-  StreamEncoderOptions options_;
   ModelTraits traits_;
-  std::uint64_t scene_rate_hz_ = 800;
-  std::unique_ptr<Device> device_;
-  StreamConfig power_up_;
-  // Emission-thread state: the power-up instant (time since startup) and
-  // the deltas accumulated per output (3 binary, ASCII) since it last went out.
-  bool have_power_up_ = false;
-  TimeNs power_up_t_ns_ = 0;
-  struct Deltas {
-    double dtime_s = 0.0;
-    Vec3 dtheta_rad = Vec3::Zero();
-    Vec3 dvel_m_s = Vec3::Zero();
-  };
-  std::array<Deltas, 4> deltas_{};
-  std::uint64_t restarts_ = 0;
   std::optional<DeviceSyncPulse> sync_pulse_;
   std::int64_t last_gps_second_ = -1;  // GpsPps: the GPS second of the last sample
   // The SyncOut decision for sample k (register 32 in `c`).
@@ -252,14 +236,9 @@ class Encoder final : public StreamEncoder {
 // binary packets of any configuration decode their IMU fields (Common or IMU
 // group: angular rate, acceleration, delta theta / velocity, TimeStartup);
 // ASCII sentences are checked and counted as frames.
-class Decoder final : public StreamDecoder {
- public:
-  void feed(std::span<const std::uint8_t> bytes, const SampleCallback& on_sample) override;
-  const DecoderCounters& counters() const override { return counters_; }
-
+class Decoder final : public ResyncingDecoder {
  private:
-  std::vector<std::uint8_t> buffer_;
-  DecoderCounters counters_;
+  std::size_t decode_buffer(const SampleCallback& on_sample) override;
 };
 
 }  // namespace imuemu::drivers::vectornav

@@ -459,64 +459,33 @@ StreamConfig Encoder::power_up_config(const XsensDeviceConfig& config) {
 }
 
 Encoder::Encoder(const StreamEncoderOptions& options)
-    : options_(options), traits_(traits_of(options.xsens.model)), power_up_(power_up_config(options.xsens)) {
-  const double r = options_.nominal_sample_rate_hz;
-  scene_rate_hz_ = r >= 1.0 ? static_cast<std::uint64_t>(std::llround(r)) : traits_.max_rate_hz;
-  if (options_.xsens.answers_commands) device_ = std::make_unique<Device>(options_.xsens, traits_);
+    : DeviceEncoderBase(options, traits_of(options.xsens.model).max_rate_hz, power_up_config(options.xsens)),
+      traits_(traits_of(options.xsens.model)) {
+  if (options_.xsens.answers_commands) install_device(std::make_unique<Device>(options_.xsens, traits_));
 }
 
 Encoder::~Encoder() = default;
 
 Encoder& Encoder::operator=(const Encoder& other) {
-  if (this != &other) {
-    Encoder fresh(other.options_);
-    options_ = fresh.options_;
-    traits_ = fresh.traits_;
-    scene_rate_hz_ = fresh.scene_rate_hz_;
-    device_ = std::move(fresh.device_);
-    power_up_ = fresh.power_up_;
-    have_power_up_ = false;
-    packet_counter_ = 0;
-    restarts_ = 0;
-    dtheta_s_rad_ = Vec3::Zero();
-    dvel_s_m_s_ = Vec3::Zero();
-  }
+  // As the copy constructor: a fresh device of the same options.
+  if (this != &other) *this = Encoder(other.options_);
   return *this;
 }
 
-CommandResponder* Encoder::command_responder() { return device_.get(); }
+Encoder& Encoder::operator=(Encoder&& other) = default;
 
 void Encoder::restart(TimeNs now_ns, std::vector<std::uint8_t>& out) {
-  have_power_up_ = true;
-  power_up_t_ns_ = now_ns;
+  DeviceEncoderBase::restart(now_ns, out);
   packet_counter_ = 0;
-  dtheta_s_rad_ = Vec3::Zero();
-  dvel_s_m_s_ = Vec3::Zero();
   // [L] "WakeUp": the first message after power-up.
   const std::uint8_t wake[] = {kPreamble, kMasterBusId, mid::kWakeUp, 0x00,
                                checksum(std::array<std::uint8_t, 3>{kMasterBusId, mid::kWakeUp, 0x00})};
   out.insert(out.end(), std::begin(wake), std::end(wake));
-  if (!device_) return;
-  ++restarts_;
-  device_->note_restart();
-}
-
-// An output at rate_hz is due on the sample that crosses the next multiple
-// of its period on the scene's grid (every sample when the scene is slower).
-bool Encoder::due(std::uint64_t k, std::uint16_t rate_hz) const noexcept {
-  if (rate_hz == xdi::kEveryPacket) return true;
-  if (rate_hz == 0) return false;
-  if (k == 0) return true;
-  const std::uint64_t now = k * rate_hz / scene_rate_hz_;
-  const std::uint64_t before = (k - 1) * rate_hz / scene_rate_hz_;
-  return now != before;
 }
 
 Measurements Encoder::measurements_of(const ImuFrameInput& s) const {
   Measurements m;
-  const TimeNs power_up =
-      have_power_up_ ? power_up_t_ns_ : s.t_ns - static_cast<TimeNs>(s.sample_counter) * s.period_ns;
-  m.since_power_up_ns = s.t_ns > power_up ? static_cast<std::uint64_t>(s.t_ns - power_up) : 0;
+  m.since_power_up_ns = static_cast<std::uint64_t>(since_power_up_ns(s));
   const Mat3 r_enu_s = enu_from_ned() * s.sensor_to_ned * s_from_b();
   for (int i = 0; i < 3; ++i)
     for (int j = 0; j < 3; ++j) m.r_enu_s[3 * i + j] = r_enu_s(i, j);
@@ -580,52 +549,58 @@ Measurements Encoder::measurements_of(const ImuFrameInput& s) const {
   return m;
 }
 
+const StreamConfig& Encoder::streamed_config(StreamConfig& after_restart) const {
+  if (!device_) return power_up_;
+  const EmitConfig& published = device_->emit_config();
+  if (!restart_pending(published) || published.measurement) return published;
+  // Power-cycled, the io thread not yet told: measurement with the kept settings.
+  after_restart = published;
+  after_restart.measurement = true;
+  return after_restart;
+}
+
+// The outputs of `c` due at sample k of a scene at scene_rate_hz, into
+// due_items (n of them); false when no packet goes. An output at rate_hz is
+// due on the sample that crosses the next multiple of its period on the
+// scene's grid (every sample when the scene is slower); a packet goes when a
+// timed output is due (or, when every output is "every packet", on every
+// sample).
+bool Encoder::packet_due(std::uint64_t k, std::uint64_t scene_rate_hz, const OutputConfiguration& c,
+                         std::span<OutputItem> due_items, std::size_t& n) noexcept {
+  n = 0;
+  bool any_timed = false, only_every = true;
+  for (std::size_t i = 0; i < c.count; ++i) {
+    const OutputItem& it = c.items[i];
+    only_every = only_every && it.rate_hz == xdi::kEveryPacket;
+    if (it.rate_hz != xdi::kEveryPacket && !due_on_scene_grid(k, it.rate_hz, 1, scene_rate_hz)) continue;
+    due_items[n++] = it;
+    any_timed = any_timed || it.rate_hz != xdi::kEveryPacket;
+  }
+  return n != 0 && (any_timed || only_every);
+}
+
 void Encoder::encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out) {
-  const StreamConfig* c = &power_up_;
   StreamConfig after_restart;
-  if (device_) {
-    const EmitConfig& published = device_->emit_config();
-    c = &published;
-    if (published.restarts_handled < restarts_ && !published.measurement) {
-      // Power-cycled, the io thread not yet told: measurement with the kept settings.
-      after_restart = published;
-      after_restart.measurement = true;
-      c = &after_restart;
-    }
-  }
-  if (!have_power_up_) {
-    have_power_up_ = true;
-    power_up_t_ns_ = sample.t_ns - static_cast<TimeNs>(sample.sample_counter) * sample.period_ns;
-  }
-  dtheta_s_rad_ += flu_from_frd(sample.delta_theta_rad);
-  dvel_s_m_s_ += flu_from_frd(sample.delta_velocity_m_s);
+  const StreamConfig* c = &streamed_config(after_restart);
+  start_sample(sample);
+  IncrementSums& sums = increments_[0];
   if (!c->measurement) {
     // Config mode: nothing measured goes out, and the increments restart.
-    dtheta_s_rad_ = Vec3::Zero();
-    dvel_s_m_s_ = Vec3::Zero();
+    sums = IncrementSums{};
     return;
   }
   std::size_t n = 0;
-  bool any_timed = false;
-  for (std::size_t i = 0; i < c->output.count; ++i) {
-    const OutputItem& it = c->output.items[i];
-    if (!due(sample.sample_counter, it.rate_hz)) continue;
-    due_items_[n++] = it;
-    any_timed = any_timed || it.rate_hz != xdi::kEveryPacket;
-  }
-  // A packet goes when a timed output is due (or when every output is
-  // "every packet": then at the scene's rate).
-  bool only_every = true;
-  for (std::size_t i = 0; i < c->output.count; ++i) only_every = only_every && c->output.items[i].rate_hz == xdi::kEveryPacket;
-  if (n == 0 || (!any_timed && !only_every)) return;
+  if (!packet_due(sample.sample_counter, scene_rate_hz_, c->output, due_items_, n)) return;
   Measurements m = measurements_of(sample);
-  const double angle = dtheta_s_rad_.norm();
-  const Vec3 axis = angle > 0.0 ? Vec3(dtheta_s_rad_ / angle) : Vec3::UnitX();
+  // The sums are in body FRD; S is FLU (negating y and z commutes with the
+  // sums, to the bit).
+  const Vec3 dtheta_s_rad = flu_from_frd(sums.dtheta_rad);
+  const double angle = dtheta_s_rad.norm();
+  const Vec3 axis = angle > 0.0 ? Vec3(dtheta_s_rad / angle) : Vec3::UnitX();
   m.delta_q_wxyz[0] = std::cos(angle / 2);
   for (int i = 0; i < 3; ++i) m.delta_q_wxyz[i + 1] = axis[i] * std::sin(angle / 2);
-  copy3(dvel_s_m_s_, m.delta_v_s_m_s);
-  dtheta_s_rad_ = Vec3::Zero();
-  dvel_s_m_s_ = Vec3::Zero();
+  copy3(flu_from_frd(sums.dvel_m_s), m.delta_v_s_m_s);
+  sums = IncrementSums{};
   if (device_) device_->publish_measurements(m);
   append_mtdata2(std::span<const OutputItem>(due_items_.data(), n), *c, m, packet_counter_, out);
   ++packet_counter_;
@@ -649,6 +624,27 @@ std::size_t Encoder::max_bytes_per_sample() const {
   std::size_t payload = 0;
   for (std::size_t i = 0; i < sizes.size() && i < kMaxOutputItems; ++i) payload += sizes[i];
   return 7 + payload + 5;  // preamble, bus id, MID, extended length (3), checksum; WakeUp
+}
+
+double Encoder::configured_bytes_per_second(double sample_rate_hz) const {
+  // The packets of one second of the scene, counted: a packet's size
+  // depends on which outputs are due together, and outputs at rates that do
+  // not divide each other share some packets and not others.
+  StreamConfig after_restart;
+  const StreamConfig& c = streamed_config(after_restart);
+  if (!c.measurement || !(sample_rate_hz > 0.0)) return 0.0;
+  const auto samples = static_cast<std::uint64_t>(std::max<long long>(1, std::llround(sample_rate_hz)));
+  std::array<OutputItem, kMaxOutputItems> items{};
+  double bytes = 0.0;
+  for (std::uint64_t k = 0; k < samples; ++k) {
+    std::size_t n = 0;
+    if (!packet_due(k, samples, c.output, items, n)) continue;
+    std::size_t payload = 0;
+    for (std::size_t i = 0; i < n; ++i) payload += 3 + data_bytes(items[i].id);
+    // [L] preamble, bus id, MID, length (3 bytes when extended), checksum.
+    bytes += static_cast<double>(payload + (payload < kExtendedLength ? 5 : 7));
+  }
+  return bytes * sample_rate_hz / static_cast<double>(samples);
 }
 
 StreamFrameLayout Encoder::frame_layout(std::span<const std::uint8_t> frame) const {
@@ -689,27 +685,22 @@ double read_value(const std::uint8_t* p, unsigned precision) noexcept {
   }
 }
 
-void Decoder::feed(std::span<const std::uint8_t> bytes, const SampleCallback& on_sample) {
-  buffer_.insert(buffer_.end(), bytes.begin(), bytes.end());
+std::size_t Decoder::decode_buffer(const SampleCallback& on_sample) {
   std::size_t pos = 0;
   const std::size_t n = buffer_.size();
+  constexpr std::uint8_t kSync[] = {kPreamble, kMasterBusId};
   while (pos < n) {
-    if (buffer_[pos] != kPreamble) {
-      ++counters_.resync_bytes, ++pos;
-      continue;
-    }
-    if (pos + 4 > n) break;
-    if (buffer_[pos + 1] != kMasterBusId) {
-      ++counters_.resync_bytes, ++pos;
-      continue;
-    }
+    // The bus identifier is checked once the length byte is in too.
+    const FrameStart start = frame_start_at(pos, kSync, 4);
+    if (start == FrameStart::need_more) break;
+    if (start == FrameStart::skipped) continue;
     std::size_t header = 4, length = buffer_[pos + 3];
     if (length == kExtendedLength) {
       if (pos + 6 > n) break;
       header = 6;
       length = (std::size_t{buffer_[pos + 4]} << 8) | buffer_[pos + 5];
       if (length > kMaxPayloadBytes) {
-        ++counters_.other_errors, ++counters_.resync_bytes, ++pos;
+        skip_byte(pos, &DecoderCounters::other_errors);
         continue;
       }
     }
@@ -718,7 +709,7 @@ void Decoder::feed(std::span<const std::uint8_t> bytes, const SampleCallback& on
     unsigned sum = 0;
     for (std::size_t i = pos + 1; i < pos + total; ++i) sum += buffer_[i];
     if ((sum & 0xFF) != 0) {
-      ++counters_.checksum_errors, ++counters_.resync_bytes, ++pos;
+      skip_byte(pos, &DecoderCounters::checksum_errors);
       continue;
     }
     ++counters_.frames;
@@ -781,7 +772,7 @@ void Decoder::feed(std::span<const std::uint8_t> bytes, const SampleCallback& on
     }
     pos += total;
   }
-  buffer_.erase(buffer_.begin(), buffer_.begin() + static_cast<std::ptrdiff_t>(pos));
+  return pos;
 }
 
 }  // namespace imuemu::drivers::xsens

@@ -49,6 +49,8 @@
 #include <vector>
 
 #include "drivers/protocol.hpp"
+#include "drivers/protocols/device_encoder_base.hpp"
+#include "drivers/protocols/frame_resync.hpp"
 #include "drivers/protocols/stream_protocols.hpp"
 
 namespace imuemu::drivers::xsens {
@@ -237,20 +239,20 @@ void append_item_data(std::uint16_t id, const StreamConfig& frames, const Measur
 
 class Device;
 
-class Encoder final : public StreamEncoder {
+class Encoder final : public DeviceEncoderBase<Device, StreamConfig, 1> {  // one MTData2 stream
  public:
   explicit Encoder(const StreamEncoderOptions& options);
   Encoder(const Encoder& other) : Encoder(other.options_) {}
   Encoder& operator=(const Encoder& other);
+  Encoder& operator=(Encoder&& other);
   ~Encoder() override;
   std::string name() const override { return "xsens"; }
-  CommandResponder* command_responder() override;
   void encode(const ImuFrameInput& sample, std::vector<std::uint8_t>& out) override;
+  // The widest MTData2 any configuration makes (the emission buffers' size).
   std::size_t max_bytes_per_sample() const override;
-  // [L] ΔQ / Δv are the strapdown integration's increments (coning and
-  // sculling compensated).
-  bool compensated_increments() const override { return true; }
-  bool needs_navigation() const override { return true; }
+  // The MTData2 packets of the output configuration now
+  // (docs/xsens-device.md "Link budget").
+  double configured_bytes_per_second(double sample_rate_hz) const override;
   StreamFrameLayout frame_layout(std::span<const std::uint8_t> frame) const override;
   bool has_sequence_counter() const override { return true; }
   void sequence_step(std::int64_t step) override { packet_counter_ = static_cast<std::uint16_t>(packet_counter_ + step); }
@@ -263,19 +265,12 @@ class Encoder final : public StreamEncoder {
   static StreamConfig power_up_config(const XsensDeviceConfig& config);
 
  private:
-  bool due(std::uint64_t k, std::uint16_t rate_hz) const noexcept;
-  StreamEncoderOptions options_;
+  // What streams now; after_restart: the room for a configuration made here.
+  const StreamConfig& streamed_config(StreamConfig& after_restart) const;
+  static bool packet_due(std::uint64_t k, std::uint64_t scene_rate_hz, const OutputConfiguration& c,
+                         std::span<OutputItem> due_items, std::size_t& n) noexcept;
   ModelTraits traits_;
-  std::uint64_t scene_rate_hz_ = 400;
-  std::unique_ptr<Device> device_;
-  StreamConfig power_up_;
-  bool have_power_up_ = false;
-  TimeNs power_up_t_ns_ = 0;
   std::uint16_t packet_counter_ = 0;
-  std::uint64_t restarts_ = 0;
-  // ΔQ / Δv accumulated since each last went out (rotation vector in S, velocity in S).
-  Vec3 dtheta_s_rad_ = Vec3::Zero();
-  Vec3 dvel_s_m_s_ = Vec3::Zero();
   std::array<OutputItem, kMaxOutputItems> due_items_{};  // scratch, no allocation
 };
 
@@ -283,14 +278,9 @@ class Encoder final : public StreamEncoder {
 // MTData2 with RateOfTurn or Acceleration (any precision) is a sample, in the
 // body FRD axes of an unrotated device (x, -y, -z of S); PacketCounter is its
 // sequence, SampleTimeFine its time.
-class Decoder final : public StreamDecoder {
- public:
-  void feed(std::span<const std::uint8_t> bytes, const SampleCallback& on_sample) override;
-  const DecoderCounters& counters() const override { return counters_; }
-
+class Decoder final : public ResyncingDecoder {
  private:
-  std::vector<std::uint8_t> buffer_;
-  DecoderCounters counters_;
+  std::size_t decode_buffer(const SampleCallback& on_sample) override;
   bool have_counter_ = false;
   std::uint16_t last_counter_ = 0;
 };

@@ -39,6 +39,7 @@
 #include <chrono>
 #include <cstdint>
 #include <cstdlib>
+#include <functional>
 #include <map>
 #include <new>
 #include <optional>
@@ -998,6 +999,45 @@ TEST(MipDevice, MavlinkAnswersSerialisedOnTheEmissionThreadAllocateNothing) {
   EXPECT_EQ(c.answered, 100u);
 }
 
+// The replies a device sends (the emission tests below count them).
+struct CountingReplySink final : drivers::ReplySink {
+  std::size_t replies = 0;
+  bool reply(std::span<const std::uint8_t>) override { return ++replies, true; }
+  void change_baud_after_replies(std::uint32_t) override {}
+};
+
+struct EmissionTally {
+  std::uint64_t allocations = 0;  // inside encode() only
+  std::uint64_t bytes = 0;        // emitted
+};
+// Encodes `samples` samples of `period_ns` with a navigation fix at
+// `latitude_rad` into a buffer reserved to max_bytes_per_sample(), as the
+// emission thread does, calling between(k) before sample k (the commands
+// the io thread answers meanwhile, not counted).
+EmissionTally encode_counting_allocations(drivers::StreamEncoder& enc, std::uint64_t samples, TimeNs period_ns,
+                                          double latitude_rad, const std::function<void(std::uint64_t)>& between) {
+  Bytes out;
+  out.reserve(enc.max_bytes_per_sample());
+  drivers::ImuFrameInput s;
+  s.period_ns = period_ns;
+  s.has_navigation = true;
+  s.latitude_rad = latitude_rad;
+  EmissionTally tally;
+  for (std::uint64_t k = 0; k < samples; ++k) {
+    between(k);
+    s.sample_counter = k;
+    s.t_ns = static_cast<TimeNs>(k) * s.period_ns;
+    out.clear();
+    const std::uint64_t before = g_emission_allocations.load();
+    t_counting = true;
+    enc.encode(s, out);
+    t_counting = false;
+    tally.allocations += g_emission_allocations.load() - before;
+    tally.bytes += out.size();
+  }
+  return tally;
+}
+
 // The VectorNav device (tests/device/test_vectornav_device.cpp): its encoder
 // builds three binary outputs and an ASCII sentence per sample and hands its
 // latest measurements to the command side, while register writes change
@@ -1010,11 +1050,7 @@ TEST(MipDevice, VectorNavEmissionWithCommandsBetweenSamplesAllocatesNothing) {
   drivers::vectornav::Encoder enc(o);
   drivers::CommandResponder* r = enc.command_responder();
   ASSERT_NE(r, nullptr);
-  struct CountingSink final : drivers::ReplySink {
-    std::size_t replies = 0;
-    bool reply(std::span<const std::uint8_t>) override { return ++replies, true; }
-    void change_baud_after_replies(std::uint32_t) override {}
-  } sink;
+  CountingReplySink sink;
   auto send = [&](const std::string& body) {
     char sum[8];
     std::uint8_t x = 0;
@@ -1027,26 +1063,11 @@ TEST(MipDevice, VectorNavEmissionWithCommandsBetweenSamplesAllocatesNothing) {
   send("VNWRG,75,1,2,01,0721");
   send("VNWRG,76,1,8,31,0001,0106,0613");
   send("VNWRG,77,1,80,49,0003,26B8,0018");
-  Bytes out;
-  out.reserve(enc.max_bytes_per_sample());
-  drivers::ImuFrameInput s;
-  s.period_ns = 2'500'000;
-  s.has_navigation = true;
-  s.latitude_rad = 0.8;
-  std::uint64_t allocations = 0;
-  for (std::uint64_t k = 0; k < 400; ++k) {
+  const EmissionTally tally = encode_counting_allocations(enc, 400, 2'500'000, 0.8, [&](std::uint64_t k) {
     if (k % 10 == 0) send("VNRRG,08");
     if (k % 100 == 50) send(k % 200 == 50 ? "VNWRG,06,19" : "VNWRG,06,14");
-    s.sample_counter = k;
-    s.t_ns = static_cast<TimeNs>(k) * s.period_ns;
-    out.clear();
-    const std::uint64_t before = g_emission_allocations.load();
-    t_counting = true;
-    enc.encode(s, out);
-    t_counting = false;
-    allocations += g_emission_allocations.load() - before;
-  }
-  EXPECT_EQ(allocations, 0u);
+  });
+  EXPECT_EQ(tally.allocations, 0u);
   EXPECT_EQ(sink.replies, 4u + 40u + 4u);
   EXPECT_EQ(r->command_counters().nacked, 0u);
 }
@@ -1062,11 +1083,7 @@ TEST(MipDevice, SbgEmissionWithCommandsBetweenSamplesAllocatesNothing) {
   drivers::sbg::Encoder enc(o);
   drivers::CommandResponder* r = enc.command_responder();
   ASSERT_NE(r, nullptr);
-  struct CountingSink final : drivers::ReplySink {
-    std::size_t replies = 0;
-    bool reply(std::span<const std::uint8_t>) override { return ++replies, true; }
-    void change_baud_after_replies(std::uint32_t) override {}
-  } sink;
+  CountingReplySink sink;
   auto send = [&](std::uint8_t msg, const Bytes& payload) {
     Bytes frame;
     drivers::sbg::append_frame(msg, drivers::sbg::kClassCmd0, payload, frame);
@@ -1080,14 +1097,7 @@ TEST(MipDevice, SbgEmissionWithCommandsBetweenSamplesAllocatesNothing) {
   output_conf(3, 0, 1001);
   output_conf(44, 0, 1001);
   output_conf(0, 1, 20001);
-  Bytes out;
-  out.reserve(enc.max_bytes_per_sample());
-  drivers::ImuFrameInput s;
-  s.period_ns = 1'000'000;
-  s.has_navigation = true;
-  s.latitude_rad = 0.7;
-  std::uint64_t allocations = 0;
-  for (std::uint64_t k = 0; k < 1000; ++k) {
+  const EmissionTally tally = encode_counting_allocations(enc, 1000, 1'000'000, 0.7, [&](std::uint64_t k) {
     if (k % 100 == 0) send(drivers::sbg::kCmdInfo, Bytes{});
     if (k % 250 == 125) {
       const std::string path = "/api/v1/settings/output/comA/messages/ekfEuler";
@@ -1099,16 +1109,8 @@ TEST(MipDevice, SbgEmissionWithCommandsBetweenSamplesAllocatesNothing) {
       p.push_back(0);
       send(drivers::sbg::kCmdApiPost, p);
     }
-    s.sample_counter = k;
-    s.t_ns = static_cast<TimeNs>(k) * s.period_ns;
-    out.clear();
-    const std::uint64_t before = g_emission_allocations.load();
-    t_counting = true;
-    enc.encode(s, out);
-    t_counting = false;
-    allocations += g_emission_allocations.load() - before;
-  }
-  EXPECT_EQ(allocations, 0u);
+  });
+  EXPECT_EQ(tally.allocations, 0u);
   EXPECT_EQ(sink.replies, 11u + 10u + 4u);
   EXPECT_EQ(r->command_counters().nacked, 0u);
 }
@@ -1125,11 +1127,7 @@ TEST(MipDevice, XsensEmissionWithCommandsBetweenSamplesAllocatesNothing) {
   drivers::xsens::Encoder enc(o);
   drivers::CommandResponder* r = enc.command_responder();
   ASSERT_NE(r, nullptr);
-  struct CountingSink final : drivers::ReplySink {
-    std::size_t replies = 0;
-    bool reply(std::span<const std::uint8_t>) override { return ++replies, true; }
-    void change_baud_after_replies(std::uint32_t) override {}
-  } sink;
+  CountingReplySink sink;
   // Xbus frames written here from [L 2.2]: FA FF MID LEN DATA CS.
   auto send = [&](std::uint8_t mid, std::vector<std::uint8_t> data) {
     Bytes f{0xFA, 0xFF, mid, static_cast<std::uint8_t>(data.size())};
@@ -1155,28 +1153,12 @@ TEST(MipDevice, XsensEmissionWithCommandsBetweenSamplesAllocatesNothing) {
     send(0x10, {});
   };
   configure(true);
-  Bytes out;
-  out.reserve(enc.max_bytes_per_sample());
-  drivers::ImuFrameInput s;
-  s.period_ns = 2'500'000;
-  s.has_navigation = true;
-  s.latitude_rad = 0.8;
-  std::uint64_t allocations = 0, bytes = 0;
-  for (std::uint64_t k = 0; k < 400; ++k) {
+  const EmissionTally tally = encode_counting_allocations(enc, 400, 2'500'000, 0.8, [&](std::uint64_t k) {
     if (k % 10 == 0) send(0x34, {});  // ReqData
     if (k % 100 == 50) configure(k % 200 != 50);
-    s.sample_counter = k;
-    s.t_ns = static_cast<TimeNs>(k) * s.period_ns;
-    out.clear();
-    const std::uint64_t before = g_emission_allocations.load();
-    t_counting = true;
-    enc.encode(s, out);
-    t_counting = false;
-    allocations += g_emission_allocations.load() - before;
-    bytes += out.size();
-  }
-  EXPECT_EQ(allocations, 0u);
-  EXPECT_GT(bytes, 400u * 100u);  // every sample streamed (config mode only between the commands)
+  });
+  EXPECT_EQ(tally.allocations, 0u);
+  EXPECT_GT(tally.bytes, 400u * 100u);  // every sample streamed (config mode only between the commands)
   EXPECT_EQ(sink.replies, 3u + 40u + 4u * 3u);
   EXPECT_EQ(r->command_counters().nacked, 0u);
 }

@@ -52,6 +52,7 @@
 #include <utility>
 #include <vector>
 
+#include "drivers/link_budget.hpp"
 #include "drivers/protocols/sbg.hpp"
 #include "drivers/protocols/sbg_device.hpp"
 #include "drivers/protocols/stream_protocols.hpp"
@@ -509,6 +510,47 @@ TEST(SbgLogs, LinkBudgetBoundsEveryLogAtOnce) {
     EXPECT_LE(out.size(), b.enc->max_bytes_per_sample());
   }
   EXPECT_EQ(most, b.enc->max_bytes_per_sample());  // all eleven at tick 0 and every 5 ms
+}
+
+TEST(SbgLogs, ConfiguredTrafficIsEachLogsFrameTimesItsRateAndFollowsOutputConf) {
+  // docs/sbg-device.md's log table (payload bytes) plus 9 bytes of framing
+  // (sync 2, id, class, length 2, CRC 2, ETX), at the factory rates: STATUS
+  // 1 Hz, UTC_TIME 5 Hz, IMU_SHORT 50 Hz, MAG 10 Hz, EKF_EULER / EKF_QUAT 25
+  // Hz; on an INS also EKF_NAV 25 Hz, GPS1_VEL / GPS1_POS 5 Hz.
+  const double ahrs = (27 + 9) * 1 + (21 + 9) * 5 + (32 + 9) * 50 + (30 + 9) * 10 + (40 + 9) * 25 + (44 + 9) * 25;
+  const double ins = ahrs + (72 + 9) * 25 + (44 + 9) * 5 + (62 + 9) * 5;
+  EXPECT_EQ(ins, 7821.0);  // the document's figure
+  Bench a(drivers::SbgModel::ellipse_a, 200.0);
+  EXPECT_DOUBLE_EQ(a.enc->configured_bytes_per_second(200.0), ahrs);
+  Bench b(drivers::SbgModel::ellipse_n, 200.0);
+  EXPECT_DOUBLE_EQ(b.enc->configured_bytes_per_second(200.0), ins);
+  EXPECT_EQ(static_cast<double>(b.stream(200).size()), ins);  // one second on the wire agrees
+
+  // OUTPUT_CONF (port A): IMU_SHORT every main-loop tick (200 Hz), EKF_QUAT off.
+  for (const auto& [msg, mode] : std::vector<std::pair<std::uint8_t, std::uint16_t>>{{44, 1}, {7, 0}}) {
+    Bytes p{0, msg, 0};
+    put_u16(p, mode);
+    const std::vector<Frame> r = b.send(spec_frame(30, 0x10, p));
+    ASSERT_EQ(r.size(), 1u);
+    ASSERT_EQ(u16(r[0].payload, 2), 0) << int{msg};
+  }
+  const double reconfigured = ins + (32 + 9) * (200 - 50) - (44 + 9) * 25;
+  EXPECT_DOUBLE_EQ(b.enc->configured_bytes_per_second(200.0), reconfigured);
+  EXPECT_EQ(static_cast<double>(b.stream(200, 200).size()), reconfigured);
+  // A 100 Hz scene sends IMU_SHORT on every sample: 100 Hz, not 200.
+  EXPECT_DOUBLE_EQ(b.enc->configured_bytes_per_second(100.0), reconfigured - (32 + 9) * 100);
+
+  // The budget's verdict is on the factory outputs (78210 bit/s of 115200
+  // at 8N1: ok), the worst case beside it: every log on every sample.
+  Bench fresh(drivers::SbgModel::ellipse_n, 200.0);
+  const drivers::LinkBudget budget = drivers::uart_budget(*fresh.enc, 200.0, drivers::SerialSettings{});
+  EXPECT_EQ(budget.verdict, drivers::BudgetVerdict::ok) << budget.message;
+  EXPECT_DOUBLE_EQ(budget.bits_per_second_used, ins * 10);
+  const double every_log = 27 + 21 + 58 + 32 + 18 + 30 + 40 + 44 + 72 + 44 + 62 + 11 * 9;
+  ASSERT_TRUE(budget.worst_case_bytes_per_second.has_value());
+  EXPECT_DOUBLE_EQ(*budget.worst_case_bytes_per_second, every_log * 200);
+  EXPECT_DOUBLE_EQ(*budget.worst_case_load_fraction, every_log * 200 * 10 / 115200.0);
+  EXPECT_NE(budget.message.find("worst case"), std::string::npos) << budget.message;
 }
 
 // ------------------------------------------------ commands

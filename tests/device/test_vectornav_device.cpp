@@ -489,6 +489,37 @@ TEST(VectorNavDevice, AsyncAsciiFollowsRegisters6And7AndVnasyPausesEverything) {
   EXPECT_EQ(s.packets.size(), 50u);
 }
 
+TEST(VectorNavDevice, ConfiguredTrafficIsEachOutputsBytesTimesItsRateAndFollowsRegisterWrites) {
+  drivers::vectornav::Encoder e(options(drivers::VectorNavModel::vn100, 800));
+  drivers::CommandResponder& d = *e.command_responder();
+  // One second of the scene on the wire.
+  auto wire_bytes = [&](std::uint64_t first) {
+    Bytes out;
+    for (std::uint64_t k = first; k < first + 800; ++k) e.encode(sample_at(k, 800), out);
+    return static_cast<double>(out.size());
+  };
+  // Power-up: $VNYMR at 40 Hz, of fixed-width fields [U]: "$VNYMR," (7),
+  // yaw / pitch / roll %+08.3f (3 x 8), magnetic %+07.4f (3 x 7),
+  // acceleration %+07.3f (3 x 7), angular rate %+09.6f (3 x 9), 11 commas,
+  // "*XX\r\n" (5).
+  const double ymr = 7 + 3 * 8 + 3 * 7 + 3 * 7 + 3 * 9 + 11 + 5;
+  EXPECT_DOUBLE_EQ(e.configured_bytes_per_second(800.0), ymr * 40);
+  EXPECT_EQ(wire_bytes(0), ymr * 40);
+  // Binary output 1 at 800 / 8 = 100 Hz, Common group TimeStartup (8),
+  // Ypr (12), AngularRate (12): sync, group byte, one field mask (2), the
+  // fields, CRC (2).
+  ask(d, framed("VNWRG,75,1,8,01,0029"));
+  const double binary = 1 + 1 + 2 + (8 + 12 + 12) + 2;
+  EXPECT_DOUBLE_EQ(e.configured_bytes_per_second(800.0), ymr * 40 + binary * 100);
+  EXPECT_EQ(wire_bytes(800), ymr * 40 + binary * 100);
+  // A 50 Hz scene sends the 100 Hz packet on every sample.
+  EXPECT_DOUBLE_EQ(e.configured_bytes_per_second(50.0), ymr * 40 + binary * 50);
+  ask(d, framed("VNWRG,06,0"));  // the ASCII output off
+  EXPECT_DOUBLE_EQ(e.configured_bytes_per_second(800.0), binary * 100);
+  ask(d, framed("VNASY,0"));  // everything paused
+  EXPECT_DOUBLE_EQ(e.configured_bytes_per_second(800.0), 0.0);
+}
+
 TEST(VectorNavDevice, ARestartBringsBackTheSavedSettings) {
   drivers::vectornav::Encoder e(options(drivers::VectorNavModel::vn100, 800));
   drivers::CommandResponder& d = *e.command_responder();

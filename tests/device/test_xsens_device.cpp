@@ -488,6 +488,34 @@ TEST(XsensDevice, OutputConfigurationAppliesDivisorRatesAndTheModelsOutputs) {
   EXPECT_EQ(euler, 10);
 }
 
+TEST(XsensDevice, ConfiguredTrafficCountsThePacketsOfTheOutputConfiguration) {
+  drivers::xsens::Encoder e(options(drivers::XsensModel::mti630));
+  drivers::CommandResponder& d = *e.command_responder();
+  // One second of the 400 Hz scene on the wire.
+  auto wire_bytes = [&](std::uint64_t first) {
+    Bytes out;
+    for (std::uint64_t k = first; k < first + 400; ++k) e.encode(sample_at(k), out);
+    return static_cast<double>(out.size());
+  };
+  // Power-up (docs/xsens-device.md): PacketCounter (2) and SampleTimeFine
+  // (4) in every packet, Quaternion (16), Acceleration, RateOfTurn,
+  // MagneticField (12 each) and StatusWord (4) at 100 Hz: 7 x (id 2 + size
+  // 1) + 62 bytes of data, and preamble, bus id, MID, length, checksum.
+  const double factory_packet = 7 * 3 + (2 + 4 + 16 + 12 + 12 + 12 + 4) + 5;
+  EXPECT_DOUBLE_EQ(e.configured_bytes_per_second(400.0), factory_packet * 100);
+  EXPECT_EQ(wire_bytes(0), factory_packet * 100);
+  // Acceleration at 100 Hz and RateOfTurn at 40 Hz with PacketCounter: a
+  // packet on every 4th sample and every 10th, both on every 20th (20 Hz):
+  // 80 with Acceleration alone, 20 with RateOfTurn alone, 20 with both.
+  ask(d, spec_message(0x30));
+  ask(d, spec_message(0xC0, config_data({{0x1020, 0xFFFF}, {0x4020, 100}, {0x8020, 40}})));
+  EXPECT_DOUBLE_EQ(e.configured_bytes_per_second(400.0), 0.0);  // config state: nothing
+  ask(d, spec_message(0x10));
+  const double one = 2 * 3 + 2 + 12 + 5, both = 3 * 3 + 2 + 12 + 12 + 5;
+  EXPECT_DOUBLE_EQ(e.configured_bytes_per_second(400.0), 80 * one + 20 * one + 20 * both);
+  EXPECT_EQ(wire_bytes(400), 80 * one + 20 * one + 20 * both);
+}
+
 TEST(XsensDevice, FramesAndPrecisionsFollowTheIdentifiersFormatBits) {
   drivers::xsens::Encoder e(options(drivers::XsensModel::mti680g));
   drivers::CommandResponder& d = *e.command_responder();

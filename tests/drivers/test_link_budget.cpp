@@ -131,6 +131,19 @@ TEST(UartBudget, FromARealStreamEncoder) {
   EXPECT_EQ(at_921600.verdict, BudgetVerdict::ok) << at_921600.message;  // 54.7 %
 }
 
+TEST(UartBudget, AProtocolNoConfigurationChangesIsJudgedOnItsWorstCase) {
+  // native: 126-byte frames on every sample whatever is configured, so the
+  // configured traffic and the worst case beside it are both 126 x 400 B/s.
+  drv::StreamEncoderOptions o;
+  o.include_deltas = true;
+  const auto encoder = drv::make_stream_encoder("native", o);
+  EXPECT_DOUBLE_EQ(encoder->configured_bytes_per_second(400.0), 126.0 * 400);
+  const drv::LinkBudget b = drv::uart_budget(*encoder, 400.0, serial(921600, 8, drv::Parity::none, 1));
+  ASSERT_TRUE(b.worst_case_bytes_per_second.has_value() && b.worst_case_load_fraction.has_value());
+  EXPECT_DOUBLE_EQ(*b.worst_case_bytes_per_second, 126.0 * 400);
+  EXPECT_DOUBLE_EQ(*b.worst_case_load_fraction, b.load_fraction);
+}
+
 TEST(CanBudget, WorstCaseStuffBitsMatchABitLevelStuffer) {
   // The formulas charge floor((L - 1) / 4) stuff bits to L stuffable bits.
   // The worst pattern 00000 1111 0000 1111 ... reaches it exactly; random
