@@ -897,8 +897,9 @@ TEST(XsensDevice, XspublicOpenPortRequestsAreAnsweredInTheLayoutItReads) {
 // and fails on an Error (0x42).
 //
 // With the default `scan_for_devices: true` the node only scans ports
-// xspublic's udev enumeration lists as Xsens USB devices (isXsensUsbDevice
-// on the USB parent's vendor / product ids; /dev/ttyS* skipped): a bench's
+// xspublic's udev enumeration lists as Xsens USB devices (isXsensUsbDevice:
+// Xsens' vendor id, or FTDI's with product ids 0xD388-0xD38F; /dev/ttyS*
+// skipped; without libudev, every /dev/ttyUSB*): a bench's
 // UART, USB-serial adapter or pty needs scan_for_devices false and the
 // port and baudrate parameters, the path replayed here.
 TEST(XsensDevice, Ros2NodeStartUpGetsEveryReplyItWaitsForAndTheFirstMtData2Decodes) {
