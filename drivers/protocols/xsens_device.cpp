@@ -15,6 +15,13 @@ namespace imuemu::drivers::xsens {
 
 namespace {
 
+// ReqEmts / EmtsData: not in [L]'s message list (the EMTS, the device's
+// extended settings, are Xsens-internal); the ids and the request's two
+// bytes (first page, page count) as xspublic's XsDevice::
+// readEmtsAndDeviceConfiguration sends them. Kept here, not in xsens.hpp's
+// table of documented messages.
+constexpr std::uint8_t kReqEmts = 0x90;
+
 template <class T>
 void put(std::vector<std::uint8_t>& out, T v) {
   std::uint8_t b[sizeof(T)];
@@ -220,7 +227,8 @@ Device::Outcome Device::command(std::uint8_t m, std::span<const std::uint8_t> da
   const bool config_only = m == mid::kBaudrate || m == mid::kOutputConfiguration || m == mid::kAlignmentRotation ||
                            m == mid::kRestoreFactoryDef || m == mid::kReqConfiguration || m == mid::kOptionFlags ||
                            m == mid::kLocationId || m == mid::kFilterProfile || m == mid::kAvailableFilterProfiles ||
-                           m == mid::kGnssPlatform || m == mid::kGnssLeverArm || m == mid::kStringOutputType;
+                           m == mid::kGnssPlatform || m == mid::kGnssLeverArm || m == mid::kStringOutputType ||
+                           m == kReqEmts;
   if (config_only && measurement_) return refuse(ErrorCode::invalid_message);
   switch (m) {
     case mid::kWakeUpAck:
@@ -430,6 +438,13 @@ Device::Outcome Device::command(std::uint8_t m, std::span<const std::uint8_t> da
         return o;
       }
       return data.size() == 12 ? o : refuse(ErrorCode::invalid_parameter);
+    case kReqEmts:
+      // EmtsData (0x91) with no pages: the blob's layout is not public and
+      // xspublic does not parse it (it keeps it for a .mtb log's header);
+      // what its transaction waits for is the reply's MID.
+      if (data.size() != 2) return refuse(ErrorCode::invalid_parameter);
+      log("ReqEmts: EmtsData without pages");
+      return o;
     default: return refuse(ErrorCode::invalid_message);
   }
 }

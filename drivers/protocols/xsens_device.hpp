@@ -25,7 +25,8 @@
 //      legacy configuration), ReqOptionFlags (0x48), ReqLocationId (0x84),
 //      ReqFilterProfile (0x64), ReqAvailableFilterProfiles (0x62),
 //      ReqGnssPlatform (0x76), ReqGnssLeverArm (0x68), Req/SetStringOutputType
-//      (0x8E: 0, no NMEA output).
+//      (0x8E: 0, no NMEA output), ReqEmts (0x90, not in [L]: xspublic's
+//      readEmtsAndDeviceConfiguration; EmtsData 0x91 without pages).
 //      Anything else, and a request whose data do not parse: Error (0x42)
 //      with the code of [L] "Error codes"; a refused command changes nothing.
 //  Settings are kept as the device keeps them (non-volatile: a Reset or a

@@ -39,6 +39,11 @@
 //    "/api/v1/settings/output/comA/messages/imuShort" = "\"100ms\"" and reads
 //    needReboot; ellipseLegacy sends CMD_INFO and OUTPUT_CONF (port A,
 //    IMU_DATA and EKF_EULER, mode 8 = every 8 ticks of the 200 Hz loop).
+//  - The ROS 2 driver SBG-Systems/sbg_ros2_driver 3.3.2
+//    (346000395b29bc865701f9a85acd65a37d9c04e1; its vendored sbgECom
+//    5.3.2276): with its default configuration files (confWithRos false in
+//    all of config/*.yaml and config/example/*.yaml) it sends CMD_INFO only
+//    and reads the logs the device streams; see the test for the details.
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
@@ -872,6 +877,72 @@ TEST(SbgClients, SbgEComExampleAndEllipseLegacySequences) {
   f = spec_frames(legacy.stream(200));
   EXPECT_EQ(count(f, 0, 3), 25);
   EXPECT_EQ(count(f, 0, 6), 25);
+}
+
+TEST(SbgClients, Ros2DriverDefaultStartUpGetsItsInfoThenDecodesTheFactoryLogs) {
+  // SBG-Systems/sbg_ros2_driver 3.3.2 (346000395b29bc865701f9a85acd65a37d9c04e1),
+  // config/sbg_device_uart_default.yaml: confWithRos false, uartConf
+  // 115200 baud, no fallbackBaudRates. src/sbg_device.cpp connect():
+  // sbgEComInit, then readDeviceInfo() -> sbgEComCmdGetInfo (its vendored
+  // sbgECom 5.3.2276, src/commands/sbgEComCmdInfo.c): CMD_INFO with no
+  // payload, up to numTrials times, each waiting cmdDefaultTimeOut for a
+  // class 0x10 id 4 frame with a non-empty payload read as product code [32],
+  // serial u32, calibration revision u32, year u16, month u8, day u8,
+  // hardware revision u32, firmware revision u32. configure() applies
+  // nothing with confWithRos false; the node then reads whatever logs the
+  // device streams (onLogReceived -> MessagePublisher).
+  Bench b;
+  const Bytes info_request{0xFF, 0x5A, 0x04, 0x10, 0x00, 0x00, 0x79, 0xF7, 0x33};
+  const std::vector<Frame> r = b.send(info_request);
+  ASSERT_EQ(r.size(), 1u);
+  ASSERT_EQ(r[0].cls, 0x10);
+  ASSERT_EQ(r[0].msg, 4);
+  const Bytes& info = r[0].payload;
+  ASSERT_EQ(info.size(), 52u) << "every field sbgEComCmdGetInfo reads, no stream error";
+  EXPECT_EQ(std::string(reinterpret_cast<const char*>(info.data())), "ELLIPSE-N-G4A3-B1");
+  EXPECT_EQ(u32(info, 32), 45000123u);
+  const unsigned month = info[42], day = info[43];
+  EXPECT_GE(u16(info, 40), 2000u);  // calibration date, printed d / m / y
+  EXPECT_TRUE(month >= 1 && month <= 12 && day >= 1 && day <= 31);
+  // getVersionAsString -> sbgVersionToStringEncoded: bit 31 set, a
+  // software version "3.2.2406-stable".
+  const std::uint32_t fw = u32(info, 48);
+  EXPECT_EQ(fw >> 31, 1u);
+  EXPECT_EQ((fw >> 22) & 0x3F, 3u);
+  EXPECT_EQ((fw >> 16) & 0x3F, 2u);
+  EXPECT_EQ(fw & 0xFFFF, 2406u);
+  EXPECT_EQ(b.enc->command_responder()->command_counters().nacked, 0u);
+
+  // The factory logs, decoded as sbgECom 5.3 reads them and the node's
+  // MessageWrapper scales them (accelerometer 2^20, gyroscope 2^26,
+  // temperature 2^8 per unit for IMU_SHORT).
+  const std::vector<Frame> f = spec_frames(b.stream(200));
+  const Frame* sh = first(f, 0, 44);
+  ASSERT_NE(sh, nullptr);
+  ASSERT_EQ(sh->payload.size(), 32u);  // time stamp, status, 3 x i32, 3 x i32, i16
+  EXPECT_NEAR(i32(sh->payload, 6) / 1048576.0, 0.1, 1e-5);
+  EXPECT_NEAR(i32(sh->payload, 14) / 1048576.0, -9.8, 1e-5);
+  EXPECT_NEAR(i32(sh->payload, 18) / 67108864.0, 0.01, 1e-6);
+  EXPECT_NEAR(i32(sh->payload, 26) / 67108864.0, 0.03, 1e-6);
+  EXPECT_GT(i16(sh->payload, 30) / 256.0, -40.0);
+  EXPECT_LT(i16(sh->payload, 30) / 256.0, 85.0);
+  const Frame* q = first(f, 0, 7);
+  ASSERT_NE(q, nullptr);
+  ASSERT_GE(q->payload.size(), 36u);  // time, w x y z, 3 std devs, status (+ declination, inclination)
+  const Eigen::Quaterniond got(f32(q->payload, 4), f32(q->payload, 8), f32(q->payload, 12), f32(q->payload, 16));
+  EXPECT_NEAR(got.angularDistance(Eigen::Quaterniond(Eigen::AngleAxisd(0.6, Eigen::Vector3d::UnitZ()))), 0.0, 1e-6);
+  const Frame* eu = first(f, 0, 6);
+  ASSERT_NE(eu, nullptr);
+  EXPECT_NEAR(f32(eu->payload, 12), 0.6, 1e-6);  // yaw, rad
+  const Frame* nav = first(f, 0, 8);
+  ASSERT_NE(nav, nullptr);
+  ASSERT_EQ(nav->payload.size(), 72u);
+  EXPECT_NEAR(f32(nav->payload, 4), 3.0, 1e-6);  // velocity north
+  EXPECT_NEAR(f64(nav->payload, 28), 41.39, 1e-9);  // latitude, deg
+  // Every log the default yaml gives a publisher (status, UTC, IMU_SHORT,
+  // EKF euler / quat / nav, GPS1 vel / pos) arrives within 1 s.
+  for (const int msg : {1, 2, 44, 6, 7, 8, 13, 14})
+    EXPECT_GT(count(f, 0, static_cast<std::uint8_t>(msg)), 0) << "log " << msg;
 }
 
 // ------------------------------------------------ listen's decoder

@@ -41,6 +41,18 @@
 //    serial port 2 (ASYNCMODE_PORT2): "$VNWRG,75,2,1,6,1,C" (time startup;
 //    uncompensated accel and gyro), "$VNWRG,76,2,8,36,1,130,84,613" and
 //    "$VNWRG,77,2,80,A,1,26B9" (libvnc's "%u,%u,%u,%X" + ",%X" per group).
+//  - The ROS 2 driver dawonn/vectornav, branch ros2 at
+//    2a2789eaf8fb3ec99e5effc0df9c731d7933d74c (vectornav/src/vectornav.cc
+//    connect() and configure_sensor(), config/vectornav.yaml, through the
+//    vnproglib 1.2.0.0 it carries: cpp/src/sensors.cpp, packet.cpp): the
+//    model register read at the requested 115200 baud (then at each of
+//    vnproglib's nine rates until one answers; none: "Unable to connect"),
+//    twice more, then registers 1, 4, 2, 3, 0; writes of registers 6, 7,
+//    32, 30 and 75-77 with the 8-bit checksum, each taken by the first
+//    $VNRRG / $VNWRG / $VNERR line that arrives; the model again and, on a
+//    VN-200 / VN-300, the GNSS registers 55, 57 (and 93 on a VN-300) inside
+//    a try block that only logs a refusal. (Register 8 is not read by this
+//    revision.)
 #include <gtest/gtest.h>
 
 #include <Eigen/Geometry>
@@ -835,6 +847,188 @@ TEST(VectorNavDevice, Px4StartUpThroughLibvncGetsEveryReplyAndDecodesItsThreeOut
   EXPECT_EQ(n1, 400u);  // divisor 1 of 400 Hz
   EXPECT_EQ(n2, 50u);   // 400 / 8
   EXPECT_EQ(n3, 5u);    // 400 / 80
+}
+
+// ------------------------------------------------------ ROS 2 (dawonn/vectornav)
+
+// vnproglib 1.2's handling of a reply (dawonn/vectornav ros2 2a2789e,
+// vnproglib-1.2.0.0/cpp/src/packet.cpp isValid / isError / isResponse,
+// sensors.cpp possiblePacketFoundHandler / transactionWithWait), re-stated:
+// an ASCII line is valid when the two hex digits after '*' equal the XOR of
+// the bytes between '$' and '*' (four digits: the CRC; "XX": unchecked);
+// "$VNERR" ends the transaction with a sensor_error; a line whose
+// characters 3..5 are RRG or WRG is the response to whichever command is
+// waiting (its register is not compared); the parse takes the comma-
+// separated terms from character 7 (the register number, then the values).
+struct Ros2VnReply {
+  bool valid = false;
+  bool error = false;
+  bool response = false;
+  std::vector<std::string> terms;
+};
+Ros2VnReply ros2_vnproglib_take(const std::string& line) {
+  Ros2VnReply r;
+  if (line.size() < 8 || line[0] != '$' || line.compare(line.size() - 2, 2, "\r\n") != 0) return r;
+  const std::string packet = line.substr(0, line.size() - 2);
+  const std::size_t n = packet.size();
+  if (packet[n - 3] != '*') return r;  // the device answers in the 8-bit checksum mode register 30 sets
+  const std::string body = packet.substr(1, n - 4);
+  r.valid = std::stoul(packet.substr(n - 2), nullptr, 16) == spec_xor(body);
+  r.error = packet.compare(3, 3, "ERR") == 0;
+  r.response = packet.compare(3, 3, "RRG") == 0 || packet.compare(3, 3, "WRG") == 0;
+  std::size_t start = 7;
+  for (std::size_t c = 7; c <= n - 3; ++c)
+    if (packet[c] == ',' || packet[c] == '*') r.terms.push_back(packet.substr(start, c - start)), start = c + 1;
+  return r;
+}
+
+struct Ros2VnRun {
+  std::vector<std::pair<std::string, std::string>> exchanges;  // (command body, reply line)
+  bool configured = false;  // configure_sensor() returned true
+  std::string failed_at;    // the command whose sensor_error escaped connect()
+  std::string model, firmware, user_tag;
+  std::uint32_t hardware = 0, serial = 0;
+};
+
+// dawonn/vectornav ros2 2a2789eaf8fb3ec99e5effc0df9c731d7933d74c,
+// vectornav/src/vectornav.cc connect() and configure_sensor() with
+// config/vectornav.yaml's parameters (baud 115200, AsyncDataOutputType 0,
+// AsyncDataOutputFrequency 20, syncInMode 3, serialChecksum 1, errorMode 1,
+// BO1 asyncMode 3, rateDivisor 40, commonField 0x7FFF, and the source's
+// defaults for the BO1 gpsField (GPSGROUP_FIX | GPSGROUP_POSU = 0x0210) and
+// insField (INSGROUP_POSECEF | INSGROUP_VELBODY = 0x000C); BO2 and BO3
+// off), each command as vnproglib's Packet::gen* / writeBinaryOutput
+// formats it ("$VNRRG,01", "$VNWRG,06,%u", "$VNWRG,07,%u", "$VNWRG,32,%u,
+// %u,%u,0,%u,%u,%u,%u,0", "$VNWRG,30,%u,...", "$VNWRG,%u,%u,%u,%X" + ",%X"
+// per non-zero group) with the 8-bit checksum (VnSensor's default error
+// detection mode) and CR LF.
+Ros2VnRun ros2_vectornav_start_up(drivers::vectornav::Encoder& e) {
+  drivers::CommandResponder& d = *e.command_responder();
+  Ros2VnRun run;
+  // One vnproglib transaction: sent, answered by one line, taken or thrown.
+  auto transaction = [&](const std::string& body) -> std::optional<Ros2VnReply> {
+    const std::string reply = ask(d, framed(body));
+    run.exchanges.emplace_back(body, reply);
+    const Ros2VnReply r = ros2_vnproglib_take(reply);
+    EXPECT_TRUE(r.valid) << body << " -> " << reply;
+    EXPECT_TRUE(r.error || r.response) << body << ": vnproglib would wait 1 s, resending every 50 ms, then time out";
+    if (r.error) return std::nullopt;  // sensor_error
+    return r;
+  };
+  auto value = [](const std::optional<Ros2VnReply>& r) {
+    return r && r->terms.size() > 1 ? r->terms[1] : std::string();
+  };
+  // connect(): VnSensor::connect(port, 115200) (the requested rate first,
+  // then supportedBaudrates() 9600 ... 921600 until verifySensorConnectivity()
+  // reads register 1); the loop's read, the read after the loop, the read
+  // after the (skipped: same rate) changeBaudRate.
+  for (int i = 0; i < 3; ++i)
+    if (!transaction("VNRRG,01")) return run;
+  run.model = value(transaction("VNRRG,01"));      // readModelNumber
+  run.firmware = value(transaction("VNRRG,04"));   // readFirmwareVersion
+  run.hardware = static_cast<std::uint32_t>(std::atoi(value(transaction("VNRRG,02")).c_str()));  // ATOU32
+  run.serial = static_cast<std::uint32_t>(std::atoi(value(transaction("VNRRG,03")).c_str()));
+  run.user_tag = value(transaction("VNRRG,00"));
+  // configure_sensor(): a sensor_error here escapes connect() and the node's constructor.
+  for (const char* body : {"VNWRG,06,0", "VNWRG,07,20", "VNWRG,32,3,0,0,0,0,0,0,100000000,0", "VNWRG,30,0,0,0,0,1,0,1",
+                           "VNWRG,75,3,40,29,7FFF,210,C", "VNWRG,76,0,0,0", "VNWRG,77,0,0,0"}) {
+    if (!transaction(body)) {
+      run.failed_at = body;
+      return run;
+    }
+  }
+  // determineDeviceFamily() reads the model again; not a VN-100: the GNSS
+  // reads (55, 57, then for a VN-300 93) in a try block whose sensor_error
+  // only logs "GPS initialization error".
+  const std::string family = value(transaction("VNRRG,01"));
+  if (family.rfind("VN-100", 0) != 0 && transaction("VNRRG,55") && transaction("VNRRG,57") &&
+      family.rfind("VN-300", 0) == 0)
+    transaction("VNRRG,93");
+  run.configured = true;
+  return run;
+}
+
+TEST(VectorNavDevice, Ros2DriverStartUpOnAVn300GetsEveryReplyAndItsBinaryOutputDecodes) {
+  drivers::vectornav::Encoder e(options(drivers::VectorNavModel::vn300, 400));
+  const Ros2VnRun r = ros2_vectornav_start_up(e);
+  EXPECT_TRUE(r.configured) << r.failed_at;
+  EXPECT_EQ(r.model, "VN-300T-CR");
+  EXPECT_EQ(r.firmware, "2.1.0.0");
+  EXPECT_EQ(r.hardware, 2u);
+  EXPECT_EQ(r.serial, 100012345u);
+  EXPECT_EQ(r.user_tag, "");
+  // The exact replies (the device's formatting of what was written).
+  const std::map<std::string, std::string> want{
+      {"VNWRG,06,0", "VNWRG,06,0"},
+      {"VNWRG,07,20", "VNWRG,07,20"},
+      {"VNWRG,32,3,0,0,0,0,0,0,100000000,0", "VNWRG,32,3,0,0,0,0,0,0,100000000,0"},
+      {"VNWRG,30,0,0,0,0,1,0,1", "VNWRG,30,0,0,0,0,1,0,1"},
+      {"VNWRG,75,3,40,29,7FFF,210,C", "VNWRG,75,3,40,29,7FFF,0210,000C"},
+      {"VNWRG,76,0,0,0", "VNWRG,76,0,0,00"},
+      {"VNWRG,77,0,0,0", "VNWRG,77,0,0,00"},
+      {"VNRRG,55", "VNERR,08"},  // no GNSS configuration register emulated: caught, logged
+  };
+  for (const auto& [command, reply] : r.exchanges) {
+    const auto w = want.find(command);
+    if (w != want.end()) {
+      EXPECT_EQ(reply, framed(w->second)) << command;
+    }
+  }
+  ASSERT_EQ(r.exchanges.size(), 17u);  // 8 reads, 7 writes, the family read, register 55
+  EXPECT_EQ(r.exchanges.back().first, "VNRRG,55");
+
+  // Binary output 1 on both ports, every 40th IMU sample (10 Hz of 400):
+  // common 0x7FFF, GNSS1 Fix | PosU, INS PosEcef | VelBody; no ASCII.
+  const Split s = run(e, 0, 400, 400);
+  EXPECT_TRUE(s.lines.empty());
+  ASSERT_EQ(s.packets.size(), 10u);
+  for (std::size_t i = 0; i < s.packets.size(); ++i) EXPECT_EQ(s.packets[i].counter, 40u * i);
+  const SpecPacket& p = s.packets[0];
+  EXPECT_EQ(p.groups, 0x29);
+  EXPECT_EQ(p.masks.at(0), 0x7FFF);
+  EXPECT_EQ(p.masks.at(3), 0x0210);
+  EXPECT_EQ(p.masks.at(5), 0x000C);
+  // 1 sync + 1 groups + 3 masks + 198 common + 13 GNSS + 36 INS + 2 CRC.
+  EXPECT_EQ(p.bytes.size(), 2u + 6u + 198u + 13u + 36u + 2u);
+  EXPECT_EQ(le<std::uint64_t>(field(p, 0, 0)), 0u);                      // TimeStartup
+  EXPECT_NEAR(f3(field(p, 0, 3)).x(), yaw_deg_at(0, 400), 1e-4);        // Ypr
+  EXPECT_NEAR(le<float>(field(p, 0, 4) + 12), 1.0, 1e-6);                // Quaternion w at yaw 0
+  EXPECT_NEAR(f3(field(p, 0, 5)).z(), kYawRate, 1e-6);                   // AngularRate
+  EXPECT_NEAR(d3(field(p, 0, 6)).x(), kLatDeg, 1e-9);                    // Position LLA
+  EXPECT_NEAR(d3(field(p, 0, 6)).z(), kHeight, 1e-6);
+  EXPECT_NEAR(f3(field(p, 0, 8)).z(), -kG, 1e-5);                        // Accel
+  EXPECT_NEAR(f3(field(p, 0, 9) + 12).z(), kYawRate, 1e-6);              // Imu: uncompensated gyro
+  EXPECT_EQ(le<std::uint16_t>(field(p, 0, 12)) & 0x3, 2);                // InsStatus: tracking
+  EXPECT_EQ(field(p, 3, 4)[0], 3);                                       // GNSS1 Fix: 3D
+  // INS PosEcef from the manual's WGS-84 (a = 6378137 m, e^2 = 6.69437999014e-3).
+  const double lat = kLatDeg * kPi / 180.0, lon = kLonDeg * kPi / 180.0, e2 = 6.69437999014e-3;
+  const double n = 6378137.0 / std::sqrt(1.0 - e2 * std::sin(lat) * std::sin(lat));
+  const Eigen::Vector3d ecef((n + kHeight) * std::cos(lat) * std::cos(lon), (n + kHeight) * std::cos(lat) * std::sin(lon),
+                             (n * (1.0 - e2) + kHeight) * std::sin(lat));
+  EXPECT_LT((d3(field(p, 5, 2)) - ecef).norm(), 0.01);
+  EXPECT_LT(f3(field(p, 5, 3)).norm(), 1e-3) << "VelBody: at rest in translation";
+}
+
+TEST(VectorNavDevice, Ros2DriverDefaultsAskAVn100ForGnssAndInsGroupsWhichItRefuses) {
+  // The node's default BO1 carries the GNSS and INS groups, which a VN-100
+  // does not have: $VNERR,07 to that write, a sensor_error configure_sensor()
+  // does not catch, so the node stops in its constructor. A VN-100 needs
+  // BO1.gpsField and BO1.insField set to 0 in the parameters.
+  drivers::vectornav::Encoder e(options(drivers::VectorNavModel::vn100, 800));
+  const Ros2VnRun r = ros2_vectornav_start_up(e);
+  EXPECT_FALSE(r.configured);
+  EXPECT_EQ(r.model, "VN-100T-CR");
+  EXPECT_EQ(r.failed_at, "VNWRG,75,3,40,29,7FFF,210,C");
+  ASSERT_FALSE(r.exchanges.empty());
+  EXPECT_EQ(r.exchanges.back().second, framed("VNERR,07"));
+  // With those two fields 0, the rest of the sequence is answered.
+  drivers::CommandResponder& d = *e.command_responder();
+  EXPECT_EQ(ask(d, framed("VNWRG,75,3,40,1,7FFF")), framed("VNWRG,75,3,40,01,7FFF"));
+  EXPECT_EQ(ask(d, framed("VNWRG,76,0,0,0")), framed("VNWRG,76,0,0,00"));
+  EXPECT_EQ(ask(d, framed("VNWRG,77,0,0,0")), framed("VNWRG,77,0,0,00"));
+  const Split s = run(e, 0, 800, 800);
+  ASSERT_EQ(s.packets.size(), 20u);  // 800 / 40
+  EXPECT_NEAR(f3(field(s.packets[1], 0, 5)).z(), kYawRate, 1e-6);
 }
 
 TEST(VectorNavDevice, PortOneOutputsStayOffTheOtherPort) {

@@ -36,6 +36,10 @@
 //    the reply's pairs become the device's configuration), gotoMeasurement()
 //    (GotoMeasurement, waits for 0x11); src/xdainterface.cpp connectDevice()
 //    stops with "No MTi device found" when the scan gets no device id.
+//  - The same repository's ROS 2 node (branch ros2 at
+//    2022373604d9c4aab4a38743832dbc2e60114078, src/xsens_mti_ros2_driver):
+//    connectDevice() and prepare() through its xspublic, message by message
+//    (see Ros2NodeStartUp... below), ReqEmts included.
 #include <gtest/gtest.h>
 
 #include <algorithm>
@@ -889,6 +893,177 @@ TEST(XsensDevice, XspublicOpenPortRequestsAreAnsweredInTheLayoutItReads) {
   r = ask(d, spec_message(0x8E, {0x00, 0x05}));
   EXPECT_EQ(r.at(0).mid, 0x42) << "NMEA string outputs are not emulated";
   EXPECT_EQ(d.command_counters().nacked, 1u);
+}
+
+// The ROS 2 node's start-up (xsenssupport/Xsens_MTi_ROS_Driver_and_Ntrip_Client,
+// branch ros2 at 2022373604d9c4aab4a38743832dbc2e60114078,
+// src/xsens_mti_ros2_driver/src/xdainterface.cpp connectDevice(), prepare(),
+// manualGyroBiasEstimation(), with param/xsens_mti_node.yaml's
+// enable_deviceConfig false and enable_logging false, and its xspublic:
+// xscontroller/scanner.cpp, serialcommunicator.cpp, devicecommunicator.cpp,
+// xsdevice_def.cpp, mtdevice.cpp), every message in order:
+//  - XsScanner::scanPort at the `baudrate` parameter (fetchBasicInfo ->
+//    SerialCommunicator::openPort(OPS_InitStart)): GotoConfig, ReqDID,
+//    ReqProductCode, ReqHardwareVersion, ReqFWRev.
+//  - XsControl::openPort (OPS_Full): the same five again.
+//  - The device's MtDevice::initialize(): readDeviceConfiguration()
+//    (gotoConfig from the initial state: GotoConfig; InitBus; ReqConfiguration;
+//    ReqFWRev; outputConfiguration(): ReqOutputConfiguration), then
+//    fetchAvailableHardwareScenarios(): ReqAvailableFilterProfiles.
+//  - connectDevice(): productCode() ReqProductCode; onboardFilterProfile()
+//    ReqFilterProfile (data read as a C string first; empty: the u16
+//    profile type, looked up in) ReqAvailableFilterProfiles;
+//    deviceOptionFlags() ReqOptionFlags (u32).
+//  - prepare(): gotoConfig() (already in config: nothing sent);
+//    configureSensorSettings() returns at enable_deviceConfig false;
+//    readEmtsAndDeviceConfiguration(): ReqEmts with data {0, 255} (10 s
+//    timeout), then ReqConfiguration sent with the same message object, so
+//    with the same two data bytes; gotoMeasurement(): GotoMeasurement;
+//    manualGyroBiasEstimation(0, 6): SetNoRotation of 6 s (u16), waiting
+//    1 s for its acknowledgement.
+// xspublic's doTransaction takes the reply whose MID is the request's + 1
+// and fails on an Error (0x42).
+//
+// With the default `scan_for_devices: true` the node only scans ports
+// xspublic's udev enumeration lists as Xsens USB devices (isXsensUsbDevice:
+// Xsens' vendor id, or FTDI's with product ids 0xD388-0xD38F; /dev/ttyS*
+// skipped; without libudev, every /dev/ttyUSB*): a bench's
+// UART, USB-serial adapter or pty needs scan_for_devices false and the
+// port and baudrate parameters, the path replayed here.
+TEST(XsensDevice, Ros2NodeStartUpGetsEveryReplyItWaitsForAndTheFirstMtData2Decodes) {
+  for (const drivers::XsensModel model : {drivers::XsensModel::mti630, drivers::XsensModel::mti680g}) {
+    drivers::xsens::Encoder e(options(model));
+    drivers::CommandResponder& d = *e.command_responder();
+    // One transaction: the request's bytes as written, its one reply.
+    auto transaction = [&](const Bytes& request, std::uint8_t mid) -> SpecMessage {
+      const std::vector<SpecMessage> r = ask(d, request);
+      EXPECT_EQ(r.size(), 1u) << "MID " << int(request[2]);
+      if (r.empty()) return {};
+      EXPECT_EQ(r[0].mid, mid + 1) << "MID " << int(mid) << ": answered " << int(r[0].mid);
+      return r[0];
+    };
+    const Bytes goto_config{0xFA, 0xFF, 0x30, 0x00, 0xD1};
+    const Bytes req_did{0xFA, 0xFF, 0x00, 0x00, 0x01};
+    const Bytes req_product_code{0xFA, 0xFF, 0x1C, 0x00, 0xE5};
+    const Bytes req_hardware_version{0xFA, 0xFF, 0x1E, 0x00, 0xE3};
+    const Bytes req_fw_rev{0xFA, 0xFF, 0x12, 0x00, 0xEF};
+    const Bytes init_bus{0xFA, 0xFF, 0x02, 0x00, 0xFF};
+    const Bytes req_configuration{0xFA, 0xFF, 0x0C, 0x00, 0xF5};
+    const Bytes req_output_configuration{0xFA, 0xFF, 0xC0, 0x00, 0x41};
+    const Bytes req_available_filter_profiles{0xFA, 0xFF, 0x62, 0x00, 0x9F};
+    const Bytes req_filter_profile{0xFA, 0xFF, 0x64, 0x00, 0x9D};
+    const Bytes req_option_flags{0xFA, 0xFF, 0x48, 0x00, 0xB9};
+    const Bytes req_emts{0xFA, 0xFF, 0x90, 0x02, 0x00, 0xFF, 0x70};
+    const Bytes req_configuration_2{0xFA, 0xFF, 0x0C, 0x02, 0x00, 0xFF, 0xF4};
+    const Bytes goto_measurement{0xFA, 0xFF, 0x10, 0x00, 0xF1};
+    const Bytes set_no_rotation_6s{0xFA, 0xFF, 0x22, 0x02, 0x00, 0x06, 0xD7};
+    // The hand-written checksums are the document's.
+    for (const Bytes* m : {&goto_config, &req_did, &req_product_code, &req_hardware_version, &req_fw_rev, &init_bus,
+                           &req_configuration, &req_output_configuration, &req_available_filter_profiles,
+                           &req_filter_profile, &req_option_flags, &req_emts, &req_configuration_2, &goto_measurement,
+                           &set_no_rotation_6s})
+      EXPECT_EQ(spec_message((*m)[2], Bytes(m->begin() + 4, m->end() - 1)), *m);
+
+    // Scan, then openPort: the same five each time.
+    std::string product_code;
+    for (int pass = 0; pass < 2; ++pass) {
+      transaction(goto_config, 0x30);
+      const SpecMessage did = transaction(req_did, 0x00);
+      EXPECT_TRUE(did.data.size() == 4 || did.data.size() == 8);
+      EXPECT_NE(did.data, Bytes(did.data.size(), 0)) << "a device id, else 'No MTi device found'";
+      const SpecMessage pc = transaction(req_product_code, 0x1C);
+      product_code = std::string(pc.data.begin(), pc.data.end());
+      product_code = product_code.substr(0, product_code.find(' '));
+      EXPECT_EQ(transaction(req_hardware_version, 0x1E).data.size(), 2u);
+      EXPECT_EQ(transaction(req_fw_rev, 0x12).data.size(), 11u);
+    }
+    // MtDevice::initialize().
+    transaction(goto_config, 0x30);
+    transaction(init_bus, 0x02);
+    const SpecMessage config = transaction(req_configuration, 0x0C);
+    ASSERT_EQ(config.data.size(), 118u);
+    const std::uint16_t profile_in_config = be16(&config.data[110]);
+    const SpecMessage fw = transaction(req_fw_rev, 0x12);
+    ASSERT_EQ(fw.data.size(), 11u);
+    EXPECT_EQ(fw.data[0], 1);  // XsVersion(major, minor, revision)
+    const SpecMessage output = transaction(req_output_configuration, 0xC0);
+    EXPECT_EQ(output.data.size() % 4, 0u);
+    EXPECT_FALSE(output.data.empty());
+    const SpecMessage profiles = transaction(req_available_filter_profiles, 0x62);
+    ASSERT_EQ(profiles.data.size() % 22, 0u);  // type, version, label [20] each
+    ASSERT_GE(profiles.data.size(), 22u);
+    // connectDevice().
+    const SpecMessage pc = transaction(req_product_code, 0x1C);
+    std::string code(pc.data.begin(), pc.data.end());
+    code = code.substr(0, code.find(' '));
+    EXPECT_EQ(code, product_code);
+    EXPECT_EQ(code.substr(4, 3), model == drivers::XsensModel::mti630 ? "630" : "680");  // its 670/680 check
+    if (model == drivers::XsensModel::mti680g) {
+      EXPECT_GE(fw.data[1], 12) << "firmware 1.12 or later: no 'please update' warning on a 670 / 680";
+    }
+    const SpecMessage profile = transaction(req_filter_profile, 0x64);
+    ASSERT_EQ(profile.data.size(), 2u);
+    EXPECT_EQ(profile.data[0], 0) << "an empty C string: read as the numeric profile";
+    const std::uint16_t type = be16(profile.data.data());
+    EXPECT_EQ(type & 0xFF, profile_in_config & 0xFF);
+    bool listed = false;
+    const SpecMessage profiles_again = transaction(req_available_filter_profiles, 0x62);
+    for (std::size_t i = 0; i + 22 <= profiles_again.data.size(); i += 22) listed |= profiles_again.data[i] == type;
+    EXPECT_TRUE(listed) << "onboardFilterProfile() finds its profile among the device's";
+    const SpecMessage flags = transaction(req_option_flags, 0x48);
+    ASSERT_EQ(flags.data.size(), 4u);
+    EXPECT_EQ(be32(flags.data.data()), 0u);
+    // prepare().
+    const SpecMessage emts = transaction(req_emts, 0x90);
+    EXPECT_TRUE(emts.data.empty()) << "EmtsData without pages (xspublic keeps it, does not parse it)";
+    EXPECT_EQ(transaction(req_configuration_2, 0x0C).data, config.data);
+    transaction(goto_measurement, 0x10);
+    transaction(set_no_rotation_6s, 0x22);
+    EXPECT_EQ(d.command_counters().nacked, 0u);
+
+    // The first MTData2: the factory configuration's items, each at its
+    // documented size; the node's imu publisher takes the quaternion, rate
+    // of turn and acceleration.
+    const std::vector<SpecMessage> m = run(e, 0, 8);
+    ASSERT_FALSE(m.empty());
+    EXPECT_EQ(m[0].mid, 0x36);
+    const SpecItems it = spec_items(m[0].data);
+    ASSERT_TRUE(it.tiled);
+    ASSERT_EQ(it.at(0x1020).size(), 2u);  // PacketCounter
+    ASSERT_EQ(it.at(0x1060).size(), 4u);  // SampleTimeFine
+    ASSERT_EQ(it.reals(0x2010).size(), 4u);
+    ASSERT_EQ(it.reals(0x4020).size(), 3u);
+    ASSERT_EQ(it.reals(0x8020).size(), 3u);
+    EXPECT_NEAR(it.reals(0x4020)[2], kG, 1e-5) << "ENU: up";
+    EXPECT_NEAR(it.reals(0x8020)[2], -kYawRate, 1e-6);
+    const std::vector<double> q = it.reals(0x2010);
+    EXPECT_NEAR(q[0] * q[0] + q[1] * q[1] + q[2] * q[2] + q[3] * q[3], 1.0, 1e-6);
+    EXPECT_EQ(it.at(0xE020).size(), 4u);  // StatusWord
+    if (model == drivers::XsensModel::mti680g) {
+      bool latlon = false;
+      for (const std::uint16_t id : it.order) latlon |= (id & 0xFFF0) == 0x5040;
+      EXPECT_TRUE(latlon) << "the GNSS model's LatLon for the node's positionLLA publisher";
+    }
+  }
+}
+
+TEST(XsensDevice, ReqEmtsIsAConfigStateRequestWithItsTwoBytes) {
+  drivers::xsens::Encoder e(options(drivers::XsensModel::mti630));
+  drivers::CommandResponder& d = *e.command_responder();
+  auto r = ask(d, spec_message(0x90, {0x00, 0xFF}));  // measuring after power-up
+  ASSERT_EQ(r.size(), 1u);
+  EXPECT_EQ(r[0].mid, 0x42);
+  EXPECT_EQ(r[0].data, Bytes{0x04});
+  ask(d, spec_message(0x30));
+  r = ask(d, spec_message(0x90, {0x00}));
+  ASSERT_EQ(r.size(), 1u);
+  EXPECT_EQ(r[0].mid, 0x42);
+  EXPECT_EQ(r[0].data, Bytes{0x21});
+  r = ask(d, spec_message(0x90, {0x00, 0xFF}));
+  ASSERT_EQ(r.size(), 1u);
+  EXPECT_EQ(r[0].mid, 0x91);
+  EXPECT_TRUE(r[0].data.empty());
+  EXPECT_EQ(d.command_counters().nacked, 2u);
 }
 
 TEST(XsensDevice, TheLinkBudgetBoundsTheWidestConfiguration) {
