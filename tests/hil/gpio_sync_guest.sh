@@ -37,6 +37,20 @@ run() { # name line [--sync-active-low]
 run sync_high 0
 run sync_low 1 --sync-active-low
 
+# Issue 29: a VectorNav whose saved register 32 drives its SyncOut pin (line
+# 3, the scene's sync line, requested active high): SyncOutMode ImuReady,
+# negative polarity, skip factor 39 (every 40th IMU sample of its 800 Hz: 20
+# Hz, every 5th sample of this 100 Hz scene), 2000 us wide. Binary output 1
+# carries the samples' time for the host (register 75; ASCII off).
+marker "BEGIN:sync_vectornav:vectornav"
+"$imuemu" emit --sample static --duration-s $((SECONDS_EMITTED + 2)) --seconds $SECONDS_EMITTED \
+  --rate "$rate_hz" --protocol vectornav --device serial:/dev/ttyS1,baud=921600 --gpio "$HIL_GPIOCHIP:3" \
+  --vectornav-saved-registers '6,0;75,1,4,01,0121;32,3,0,0,0,2,0,39,2000000,0' \
+  --stats-json "$HIL_OUT/sync_vectornav.emit.json"
+rc=$?
+echo "gpio_sync_guest: sync_vectornav: imuemu emit exit status $rc"
+[ $rc -eq 0 ] || status=1
+
 # A line another process holds (gpioset keeps it requested until signalled):
 # emit must refuse before sending anything, naming the chip, the line and the
 # owner. gpioset drives line 2 to 0 once; the host allows that line's events.

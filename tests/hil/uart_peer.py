@@ -1009,6 +1009,55 @@ def check_gpio_run(run, device, events, line, active_low, c):
             f"(expected {expected_spacing / 1e6:.2f} ms)")
 
 
+# Issue 29: the device's own sync-out setting on a recorder line
+# (gpio_sync_guest.sh sync_vectornav): line, pulse every N samples of the
+# scene, width, negative polarity.
+DEVICE_SYNC_RUNS = {"sync_vectornav": (3, 5, 2000)}
+
+
+def check_device_sync_run(run, device, events, line, every, width_us, c):
+    """VectorNav register 32 (SyncOutMode ImuReady, negative, skip 39 of its
+    800 Hz IMU samples): the line requested active high idles high from the
+    first sample on and pulses low on each sample whose tick is a multiple of
+    `every`, at least width_us wide."""
+    tag = f"{run.name} (line {line}, the device's SyncOut: negative pulses every {every} samples)"
+    levels = [(t, v) for t, ln, v in events if ln == line]
+    if not c.expect(len(levels) >= 2, f"{tag}: the recorder saw {len(levels)} levels on line {line}"):
+        return
+    # Requested as an output, inactive (low); the device's negative polarity
+    # then moves it to its idle level, high, before any pulse.
+    c.expect(levels[0][1] == 0 and levels[1][1] == 1, f"{tag}: first levels {levels[:2]}, expected 0 (request) then 1")
+    pulses, lead, level = [], None, 1
+    for t, v in levels[2:]:
+        if v == level:
+            continue
+        if v == 0:
+            lead = t
+        elif lead is not None:
+            pulses.append((lead, t))
+            lead = None
+        level = v
+    period_ns = 1e9 / GPIO_RATE_HZ
+    ticks = [round(x["t_ns"] / period_ns) for x in run.samples if x.get("t_ns") is not None]
+    expected = [k for k in ticks if k % every == 0]
+    c.expect(ticks and len(pulses) == len(expected),
+             f"{tag}: {len(pulses)} low pulses, {len(expected)} sent samples with a tick multiple of {every}")
+    gpio = device.get("gpio") or {}
+    c.expect(gpio.get("pulses") == len(pulses), f"{tag}: emit reports {gpio.get('pulses')} pulses, recorder {len(pulses)}")
+    widths = [b - a for a, b in pulses]
+    if widths:
+        c.expect(min(widths) >= width_us * 1000, f"{tag}: narrowest pulse {min(widths)} ns < the register's {width_us} us")
+        c.expect(max(widths) < 0.5 * every * period_ns, f"{tag}: widest pulse {max(widths)} ns")
+    if len(pulses) == len(expected) and len(pulses) > 2:
+        offsets = [lead - k * period_ns for (lead, _), k in zip(pulses, expected)]
+        spread = max(offsets) - min(offsets)
+        c.expect(spread < 0.5 * every * period_ns,
+                 f"{tag}: leading edge minus tick x period varies by {spread / 1e6:.1f} ms: pulses off their samples")
+        log(f"{tag}: {len(pulses)} pulses for {len(ticks)} samples, widths {min(widths) / 1e3:.0f}.."
+            f"{max(widths) / 1e3:.0f} us (register {width_us} us), lined up with their samples within "
+            f"{spread / 1e6:.1f} ms")
+
+
 def test_gpio(args, results):
     token = secrets.token_hex(8)
     guest = os.path.join(HERE, "gpio_sync_guest.sh")
@@ -1016,17 +1065,19 @@ def test_gpio(args, results):
     if rc == FIXTURE_FAILURE:
         return rc
     c = Checks()
-    check_common(rc, splitter, list(GPIO_RUNS), c)
+    check_common(rc, splitter, list(GPIO_RUNS) + list(DEVICE_SYNC_RUNS), c)
     events = read_recorder(os.path.join(results, "gpio_recorder.txt"), c)
     for run in splitter.runs:
         device = check_stream_run(run, results, GPIO_RATE_HZ, c)
         if run.name in GPIO_RUNS:
             check_gpio_run(run, device, events, *GPIO_RUNS[run.name], c)
+        if run.name in DEVICE_SYNC_RUNS:
+            check_device_sync_run(run, device, events, *DEVICE_SYNC_RUNS[run.name], c)
     # Line 2: driven once by gpioset, which holds it while the guest checks
     # that emit refuses a claimed line (gpio_sync_guest.sh).
     lines_used = {ln for _, ln, _ in events} - {2}
-    c.expect(lines_used <= {line for line, _ in GPIO_RUNS.values()},
-             f"the recorder saw lines {sorted(lines_used)}, only {[line for line, _ in GPIO_RUNS.values()]} were used")
+    used = {line for line, _ in GPIO_RUNS.values()} | {run[0] for run in DEVICE_SYNC_RUNS.values()}
+    c.expect(lines_used <= used, f"the recorder saw lines {sorted(lines_used)}, only {sorted(used)} were used")
     return 1 if c.failures else 0
 
 
